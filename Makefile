@@ -1,0 +1,45 @@
+# Two commands for a user: `make book` and `make test`. Everything runs inside .venv, which is
+# created from the pinned requirements.txt on first use (pip only, works offline where the
+# package files are cached).
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+JOBS   ?= 2
+STAMP  := $(VENV)/.installed
+
+.PHONY: venv book chapter test test-fast bench clean help
+
+help:
+	@echo "make book      run every chapter (smoke profile) and build the HTML book"
+	@echo "make test      run the whole test suite (what CI runs)"
+	@echo "make chapter CHAPTER=01_background [PROFILE=full]   run one chapter"
+	@echo "make test-fast unit tests only (no notebook runs, no book build)"
+	@echo "make bench     run every benchmark in benchmarks/"
+	@echo "make clean     remove generated notebooks, results and the built book"
+
+$(STAMP): requirements.txt pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip
+	$(PY) -m pip install -r requirements.txt
+	$(PY) -m pip install --no-deps -e .
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+book: $(STAMP)
+	$(VENV)/bin/thesis book -j $(JOBS)
+
+chapter: $(STAMP)
+	$(VENV)/bin/thesis run $(CHAPTER) --profile $(or $(PROFILE),smoke)
+
+test: $(STAMP)
+	$(PY) -m pytest
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -m "not slow"
+
+bench: $(STAMP)
+	for f in benchmarks/bench_*.py; do echo "== $$f"; $(PY) $$f || exit 1; done
+
+clean:
+	rm -rf _build book/generated results/*/

@@ -1,0 +1,163 @@
+"""Writing a chapter's results: tables (CSV), figures (PNG) and ``run.json``.
+
+Every file lands in ``results/<chapter>/`` and is also *glued* (myst-nb) so the book can show it
+by name. ``run.json`` records what produced the files: the config, the seed, the git commit,
+package versions and wall time, so a table can always be traced back to its run.
+
+Used by every chapter notebook.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import platform
+import subprocess
+import sys
+import time
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from thesis_lib.book.paths import project_root, results_dir
+
+#: Packages whose versions are recorded in every run.json.
+RECORDED_PACKAGES = (
+    "thesis_lib", "numpy", "scipy", "pandas", "numba", "torch", "gymnasium", "mujoco",
+    "gymnasium-robotics", "minari", "stable-baselines3", "sb3-contrib", "librosa", "fastdtw",
+    "papermill", "jupyter-book",
+)
+
+
+def git_commit(path: str | Path | None = None) -> str:
+    """The checkout's commit hash, suffixed ``-dirty`` when there are uncommitted changes.
+
+    Returns ``"unknown"`` outside a git checkout.
+    """
+    try:
+        cwd = Path(path) if path else project_root()
+    except FileNotFoundError:
+        cwd = Path.cwd()
+    try:
+        sha = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, check=True, timeout=10
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=cwd, capture_output=True, text=True, check=True, timeout=10,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return f"{sha}-dirty" if dirty else sha
+
+
+def package_versions(names: tuple[str, ...] = RECORDED_PACKAGES) -> dict[str, str]:
+    """Installed versions of ``names`` (missing packages are left out)."""
+    out = {"python": platform.python_version()}
+    for name in names:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def _jsonable(config: Any) -> Any:
+    if dataclasses.is_dataclass(config) and not isinstance(config, type):
+        return dataclasses.asdict(config)
+    return config
+
+
+def run_metadata(config: Any, seed: int | None, **extra: Any) -> dict[str, Any]:
+    """The provenance record written as ``run.json``: config, seed, commit, versions, platform."""
+    return {
+        "config": _jsonable(config),
+        "seed": seed,
+        "git_commit": git_commit(),
+        "versions": package_versions(),
+        "platform": {"machine": platform.machine(), "system": platform.system(), "argv": sys.argv[:1]},
+        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        **extra,
+    }
+
+
+def _glue(name: str, value: Any) -> None:
+    try:
+        from myst_nb import glue
+    except ImportError:  # outside a notebook build the glue is optional
+        return
+    try:
+        glue(name, value, display=False)
+    except Exception:  # noqa: BLE001 - glue needs an IPython kernel; files are what matter
+        pass
+
+
+class ChapterResults:
+    """Collects one chapter run's outputs under ``results/<chapter>/``.
+
+    Example:
+        >>> import tempfile, os, pandas as pd
+        >>> os.environ["THESIS_RESULTS_DIR"] = tempfile.mkdtemp()
+        >>> res = ChapterResults("demo", config={"n": 3}, seed=0)
+        >>> res.table("numbers", pd.DataFrame({"x": [1, 2]})).name
+        'numbers.csv'
+        >>> sorted(res.finish()["artifacts"])
+        ['numbers.csv']
+        >>> del os.environ["THESIS_RESULTS_DIR"]
+
+    Args:
+        chapter: folder name, e.g. ``"01_background"``.
+        config: the chapter's config (a dataclass or a dict), recorded in ``run.json``.
+        seed: the run's seed, recorded in ``run.json``.
+    """
+
+    def __init__(self, chapter: str, config: Any = None, seed: int | None = None) -> None:
+        self.chapter = chapter
+        self.config = config
+        self.seed = seed
+        self.dir = results_dir(chapter)
+        self.artifacts: list[str] = []
+        self._t0 = time.perf_counter()
+
+    def table(self, name: str, df: pd.DataFrame, *, index: bool = False, glue: bool = True) -> Path:
+        """Write ``df`` to ``<name>.csv`` and glue it as ``<chapter>/<name>``."""
+        if not isinstance(df, pd.DataFrame):
+            raise TypeError(f"table '{name}' must be a pandas DataFrame, got {type(df).__name__}")
+        path = self.dir / f"{name}.csv"
+        df.to_csv(path, index=index)
+        self._record(path.name)
+        if glue:
+            _glue(f"{self.chapter}/{name}", df)
+        return path
+
+    def figure(self, name: str, fig: Any, *, dpi: int = 120, glue: bool = True) -> Path:
+        """Save a matplotlib figure to ``<name>.png`` and glue it as ``<chapter>/<name>``."""
+        path = self.dir / f"{name}.png"
+        fig.savefig(path, dpi=dpi, bbox_inches="tight")
+        self._record(path.name)
+        if glue:
+            _glue(f"{self.chapter}/{name}", fig)
+        return path
+
+    def json(self, name: str, data: Any) -> Path:
+        """Write any JSON-serialisable object to ``<name>.json``."""
+        path = self.dir / f"{name}.json"
+        path.write_text(json.dumps(_jsonable(data), indent=2, default=str))
+        self._record(path.name)
+        return path
+
+    def finish(self, **extra: Any) -> dict[str, Any]:
+        """Write ``run.json`` (config, seed, commit, versions, wall time, artifacts) and return it."""
+        meta = run_metadata(
+            self.config, self.seed, chapter=self.chapter,
+            wall_time_s=round(time.perf_counter() - self._t0, 3),
+            artifacts=list(self.artifacts), **extra,
+        )
+        (self.dir / "run.json").write_text(json.dumps(meta, indent=2, default=str))
+        return meta
+
+    def _record(self, filename: str) -> None:
+        if filename not in self.artifacts:
+            self.artifacts.append(filename)

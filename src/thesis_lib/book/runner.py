@@ -1,0 +1,249 @@
+"""Run chapter notebooks with papermill and build the book with jupyter-book.
+
+A *chapter* is a notebook ``notebooks/<name>.ipynb`` listed in ``_toc.yml`` as
+``book/generated/<name>``: the runner executes it into that place, then jupyter-book renders the
+executed copies (``execute_notebooks: off`` in ``_config.yml``: papermill is the only executor).
+
+Profiles are YAML files of parameters: ``params/<name>.smoke.yml`` (the notebook's defaults,
+minutes on a laptop CPU) and ``params/<name>.full.yml`` (the thesis's scale).
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from thesis_lib.book.params import validate_parameters
+from thesis_lib.book.paths import project_root
+
+GENERATED = Path("book") / "generated"
+PROFILES = ("smoke", "full")
+
+
+class ChapterFailed(RuntimeError):
+    """A chapter notebook raised; the message names the cell and the executed notebook to open."""
+
+
+@dataclass(frozen=True)
+class ChapterRun:
+    """One executed chapter: where its notebook went, with which parameters, how long it took."""
+
+    chapter: str
+    output: Path
+    parameters: dict[str, Any] = field(default_factory=dict)
+    wall_time_s: float = 0.0
+
+
+def _toc_files(node: Any) -> list[str]:
+    out: list[str] = []
+    if isinstance(node, dict):
+        if "file" in node:
+            out.append(str(node["file"]))
+        for key in ("root", "parts", "chapters", "sections"):
+            if key == "root" and key in node:
+                out.append(str(node[key]))
+            elif key in node:
+                out.extend(_toc_files(node[key]))
+    elif isinstance(node, list):
+        for item in node:
+            out.extend(_toc_files(item))
+    return out
+
+
+def list_chapters(root: Path | None = None) -> list[str]:
+    """Names of the chapter notebooks in ``_toc.yml`` order, e.g. ``['01_background', 'survey']``."""
+    root = root or project_root()
+    toc = yaml.safe_load((root / "_toc.yml").read_text())
+    prefix = GENERATED.as_posix() + "/"
+    return [f[len(prefix):].removesuffix(".ipynb") for f in _toc_files(toc) if f.startswith(prefix)]
+
+
+def resolve_chapter(name: str, root: Path | None = None) -> str:
+    """Turn ``'01_background'``, ``'01'``, ``'background'`` or a notebook path into a chapter name.
+
+    Raises:
+        ValueError: no chapter, or several, match; the message lists the chapters.
+    """
+    root = root or project_root()
+    chapters = list_chapters(root)
+    stem = Path(name).name.removesuffix(".ipynb")
+    if stem in chapters:
+        return stem
+    matches = [c for c in chapters if c.startswith(stem) or c.split("_", 1)[-1] == stem]
+    if len(matches) == 1:
+        return matches[0]
+    what = "matches several chapters" if matches else "is not a chapter"
+    raise ValueError(f"'{name}' {what}. Chapters: {', '.join(chapters)}.")
+
+
+def notebook_path(chapter: str, root: Path | None = None) -> Path:
+    root = root or project_root()
+    path = root / "notebooks" / f"{chapter}.ipynb"
+    if not path.is_file():
+        raise FileNotFoundError(f"Chapter '{chapter}' has no notebook at {path}.")
+    return path
+
+
+def notebook_parameters(chapter: str, root: Path | None = None) -> dict[str, Any]:
+    """The names and default values of the notebook's ``parameters`` cell."""
+    import papermill as pm
+
+    info = pm.inspect_notebook(str(notebook_path(chapter, root)))
+    out = {}
+    for name, spec in info.items():
+        default = spec.get("default")
+        try:
+            out[name] = yaml.safe_load(default) if isinstance(default, str) else default
+        except yaml.YAMLError:
+            out[name] = default
+    return out
+
+
+def load_profile(chapter: str, profile: str | Path = "smoke", root: Path | None = None) -> dict[str, Any]:
+    """Parameters of a profile: ``'smoke'``, ``'full'`` or the path of a YAML file.
+
+    Raises:
+        ValueError: unknown profile name. FileNotFoundError: the file does not exist.
+    """
+    root = root or project_root()
+    if str(profile) in PROFILES:
+        path = root / "params" / f"{chapter}.{profile}.yml"
+    else:
+        path = Path(profile)
+        if path.suffix not in (".yml", ".yaml"):
+            raise ValueError(f"Unknown profile '{profile}'. Use one of {', '.join(PROFILES)} or a .yml file.")
+    if not path.is_file():
+        raise FileNotFoundError(f"No parameter file {path} for chapter '{chapter}'.")
+    data = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"{path} must hold a mapping of parameter names to values, got {type(data).__name__}.")
+    return data
+
+
+def run_chapter(
+    chapter: str,
+    parameters: Mapping[str, Any] | None = None,
+    *,
+    profile: str | Path | None = "smoke",
+    output: str | Path | None = None,
+    kernel: str = "python3",
+    progress: bool = True,
+    root: Path | None = None,
+) -> ChapterRun:
+    """Execute one chapter notebook with papermill.
+
+    Args:
+        chapter: a chapter name (see :func:`resolve_chapter`).
+        parameters: overrides on top of the profile.
+        profile: ``'smoke'``, ``'full'``, a YAML path, or ``None`` for the notebook's defaults.
+        output: where the executed notebook goes (default ``book/generated/<chapter>.ipynb``).
+        kernel: Jupyter kernel name.
+        progress: show papermill's cell progress bar.
+
+    Raises:
+        ValueError: an unknown parameter name (listing the valid ones).
+        ChapterFailed: a cell raised; names the cell and the executed notebook.
+    """
+    import papermill as pm
+
+    root = root or project_root()
+    chapter = resolve_chapter(chapter, root)
+    params = dict(load_profile(chapter, profile, root)) if profile is not None else {}
+    params.update(parameters or {})
+    validate_parameters(params, notebook_parameters(chapter, root), chapter)
+    out = Path(output) if output else root / GENERATED / f"{chapter}.ipynb"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    try:
+        pm.execute_notebook(
+            str(notebook_path(chapter, root)), str(out), parameters=params, kernel_name=kernel,
+            cwd=str(root), progress_bar=progress, log_output=False,
+        )
+    except pm.PapermillExecutionError as err:
+        raise ChapterFailed(
+            f"Chapter '{chapter}' failed in cell {err.cell_index} (execution count {err.exec_count}): "
+            f"{err.ename}: {err.evalue}\nOpen {out} — papermill marked the failing cell at its top."
+        ) from None
+    return ChapterRun(chapter, out, params, round(time.perf_counter() - t0, 2))
+
+
+def _run_one(args: tuple) -> ChapterRun:
+    chapter, parameters, profile, root = args
+    return run_chapter(chapter, parameters, profile=profile, root=root, progress=False)
+
+
+def run_chapters(
+    chapters: Sequence[str] | None = None,
+    *,
+    jobs: int = 1,
+    profile: str | Path | None = "smoke",
+    parameters: Mapping[str, Mapping[str, Any]] | None = None,
+    root: Path | None = None,
+) -> list[ChapterRun]:
+    """Run several chapters, ``jobs`` at a time in separate processes; every chapter is tried.
+
+    Raises:
+        ChapterFailed: after all chapters ran, if any failed (every failure in the message).
+    """
+    root = root or project_root()
+    chapters = [resolve_chapter(c, root) for c in (chapters or list_chapters(root))]
+    tasks = [(c, dict((parameters or {}).get(c, {})), profile, root) for c in chapters]
+    done: list[ChapterRun] = []
+    failures: list[str] = []
+
+    def _report(result: ChapterRun) -> None:
+        done.append(result)
+        print(f"[thesis] {result.chapter}: done in {result.wall_time_s:.0f} s -> {result.output}", flush=True)
+
+    if jobs <= 1:
+        for task in tasks:
+            print(f"[thesis] running {task[0]} ...", flush=True)
+            try:
+                _report(_run_one(task))
+            except ChapterFailed as err:
+                failures.append(str(err))
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = {pool.submit(_run_one, t): t[0] for t in tasks}
+            print(f"[thesis] running {', '.join(futures.values())} with {jobs} processes ...", flush=True)
+            for fut in as_completed(futures):
+                try:
+                    _report(fut.result())
+                except ChapterFailed as err:
+                    failures.append(str(err))
+    if failures:
+        raise ChapterFailed("\n\n".join(failures))
+    order = {c: i for i, c in enumerate(chapters)}
+    return sorted(done, key=lambda r: order[r.chapter])
+
+
+def build_book(root: Path | None = None, *, strict: bool = True) -> Path:
+    """Build the HTML book with jupyter-book 1.x from the executed notebooks; return index.html.
+
+    Raises:
+        FileNotFoundError: a chapter in ``_toc.yml`` has not been executed yet.
+        RuntimeError: jupyter-book failed (its output is in the message).
+    """
+    root = root or project_root()
+    missing = [c for c in list_chapters(root) if not (root / GENERATED / f"{c}.ipynb").is_file()]
+    if missing:
+        raise FileNotFoundError(
+            f"Chapters not executed yet: {', '.join(missing)}. Run 'thesis run <chapter>' or 'thesis book'."
+        )
+    exe = Path(sys.executable).with_name("jupyter-book")
+    cmd = [str(exe) if exe.exists() else "jupyter-book", "build", str(root), "--path-output", str(root)]
+    if strict:
+        cmd += ["-W", "-n", "--keep-going"]
+    env = {**os.environ, "PYDEVD_DISABLE_FILE_VALIDATION": "1"}
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, env=env)
+    if proc.returncode != 0:
+        raise RuntimeError(f"jupyter-book build failed ({proc.returncode}):\n{proc.stdout[-6000:]}\n{proc.stderr[-6000:]}")
+    return root / "_build" / "html" / "index.html"

@@ -1,0 +1,126 @@
+"""The ``thesis`` command: run chapters, build the book, make data sets, run benchmarks.
+
+    thesis run 01_background -p rl_timesteps 20000      # one chapter, papermill underneath
+    thesis run 01_background -f params/01_background.full.yml
+    thesis book -j 2                                    # every chapter, then the HTML book
+    thesis data generate --task hopper --tier medium    # see 'thesis data --help'
+    thesis bench dtw                                    # benchmarks/bench_dtw.py
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+
+def _parse_value(text: str) -> Any:
+    """``-p`` values are YAML scalars, as papermill reads them: 3 → int, 0.5 → float, true → bool."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from thesis_lib.book import ChapterFailed, run_chapter
+
+    params = {name: _parse_value(value) for name, value in (args.param or [])}
+    profile: str | Path | None = args.file or args.profile
+    try:
+        result = run_chapter(args.chapter, params, profile=profile, output=args.output, progress=not args.quiet)
+    except (ValueError, FileNotFoundError, ChapterFailed) as err:
+        print(f"thesis run: {err}", file=sys.stderr)
+        return 1
+    print(f"{result.chapter}: executed in {result.wall_time_s:.0f} s -> {result.output}")
+    return 0
+
+
+def _cmd_book(args: argparse.Namespace) -> int:
+    from thesis_lib.book import ChapterFailed, run_chapters
+    from thesis_lib.book.runner import build_book
+
+    try:
+        if not args.no_run:
+            run_chapters(args.chapters or None, jobs=args.jobs, profile=args.profile)
+        index = build_book(strict=not args.no_strict)
+    except (ValueError, FileNotFoundError, ChapterFailed, RuntimeError) as err:
+        print(f"thesis book: {err}", file=sys.stderr)
+        return 1
+    print(f"The book is at {index}")
+    return 0
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from thesis_lib.book import list_chapters, notebook_parameters
+
+    for chapter in list_chapters():
+        params = notebook_parameters(chapter)
+        print(f"{chapter}: " + ", ".join(f"{k}={v!r}" for k, v in params.items()))
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from thesis_lib.book import project_root
+
+    folder = project_root() / "benchmarks"
+    script = folder / f"bench_{args.name}.py"
+    if not script.is_file():
+        names = sorted(p.stem.removeprefix("bench_") for p in folder.glob("bench_*.py"))
+        print(f"thesis bench: no benchmark '{args.name}'. Available: {', '.join(names)}", file=sys.stderr)
+        return 1
+    return subprocess.call([sys.executable, str(script), *args.rest])
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="thesis", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="execute one chapter notebook with papermill")
+    run.add_argument("chapter", help="chapter name, e.g. 01_background (see 'thesis list')")
+    run.add_argument("-p", "--param", nargs=2, action="append", metavar=("NAME", "VALUE"), help="set a parameter")
+    run.add_argument("-f", "--file", help="YAML file of parameters (e.g. params/01_background.full.yml)")
+    run.add_argument("--profile", default="smoke", help="'smoke' (default) or 'full'; ignored with -f")
+    run.add_argument("-o", "--output", help="executed notebook path (default book/generated/<chapter>.ipynb)")
+    run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    run.set_defaults(func=_cmd_run)
+
+    book = sub.add_parser("book", help="run every chapter, then build the HTML book")
+    book.add_argument("chapters", nargs="*", help="only these chapters (default: all in _toc.yml)")
+    book.add_argument("-j", "--jobs", type=int, default=1, help="chapters run in parallel processes")
+    book.add_argument("--profile", default="smoke", help="'smoke' (default) or 'full'")
+    book.add_argument("--no-run", action="store_true", help="only build from already executed notebooks")
+    book.add_argument("--no-strict", action="store_true", help="do not turn Sphinx warnings into errors")
+    book.set_defaults(func=_cmd_book)
+
+    lst = sub.add_parser("list", help="list the chapters and their parameters")
+    lst.set_defaults(func=_cmd_list)
+
+    bench = sub.add_parser("bench", help="run benchmarks/bench_<name>.py")
+    bench.add_argument("name")
+    bench.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark script")
+    bench.set_defaults(func=_cmd_bench)
+
+    # Sub-packages contribute their own commands (e.g. 'thesis data').
+    for module in ("thesis_lib.data.cli",):
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as err:  # that package is not written yet
+            if err.name and module.startswith(err.name):
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

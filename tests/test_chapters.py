@@ -1,0 +1,90 @@
+"""Every chapter runs at its smoke profile, writes its results, and the book builds with -W.
+
+These are the slow tests (marked ``slow``): they execute notebooks through papermill exactly as
+``make book`` does, into ``book/generated/``, with results redirected to a temporary folder.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from thesis_lib.book import list_chapters, project_root, run_chapters
+from thesis_lib.book.runner import GENERATED, build_book
+
+ROOT = project_root()
+CHAPTERS = list_chapters(ROOT)
+
+
+def test_committed_notebooks_carry_no_outputs():
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        nb = nbformat.read(path, as_version=4)
+        for cell in nb.cells:
+            if cell.cell_type == "code":
+                assert not cell.outputs, f"{path.name}: strip outputs before committing"
+                assert cell.execution_count is None, f"{path.name}: strip execution counts"
+        tagged = [c for c in nb.cells if "parameters" in c.get("metadata", {}).get("tags", [])]
+        assert len(tagged) == 1, f"{path.name} needs exactly one cell tagged 'parameters'"
+
+
+@pytest.fixture(scope="session")
+def executed(tmp_path_factory):
+    """Run every chapter once (smoke profile, 2 processes), results into a temporary folder."""
+    results = tmp_path_factory.mktemp("results")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("THESIS_RESULTS_DIR", str(results))
+    try:
+        runs = run_chapters(CHAPTERS, jobs=2, profile="smoke", root=ROOT)
+    finally:
+        mp.undo()
+    return {r.chapter: r for r in runs}, results
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("chapter", CHAPTERS)
+def test_chapter_smoke_run_writes_results(executed, chapter):
+    runs, results = executed
+    run = runs[chapter]
+    assert run.output == ROOT / GENERATED / f"{chapter}.ipynb"
+    meta = json.loads((results / chapter / "run.json").read_text())
+    assert meta["chapter"] == chapter and meta["artifacts"], "run.json lists what the chapter wrote"
+    for name in meta["artifacts"]:
+        assert (results / chapter / name).stat().st_size > 0
+    assert meta["git_commit"] and meta["versions"]["numpy"]
+    assert run.wall_time_s < 300, f"{chapter} smoke run took {run.wall_time_s:.0f} s (target < 5 min)"
+
+
+@pytest.mark.slow
+def test_book_builds_strict(executed):
+    index = build_book(ROOT, strict=True)
+    assert index.is_file()
+    html = index.read_text()
+    for chapter in CHAPTERS:
+        page = ROOT / "_build" / "html" / GENERATED / f"{chapter}.html"
+        assert page.is_file(), f"{chapter} missing from the built book"
+        assert "<img" in page.read_text(), f"{chapter} shows no figure in the book"
+    assert "Improving the Robustness" in html
+
+
+@pytest.mark.slow
+def test_papermill_cli_rejects_unknown_parameter(tmp_path):
+    """papermill alone injects any name; the notebook's config cell turns a typo into an error."""
+    out = tmp_path / "out.ipynb"
+    proc = subprocess.run(
+        [sys.executable, "-m", "papermill", str(ROOT / "notebooks" / "survey.ipynb"), str(out),
+         "-p", "tpo", "3", "--cwd", str(ROOT)],
+        capture_output=True, text=True,
+    )
+    assert proc.returncode != 0
+    assert "Unknown parameter 'tpo' for notebook survey. Did you mean: 'top'? Valid: top." in proc.stdout + proc.stderr
+
+
+def test_thesis_cli_rejects_unknown_parameter_before_running():
+    proc = subprocess.run([sys.executable, "-m", "thesis_lib.cli", "run", "survey", "-p", "tpo", "3"],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 1
+    assert "Unknown parameter 'tpo' for notebook survey. Did you mean: 'top'?" in proc.stderr
