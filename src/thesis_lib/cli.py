@@ -15,21 +15,12 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import yaml
-
-
-def _parse_value(text: str) -> Any:
-    """``-p`` values are YAML scalars, as papermill reads them: 3 → int, 0.5 → float, true → bool."""
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
-
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from thesis_lib.book import ChapterFailed, run_chapter
+    from thesis_lib.book.params import parse_value
 
-    params = {name: _parse_value(value) for name, value in (args.param or [])}
+    params = {name: parse_value(value) for name, value in (args.param or [])}
     profile: str | Path | None = args.file or args.profile
     try:
         result = run_chapter(args.chapter, params, profile=profile, output=args.output, progress=not args.quiet)

@@ -79,3 +79,26 @@ def _is_parameter_like(name: str, value: Any) -> bool:
     if inspect.ismodule(value) or inspect.isclass(value) or inspect.isroutine(value):
         return False
     return not dataclasses.is_dataclass(value)
+
+
+def parse_value(text: str) -> Any:
+    """Read a parameter value written as text (``-p NAME VALUE``, a notebook's default).
+
+    Python literals first (``3``, ``1e-3``, ``[0, 1]``, ``{"SAC": 4000}``, ``True``), then YAML
+    scalars (``true``, ``null``), else the text itself.
+
+    >>> [parse_value(t) for t in ["3", "1e-3", "[0, 1]", "true", "Pendulum-v1"]]
+    [3, 0.001, [0, 1], True, 'Pendulum-v1']
+    """
+    import ast
+
+    import yaml
+
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        pass
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text

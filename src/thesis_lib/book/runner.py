@@ -21,7 +21,7 @@ from typing import Any
 
 import yaml
 
-from thesis_lib.book.params import validate_parameters
+from thesis_lib.book.params import parse_value, validate_parameters
 from thesis_lib.book.paths import project_root
 
 GENERATED = Path("book") / "generated"
@@ -97,14 +97,8 @@ def notebook_parameters(chapter: str, root: Path | None = None) -> dict[str, Any
     import papermill as pm
 
     info = pm.inspect_notebook(str(notebook_path(chapter, root)))
-    out = {}
-    for name, spec in info.items():
-        default = spec.get("default")
-        try:
-            out[name] = yaml.safe_load(default) if isinstance(default, str) else default
-        except yaml.YAMLError:
-            out[name] = default
-    return out
+    return {name: parse_value(spec["default"]) if isinstance(spec.get("default"), str) else spec.get("default")
+            for name, spec in info.items()}
 
 
 def load_profile(chapter: str, profile: str | Path = "smoke", root: Path | None = None) -> dict[str, Any]:

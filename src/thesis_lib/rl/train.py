@@ -1,0 +1,292 @@
+"""Training, learning curves and evaluation for SB3's SAC, TD3 and DDPG.
+
+Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, fields
+from typing import Any, NamedTuple, Protocol
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import torch
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.noise import (
+    ActionNoise,
+    NormalActionNoise,
+    OrnsteinUhlenbeckActionNoise,
+    VectorizedActionNoise,
+)
+from stable_baselines3.common.utils import set_random_seed
+from stable_baselines3.common.vec_env import VecEnv
+
+from thesis_lib.rl.callbacks import EPISODE_COLUMNS, EpisodeLogger, ProgressBar, find_horizon, is_crash
+from thesis_lib.rl.config import RLConfig, _algo_class, _did_you_mean
+
+CURVE_COLUMNS: tuple[str, ...] = ("algo", "seed", *EPISODE_COLUMNS)
+"""Columns of `learning_curves`, in order."""
+
+EVAL_COLUMNS: tuple[str, ...] = ("episode", "return", "length", "terminated", "truncated", "crashed")
+"""Columns of `evaluate`, in order."""
+
+
+class TrainResult(NamedTuple):
+    """What `train` returns.
+
+    Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
+    """
+
+    model: BaseAlgorithm
+    """The trained SB3 model (`model.predict(obs, deterministic=True)` acts)."""
+    episodes: pd.DataFrame
+    """One row per finished training episode (`EpisodeLogger.episodes`)."""
+    config: RLConfig
+    """The configuration that was run."""
+    wall_time_s: float
+    """Seconds spent in `model.learn`."""
+
+
+class Predictor(Protocol):
+    """Anything that acts like an SB3 model: `predict(obs, state, episode_start, deterministic)`."""
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = False
+    ) -> tuple[Any, Any]: ...
+
+
+def config_from_params(params: Mapping[str, Any]) -> RLConfig:
+    """Build an `RLConfig` from a mapping (a notebook's parameters), rejecting unknown names.
+
+    Raises:
+        ValueError: a name is not an `RLConfig` field; the message suggests the closest one.
+
+    Used in: Background (thesis 2.5-2.7), DEFENDER (4.3).
+
+    Example:
+        >>> config_from_params({"algo": "TD3", "total_timestep": 10})  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        ValueError: Unknown RLConfig parameter 'total_timestep'. Did you mean: 'total_timesteps'? Valid: ...
+    """
+    valid = [f.name for f in fields(RLConfig) if f.init]
+    for name in params:
+        if name not in valid:
+            raise ValueError(
+                f"Unknown RLConfig parameter {name!r}.{_did_you_mean(name, valid)} Valid: {', '.join(valid)}."
+            )
+    return RLConfig(**params)
+
+
+def make_action_noise(kind: str | None, sigma: float, n_actions: int, n_envs: int = 1) -> ActionNoise | None:
+    """Exploration noise for TD3/DDPG: Gaussian or Ornstein-Uhlenbeck with std `sigma` per dimension.
+
+    Args:
+        kind: "normal", "ornstein-uhlenbeck" or None (no noise).
+        sigma: noise standard deviation, in units of the normalised action.
+        n_actions: action dimension.
+        n_envs: env copies; each gets its own noise process.
+
+    Used in: Background (thesis 2.5-2.6), DEFENDER (4.3).
+    """
+    if kind is None or sigma == 0:
+        return None
+    mean, std = np.zeros(n_actions), sigma * np.ones(n_actions)
+    noise_cls = {"normal": NormalActionNoise, "ornstein-uhlenbeck": OrnsteinUhlenbeckActionNoise}[kind]
+    noise = noise_cls(mean=mean, sigma=std)
+    return VectorizedActionNoise(noise, n_envs) if n_envs > 1 else noise
+
+
+def _policy_for(env: gym.Env | VecEnv) -> str:
+    return "MultiInputPolicy" if isinstance(env.observation_space, gym.spaces.Dict) else "MlpPolicy"
+
+
+def make_model(config: RLConfig, env: gym.Env | VecEnv | None = None) -> BaseAlgorithm:
+    """Build (seeded, untrained) the SB3 model `config` describes, on `env` or on `config.env_id`.
+
+    Used in: Background (thesis 2.5-2.7), DEFENDER (4.3).
+    """
+    if env is None:
+        if config.env_id is None:
+            raise ValueError("RLConfig.env_id is None and no env was passed: give one of them.")
+        env = make_vec_env(config.env_id, n_envs=config.n_envs, seed=config.seed)
+    set_random_seed(config.seed)  # before any network is built
+    n_envs = env.num_envs if isinstance(env, VecEnv) else 1
+    if not isinstance(env.action_space, gym.spaces.Box):
+        raise ValueError(f"{config.algo} needs a continuous (Box) action space, got {env.action_space}.")
+    noise = make_action_noise(
+        config.action_noise_resolved, config.action_noise_sigma, int(np.prod(env.action_space.shape)), n_envs
+    )
+    cls = _algo_class(config.algo)
+    return cls(_policy_for(env), env, action_noise=noise, **config.sb3_kwargs())
+
+
+def train(
+    config: RLConfig,
+    *,
+    env: gym.Env | VecEnv | None = None,
+    callbacks: Iterable[BaseCallback] = (),
+    progress: bool = True,
+    info_keys: Sequence[str] = (),
+) -> TrainResult:
+    """Train SAC, TD3 or DDPG as `config` says and log every training episode.
+
+    Seeds torch, NumPy, `random`, the action space and the env resets with `config.seed`, and
+    runs torch on one thread, so the same config gives the same episodes on CPU.
+
+    Args:
+        config: what to run.
+        env: an already built (and wrapped) gymnasium env or SB3 `VecEnv` to train on instead of
+            `gymnasium.make(config.env_id)`; e.g. DEFENDER's filter wrapper. A plain env is
+            wrapped by SB3 in `Monitor` and `DummyVecEnv`.
+        callbacks: further SB3 callbacks, called after the episode logger.
+        progress: show a tqdm bar with the step count, last return and mean of the last 10.
+        info_keys: `info` entries to copy into each episode row (see `EpisodeLogger`).
+
+    Returns:
+        `TrainResult(model, episodes, config, wall_time_s)`.
+
+    Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
+    """
+    # Small MLPs train several times faster on one thread than on two busy cores.
+    torch.set_num_threads(1)
+    model = make_model(config, env)
+    logger = EpisodeLogger(info_keys=info_keys)
+    chain: list[BaseCallback] = [logger]
+    if progress:
+        chain.append(ProgressBar(logger, desc=f"{config.algo} seed {config.seed}"))
+    chain.extend(callbacks)
+    start = time.perf_counter()
+    model.learn(total_timesteps=config.total_timesteps, callback=CallbackList(chain))
+    wall_time_s = time.perf_counter() - start
+    return TrainResult(model, logger.episodes, config, wall_time_s)
+
+
+def _curve_task(config: RLConfig, progress: bool) -> pd.DataFrame:
+    episodes = train(config, progress=progress).episodes
+    episodes.insert(0, "seed", config.seed)
+    episodes.insert(0, "algo", config.algo)
+    return episodes
+
+
+def learning_curves(
+    algos: Sequence[str],
+    env_id: str,
+    total_timesteps: int | Mapping[str, int],
+    seeds: Sequence[int],
+    n_jobs: int = 1,
+    progress: bool = True,
+    **overrides: Any,
+) -> pd.DataFrame:
+    """Train each algorithm with each seed and return every training episode as a tidy table.
+
+    Each (algo, seed) pair is a joblib task: `n_jobs=1` runs them in this process, one after the
+    other; `n_jobs>1` (or -1 for all cores) runs them in worker processes. The same rows come
+    back either way.
+
+    Args:
+        algos: names of `RLConfig.algo`, e.g. ["DDPG", "TD3", "SAC"].
+        env_id: gymnasium id, e.g. "Pendulum-v1".
+        total_timesteps: steps per run, one number or one per algorithm ({"SAC": 5000, ...}).
+        seeds: seeds to run each algorithm with.
+        n_jobs: joblib worker processes.
+        progress: show a bar over finished runs (and, with `n_jobs=1`, one per run).
+        **overrides: further `RLConfig` fields for every run (e.g. `net_arch=[64, 64]`).
+
+    Returns:
+        One row per (algo, seed, episode), columns `CURVE_COLUMNS`: algo, seed, episode,
+        env_index, timestep, return, length, terminated, truncated, crashed, wall_time_s.
+
+    Used in: Background (thesis 2.5-2.7, Fig. "DDPG/TD3/SAC learning curves").
+    """
+    from joblib import Parallel, delayed
+    from tqdm.auto import tqdm
+
+    steps = total_timesteps if isinstance(total_timesteps, Mapping) else dict.fromkeys(algos, total_timesteps)
+    missing = [algo for algo in algos if algo not in steps]
+    if missing:
+        raise ValueError(f"total_timesteps has no entry for {missing}; it has {sorted(steps)}.")
+    configs = [
+        config_from_params(
+            {**overrides, "algo": algo, "env_id": env_id, "seed": int(seed), "total_timesteps": steps[algo]}
+        )
+        for algo in algos
+        for seed in seeds
+    ]
+    # In-process runs also show a bar per run; worker processes' bars would interleave.
+    per_run_bars = progress and n_jobs == 1
+    run_all = Parallel(n_jobs=n_jobs, return_as="generator")
+    tasks = run_all(delayed(_curve_task)(config, per_run_bars) for config in configs)
+    frames = list(tqdm(tasks, total=len(configs), desc=f"{env_id} runs", disable=not progress))
+    return pd.concat(frames, ignore_index=True)[list(CURVE_COLUMNS)]
+
+
+def evaluate(
+    model: Predictor,
+    env: str | gym.Env,
+    n_episodes: int = 10,
+    seed: int = 0,
+    deterministic: bool = True,
+) -> pd.DataFrame:
+    """Run `model` for `n_episodes` episodes without learning and log each one.
+
+    Duck-typed like SB3's `evaluate_policy`: `model` is anything with
+    `predict(obs, state=, episode_start=, deterministic=) -> (action, state)`. The env is reset
+    with `seed` once, before the first episode (Gymnasium's convention), so the same seed gives
+    the same episodes.
+
+    Args:
+        model: the policy.
+        env: a gymnasium id (made with `gymnasium.make`) or a gymnasium env (not a `VecEnv`).
+        n_episodes: episodes to run.
+        seed: seed of the first reset and of the action space.
+        deterministic: act with the policy's mean/greedy action.
+
+    Returns:
+        One row per episode, columns `EVAL_COLUMNS`: episode, return, length, terminated,
+        truncated, crashed.
+
+    Used in: Background (thesis 2.5-2.7), DEFENDER (4.3).
+    """
+    if n_episodes <= 0:
+        raise ValueError(f"evaluate expects n_episodes > 0, got {n_episodes}.")
+    if isinstance(env, VecEnv):
+        raise TypeError("evaluate expects a gymnasium id or gymnasium.Env, got a VecEnv; pass its inner env.")
+    env = gym.make(env) if isinstance(env, str) else env
+    horizon = find_horizon(env)
+    env.action_space.seed(seed)
+    rows = []
+    obs, _ = env.reset(seed=seed)
+    for episode in range(n_episodes):
+        if episode > 0:
+            obs, _ = env.reset()
+        state, episode_start = None, np.ones((1,), dtype=bool)
+        total, length, terminated, truncated = 0.0, 0, False, False
+        while not (terminated or truncated):
+            action, state = model.predict(
+                obs, state=state, episode_start=episode_start, deterministic=deterministic
+            )
+            episode_start = np.zeros((1,), dtype=bool)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total += float(reward)
+            length += 1
+        rows.append(
+            {
+                "episode": episode,
+                "return": total,
+                "length": length,
+                "terminated": bool(terminated),
+                "truncated": bool(truncated),
+                "crashed": is_crash(bool(terminated), length, horizon),
+            }
+        )
+    return pd.DataFrame(rows, columns=list(EVAL_COLUMNS))
+
+
+def config_dict(config: RLConfig) -> dict[str, Any]:
+    """`config` as a JSON-ready dict of its init fields (for `run.json` beside a results CSV)."""
+    return {k: v for k, v in asdict(config).items() if k != "action_noise_resolved"}
