@@ -88,3 +88,29 @@ def test_thesis_cli_rejects_unknown_parameter_before_running():
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 1
     assert "Unknown parameter 'tpo' for notebook survey. Did you mean: 'top'?" in proc.stderr
+
+
+def _write_project(root: Path, source: str) -> None:
+    """A minimal project: _toc.yml with one chapter 'demo', its notebook and smoke profile."""
+    (root / "notebooks").mkdir()
+    (root / "params").mkdir()
+    (root / "_toc.yml").write_text("format: jb-book\nroot: intro\nchapters:\n  - file: book/generated/demo\n")
+    nb = nbformat.v4.new_notebook()
+    params = nbformat.v4.new_code_cell("n = 1")
+    params.metadata["tags"] = ["parameters"]
+    nb.cells = [params, nbformat.v4.new_code_cell(source)]
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nbformat.write(nb, root / "notebooks" / "demo.ipynb")
+    (root / "params" / "demo.smoke.yml").write_text("n: 1\n")
+
+
+def test_failing_chapter_names_the_cell_and_the_notebook(tmp_path):
+    from thesis_lib.book import ChapterFailed, run_chapter
+
+    _write_project(tmp_path, "raise RuntimeError(f'boom {n}')")
+    with pytest.raises(ChapterFailed, match=r"Chapter 'demo' failed in cell \d+ .*RuntimeError: boom 2"):
+        run_chapter("demo", {"n": 2}, root=tmp_path, progress=False)
+    executed = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
+    assert any(o.get("ename") == "RuntimeError" for c in executed.cells for o in c.get("outputs", []))
+    with pytest.raises(ChapterFailed, match="boom 1"):
+        run_chapters(["demo"], root=tmp_path)
