@@ -20,14 +20,6 @@ from thesis_lib.seq import (
 )
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 # ---------------------------------------------------------------- positional encoding (Eq. 2.1-2.2)
 
 

@@ -17,14 +17,6 @@ from thesis_lib.seq import (
 )
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 def _random_stable(N: int, rng: np.random.Generator) -> np.ndarray:
     """A random dense A whose eigenvalues have negative real part (shifted by its spectral abscissa)."""
     M = rng.normal(size=(N, N))

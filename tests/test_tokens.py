@@ -16,14 +16,6 @@ from thesis_lib.seq import (
 )
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 def _rtg_loop(r, gamma):
     out, acc = np.zeros(len(r)), 0.0
     for t in reversed(range(len(r))):
