@@ -212,3 +212,26 @@ def test_learning_curves_processes_give_the_same_rows():
     serial = learning_curves(["TD3"], "Pendulum-v1", 400, seeds=[0, 1], n_jobs=1, **kwargs)
     parallel = learning_curves(["TD3"], "Pendulum-v1", 400, seeds=[0, 1], n_jobs=2, **kwargs)
     pd.testing.assert_frame_equal(serial.drop(columns="wall_time_s"), parallel.drop(columns="wall_time_s"))
+
+
+def test_learning_curves_resume_from_cache(tmp_path, monkeypatch):
+    """Finished runs are saved and reused: a second call trains nothing and returns the same rows."""
+    import sys
+
+    from thesis_lib.rl import learning_curves
+
+    train_mod = sys.modules["thesis_lib.rl.train"]  # the package re-exports the function `train`
+
+    kwargs = dict(algos=["TD3"], env_id="Pendulum-v1", total_timesteps=400, seeds=[0], progress=False,
+                  learning_starts=100, net_arch=[8], cache_dir=tmp_path)
+    first = learning_curves(**kwargs)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Pendulum-v1-TD3-seed0.csv", "Pendulum-v1-TD3-seed0.json"]
+
+    def no_training(*args, **kw):
+        raise AssertionError("a cached run was trained again")
+
+    monkeypatch.setattr(train_mod, "train", no_training)
+    again = learning_curves(**kwargs)
+    pd.testing.assert_frame_equal(first, again, check_dtype=False)
+    with pytest.raises(AssertionError, match="trained again"):  # another config is not reused
+        learning_curves(**{**kwargs, "total_timesteps": 500})

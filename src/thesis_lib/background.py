@@ -57,6 +57,10 @@ class BackgroundConfig:
     """Hidden layers of actor and critics (the thesis's algorithms use 256-256)."""
     n_jobs: int = 1
     """Processes for the RL runs; on a busy 2-core machine one is faster."""
+    rl_resume: bool = False
+    """Keep each finished RL run under ``results/01_background/rl_runs/`` and reuse it when the
+    chapter is rerun with the same settings, so a long (full-profile) sweep that stops part-way
+    resumes. Off by default so that the book always retrains."""
 
     def __post_init__(self) -> None:
         ints = {"dtw_features": self.dtw_features, "dtw_pairs": self.dtw_pairs, "fastdtw_radius": self.fastdtw_radius,

@@ -4,9 +4,11 @@ Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
 """
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, fields
+from pathlib import Path
 from typing import Any, NamedTuple, Protocol
 
 import gymnasium as gym
@@ -166,11 +168,26 @@ def train(
     return TrainResult(model, logger.episodes, config, wall_time_s)
 
 
-def _curve_task(config: RLConfig, progress: bool) -> pd.DataFrame:
+def _curve_task(config: RLConfig, progress: bool, cache_dir: str | None = None) -> pd.DataFrame:
+    cached = _cache_paths(config, cache_dir)
+    if cached and cached[0].is_file() and cached[1].is_file():
+        if json.loads(cached[1].read_text()) == config_dict(config):
+            return pd.read_csv(cached[0])
     episodes = train(config, progress=progress).episodes
     episodes.insert(0, "seed", config.seed)
     episodes.insert(0, "algo", config.algo)
+    if cached:
+        cached[0].parent.mkdir(parents=True, exist_ok=True)
+        episodes.to_csv(cached[0], index=False)
+        cached[1].write_text(json.dumps(config_dict(config), indent=1))
     return episodes
+
+
+def _cache_paths(config: RLConfig, cache_dir: str | None) -> tuple[Path, Path] | None:
+    if cache_dir is None:
+        return None
+    stem = Path(cache_dir) / f"{config.env_id}-{config.algo}-seed{config.seed}"
+    return stem.with_suffix(".csv"), stem.with_suffix(".json")
 
 
 def learning_curves(
@@ -180,6 +197,7 @@ def learning_curves(
     seeds: Sequence[int],
     n_jobs: int = 1,
     progress: bool = True,
+    cache_dir: str | Path | None = None,
     **overrides: Any,
 ) -> pd.DataFrame:
     """Train each algorithm with each seed and return every training episode as a tidy table.
@@ -195,6 +213,9 @@ def learning_curves(
         seeds: seeds to run each algorithm with.
         n_jobs: joblib worker processes.
         progress: show a bar over finished runs (and, with `n_jobs=1`, one per run).
+        cache_dir: if given, each finished (algo, seed) run is saved there (episodes CSV and
+            its config as JSON) and reused when called again with the same config, so a long
+            sweep that stops part-way resumes from the runs it had finished.
         **overrides: further `RLConfig` fields for every run (e.g. `net_arch=[64, 64]`).
 
     Returns:
@@ -220,7 +241,8 @@ def learning_curves(
     # In-process runs also show a bar per run; worker processes' bars would interleave.
     per_run_bars = progress and n_jobs == 1
     run_all = Parallel(n_jobs=n_jobs, return_as="generator")
-    tasks = run_all(delayed(_curve_task)(config, per_run_bars) for config in configs)
+    cache = str(cache_dir) if cache_dir is not None else None
+    tasks = run_all(delayed(_curve_task)(config, per_run_bars, cache) for config in configs)
     frames = list(tqdm(tasks, total=len(configs), desc=f"{env_id} runs", disable=not progress))
     return pd.concat(frames, ignore_index=True)[list(CURVE_COLUMNS)]
 
