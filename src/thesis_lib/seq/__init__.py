@@ -5,6 +5,13 @@
 * :mod:`thesis_lib.seq.ssm` - S4's LTI state space model (Eq. 2.4-2.7) and Mamba's selective
   scan reference.
 * :mod:`thesis_lib.seq.tokens` - returns-to-go and the DT token layout (Sec. 2.8).
+* :mod:`thesis_lib.seq.models` - BC, the Decision Transformer (with and without returns-to-go)
+  and the Hierarchical Decision Transformer (Sec. 5.2); :mod:`thesis_lib.seq.subgoals` - HDT's
+  sub-goal selection (5.2.2).
+* :mod:`thesis_lib.seq.mamba` - a Mamba-1 block with a fast CPU selective scan (numba, hand-written
+  backward) and an O(1)-per-token recurrent step (Sec. 2.3, 5.3); ``mamba_ssm`` on CUDA.
+* :mod:`thesis_lib.seq.trainer` and :mod:`thesis_lib.seq.evaluate` - the one trainer and the
+  one evaluator of every sequence model; :mod:`thesis_lib.seq.experiments` - Tables 5.1-5.3.
 
 Mask convention throughout: a boolean mask is ``True`` where a query may attend (torch SDPA's).
 
@@ -26,6 +33,33 @@ from thesis_lib.seq.attention import (
     padding_mask,
     sinusoidal_positional_encoding,
 )
+from thesis_lib.seq.evaluate import EvalResult, evaluate, target_returns
+from thesis_lib.seq.experiments import HDTExperimentConfig, run_hdt_experiments, run_method, summarize
+from thesis_lib.seq.mamba import (
+    SCAN_BACKENDS,
+    GatedMLP,
+    LayerState,
+    Mamba,
+    MambaBlock,
+    MambaConfig,
+    MambaMixer,
+    MambaState,
+    ScanOutput,
+    causal_depthwise_conv1d,
+    resolve_scan_backend,
+    selective_scan,
+)
+from thesis_lib.seq.models import (
+    BC,
+    HDT,
+    BCConfig,
+    DecisionTransformer,
+    DTConfig,
+    HDTConfig,
+    SeqOutput,
+    TokenTransformer,
+    masked_mse,
+)
 from thesis_lib.seq.ssm import (
     Discretization,
     ScanStep,
@@ -37,6 +71,7 @@ from thesis_lib.seq.ssm import (
     ssm_recurrence,
     zoh_discretize,
 )
+from thesis_lib.seq.subgoals import select_subgoal_indices, select_subgoals, subgoal_fn
 from thesis_lib.seq.tokens import (
     MODALITIES,
     deinterleave_embeddings,
@@ -44,32 +79,67 @@ from thesis_lib.seq.tokens import (
     interleave_tokens,
     returns_to_go,
 )
+from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 __all__ = [
     "ACTIVATIONS",
+    "BC",
+    "HDT",
     "MLP",
     "MODALITIES",
+    "SCAN_BACKENDS",
     "AttentionOutput",
+    "BCConfig",
     "Block",
     "CausalSelfAttention",
+    "DTConfig",
+    "DecisionTransformer",
     "Discretization",
+    "EvalResult",
     "GPTBlockConfig",
+    "GatedMLP",
+    "HDTConfig",
+    "HDTExperimentConfig",
+    "LayerState",
+    "Mamba",
+    "MambaBlock",
+    "MambaConfig",
+    "MambaMixer",
+    "MambaState",
+    "ScanOutput",
     "ScanStep",
+    "SeqOutput",
+    "TokenTransformer",
+    "TrainConfig",
+    "Trainer",
     "additive_mask",
     "attention",
+    "batch_to_torch",
+    "causal_depthwise_conv1d",
     "causal_mask",
     "combine_masks",
     "deinterleave_embeddings",
+    "evaluate",
     "hippo_legs",
     "interleave_embeddings",
     "interleave_tokens",
+    "masked_mse",
     "padding_mask",
+    "resolve_scan_backend",
     "returns_to_go",
+    "run_hdt_experiments",
+    "run_method",
+    "select_subgoal_indices",
+    "select_subgoals",
+    "selective_scan",
     "selective_scan_reference",
     "selective_scan_step",
     "sinusoidal_positional_encoding",
     "ssm_convolution",
     "ssm_kernel",
     "ssm_recurrence",
+    "subgoal_fn",
+    "summarize",
+    "target_returns",
     "zoh_discretize",
 ]

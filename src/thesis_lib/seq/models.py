@@ -1,0 +1,481 @@
+"""BC, the Decision Transformer and the Hierarchical Decision Transformer (thesis 2.8, 5.2).
+
+Read top-down, as nanoGPT's ``model.py``: the shared parts first (configs, input checks, the
+masked MSE, :class:`TokenTransformer`), then the three models, one screen each.
+
+Every model takes the same input: a dict of tensors, as ``SequenceBatch.to_torch()`` gives
+(plus ``prev_subgoals`` for HDT, see :func:`thesis_lib.seq.trainer.batch_to_torch`)::
+
+    states         (B, T, state_dim)   z-scored s_t
+    actions        (B, T, act_dim)     a_t (targets; also the action tokens by default)
+    prev_actions   (B, T, act_dim)     a_{t-1}, zero at the episode start (paper_compat tokens)
+    returns_to_go  (B, T, 1)           rtg_t / rtg_scale
+    timesteps      (B, T)              step index in the episode (int64)
+    mask           (B, T)              True = real step (attend, count in the loss)
+    subgoals       (B, T, state_dim)   g_t (HDT targets, low-level input)
+    prev_subgoals  (B, T, state_dim)   g_{t-1}, zero at the episode start (HDT high-level input)
+
+``model(batch, targets=batch)`` returns a :class:`SeqOutput` with the predictions and the
+masked MSE; ``model.act(history)`` (``@torch.no_grad()``) returns the action (and sub-goal)
+for the last step of each history, for evaluation.
+
+``paper_compat=True`` switches (``notes/original-code.md``):
+
+* action tokens: the authors' DT and HDT put ``a_{t-1}`` (a zero action prepended) in the
+  action slot of step ``t``, after ``s_t``; the action ``a_t`` is read at ``s_t``, which then
+  sees actions up to ``a_{t-2}`` only. The default puts ``a_t`` there, as the DT paper: the
+  ``s_t`` token sees ``a_{t-1}`` in the previous step's slot, and ``a_t`` only after it.
+* (in the data) time-steps left-padded: :class:`thesis_lib.data.SequenceDataset`;
+  the last state's sub-goal is state 0: :func:`thesis_lib.seq.subgoals.subgoal_fn`.
+
+Used in: HDT chapter (thesis 5.2, Tables 5.1-5.3, 5.6); Decision Mamba chapter (baselines).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Mapping, NamedTuple
+
+import torch
+import torch.nn as nn
+
+from thesis_lib.seq.attention import ACTIVATIONS, Block, GPTBlockConfig
+from thesis_lib.seq.tokens import deinterleave_embeddings, interleave_embeddings
+
+__all__ = [
+    "BC",
+    "BCConfig",
+    "DTConfig",
+    "DecisionTransformer",
+    "HDT",
+    "HDTConfig",
+    "SeqOutput",
+    "TokenTransformer",
+    "masked_mse",
+]
+
+Tensors = Mapping[str, torch.Tensor]
+
+
+class SeqOutput(NamedTuple):
+    """What every model's ``forward`` returns.
+
+    Attributes:
+        actions: ``(B, T, act_dim)`` predicted actions (Tanh x ``max_action``).
+        subgoals: ``(B, T, state_dim)`` predicted sub-goals (HDT), else ``None``.
+        loss: Scalar training loss when targets were given (HDT: high + low), else ``None``.
+        losses: Named parts of the loss as floats, e.g. ``{"action": 0.3}`` (for logs).
+    """
+
+    actions: torch.Tensor
+    subgoals: torch.Tensor | None = None
+    loss: torch.Tensor | None = None
+    losses: dict[str, float] | None = None
+
+
+def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean squared error over real steps and feature dims (the authors' ``loss[mask > 0].mean()``).
+
+    Args:
+        pred: ``(B, T, D)``.
+        target: ``(B, T, D)``.
+        mask: ``(B, T)`` bool, ``True`` = count this step; ``None`` = all.
+
+    Returns:
+        Scalar tensor.
+
+    Example:
+        >>> p, t = torch.zeros(1, 2, 1), torch.tensor([[[1.0], [3.0]]])
+        >>> masked_mse(p, t, torch.tensor([[True, False]])).item()
+        1.0
+    """
+    if pred.shape != target.shape:
+        raise ValueError(f"Prediction shape {tuple(pred.shape)} differs from target shape {tuple(target.shape)}.")
+    err = (pred - target.to(pred.dtype)) ** 2  # (B, T, D)
+    if mask is None:
+        return err.mean()
+    return err[mask.bool()].mean()  # (n_real, D) -> scalar
+
+
+# ----------------------------------------------------------------------------------------------
+# Configs
+
+
+@dataclass
+class _ModelConfig:
+    state_dim: int
+    """Size of a state (observation) vector; must match the data set."""
+    act_dim: int
+    """Size of an action vector."""
+    max_action: float = 1.0
+    """Action heads output ``tanh(.) * max_action`` (``env.action_space.high``; 1 for MuJoCo)."""
+    K: int = 20
+    """Context length: the number of time steps a window (and an evaluation history) holds."""
+
+    @classmethod
+    def for_data(cls, seq: object, **kwargs: object):
+        """A config sized for a :class:`~thesis_lib.data.SequenceDataset`: its state and action sizes and K.
+
+        Example:
+            >>> from types import SimpleNamespace
+            >>> seq = SimpleNamespace(states=torch.zeros(10, 11), actions=torch.zeros(10, 3), K=20)
+            >>> DTConfig.for_data(seq, n_layer=2)
+            DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layer=2, n_head=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, use_rtg=True)
+        """
+        sizes = dict(state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=int(seq.K))
+        return cls(**{**sizes, **kwargs})
+
+    def __post_init__(self) -> None:
+        for name in ("state_dim", "act_dim", "K"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
+                raise ValueError(f"Expect `{name}` to be a positive int, actually: {value!r}.")
+        if not self.max_action > 0:
+            raise ValueError(f"Expect `max_action` > 0 (the action bound), actually: {self.max_action!r}.")
+
+
+@dataclass
+class BCConfig(_ModelConfig):
+    """Configuration of :class:`BC` (thesis 5.2.5.3: "an MLP with two fully connected layers").
+
+    Used in: HDT chapter (Table 5.3).
+    """
+
+    hidden_dim: int = 256
+    """Width of both hidden layers."""
+    dropout: float = 0.1
+    """Dropout after each hidden layer."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not isinstance(self.hidden_dim, int) or self.hidden_dim <= 0:
+            raise ValueError(f"Expect `hidden_dim` to be a positive int, actually: {self.hidden_dim!r}.")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"Expect `dropout` in [0, 1), actually: {self.dropout!r}.")
+
+
+@dataclass
+class _TransformerConfig(_ModelConfig):
+    d_model: int = 128
+    """Token embedding size (128 in the authors' code)."""
+    n_layer: int = 3
+    """Number of GPT blocks (per level for HDT)."""
+    n_head: int = 1
+    """Attention heads; must divide ``d_model``."""
+    dropout: float = 0.1
+    """Dropout on embeddings, attention and residual branches."""
+    activation: Literal["gelu", "gelu_tanh", "relu", "silu"] = "relu"
+    """MLP activation; the authors' GPT-2 config used "relu"."""
+    max_timestep: int = 4096
+    """Size of the learned time-step embedding table (time steps ``0 .. max_timestep-1``)."""
+    paper_compat: bool = False
+    """Action token ``a_{t-1}`` as in the authors' code (see the module docstring)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not isinstance(self.n_layer, int) or self.n_layer <= 0:
+            raise ValueError(f"Expect `n_layer` to be a positive int, actually: {self.n_layer!r}.")
+        if not isinstance(self.max_timestep, int) or self.max_timestep <= 0:
+            raise ValueError(f"Expect `max_timestep` to be a positive int, actually: {self.max_timestep!r}.")
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}.")
+        self.block_config()  # validates d_model, n_head, dropout
+
+    def block_config(self) -> GPTBlockConfig:
+        """The :class:`GPTBlockConfig` of each block."""
+        return GPTBlockConfig(
+            d_model=self.d_model, n_head=self.n_head, dropout=self.dropout, activation=self.activation
+        )
+
+
+@dataclass
+class DTConfig(_TransformerConfig):
+    """Configuration of :class:`DecisionTransformer` (thesis 2.8, 5.2.5.1).
+
+    Used in: HDT chapter (Tables 5.1, 5.3).
+    """
+
+    use_rtg: bool = True
+    """Tokens ``(rtg_t, s_t, a_t)``; ``False`` gives Table 5.1's "DT w/o desired returns" ``(s_t, a_t)``."""
+
+
+@dataclass
+class HDTConfig(_TransformerConfig):
+    """Configuration of :class:`HDT`; ``d_model``, ``n_layer``, ``n_head`` serve both levels.
+
+    Used in: HDT chapter (Tables 5.2, 5.3).
+    """
+
+    low_use_rtg: bool = False
+    """Add ``rtg_t`` to the low level's tokens: Table 5.2's "HDT with desired returns"."""
+
+
+# ----------------------------------------------------------------------------------------------
+# Input checks: fail at the door with both shapes, not deep inside a matmul.
+
+
+def _check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tuple[int, int]:
+    cfg = model.config
+    name = type(model).__name__
+    missing = [k for k in keys if k not in batch]
+    if missing:
+        raise KeyError(
+            f"{name} needs the inputs {', '.join(keys)}; missing: {', '.join(missing)}. "
+            f"Build the batch with SequenceBatch.to_torch() (HDT: thesis_lib.seq.trainer.batch_to_torch)."
+        )
+    s = batch["states"]
+    if s.ndim != 3 or s.shape[-1] != cfg.state_dim:
+        raise ValueError(
+            f"{name} expects states of shape (batch, seq_len, {cfg.state_dim}), got {tuple(s.shape)}. "
+            f"The model was built with state_dim={cfg.state_dim}; load the data set it was built for, "
+            f"or build a new model with state_dim={s.shape[-1] if s.ndim else '?'}."
+        )
+    B, T = s.shape[:2]
+    if T > cfg.K:
+        raise ValueError(f"Cannot forward a sequence of {T} steps: {name} was built with context K={cfg.K}.")
+    dims = {"actions": cfg.act_dim, "prev_actions": cfg.act_dim, "subgoals": cfg.state_dim,
+            "prev_subgoals": cfg.state_dim, "returns_to_go": 1}
+    for k in keys:
+        if k in dims and tuple(batch[k].shape) != (B, T, dims[k]):
+            raise ValueError(
+                f"{name} expects {k} of shape (batch, seq_len, {dims[k]}) = {(B, T, dims[k])}, "
+                f"got {tuple(batch[k].shape)}."
+            )
+    if "timesteps" in keys:
+        ts = batch["timesteps"]
+        if tuple(ts.shape) != (B, T):
+            raise ValueError(f"{name} expects timesteps of shape (batch, seq_len) = {(B, T)}, got {tuple(ts.shape)}.")
+        if ts.numel() and int(ts.max()) >= cfg.max_timestep:
+            raise ValueError(
+                f"Time step {int(ts.max())} is beyond the time-step embedding (max_timestep={cfg.max_timestep}); "
+                f"build the model with max_timestep > the longest episode."
+            )
+    return B, T
+
+
+def _action_head(d_in: int, act_dim: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(d_in, act_dim), nn.Tanh())
+
+
+# ----------------------------------------------------------------------------------------------
+# The shared transformer trunk
+
+
+class TokenTransformer(nn.Module):
+    """GPT trunk over interleaved per-step tokens: the part DT and both HDT levels share.
+
+    ``forward([x1, x2, ...], timesteps, mask)`` adds the learned time-step embedding to every
+    modality's ``(B, T, d)`` embedding, interleaves them ``(x1_0, x2_0, ..., x1_1, ...)``,
+    applies LayerNorm to the stacked tokens (as the DT's ``embed_ln``), dropout, the causal
+    GPT blocks with the step mask repeated per token, a final LayerNorm (GPT-2's ``ln_f``),
+    and splits the output back per modality.
+
+    Used in: HDT chapter (DT, HDT), Decision Mamba chapter (DT baseline).
+    """
+
+    def __init__(self, config: _TransformerConfig) -> None:
+        super().__init__()
+        self.embed_timestep = nn.Embedding(config.max_timestep, config.d_model)
+        self.embed_ln = nn.LayerNorm(config.d_model)
+        self.drop = nn.Dropout(config.dropout)
+        self.blocks = nn.ModuleList([Block(config.block_config()) for _ in range(config.n_layer)])
+        self.ln_f = nn.LayerNorm(config.d_model)
+
+    def forward(
+        self, tokens: list[torch.Tensor], timesteps: torch.Tensor, mask: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, ...]:
+        """Run the trunk.
+
+        Args:
+            tokens: ``n`` embeddings ``(B, T, d)``, in token order within a step.
+            timesteps: ``(B, T)`` int64 time steps.
+            mask: ``(B, T)`` bool, ``True`` = real step; ``None`` = all real.
+
+        Returns:
+            ``n`` outputs ``(B, T, d)``: the output at each modality's token.
+        """
+        time = self.embed_timestep(timesteps)  # (B, T, d), shared by the step's tokens
+        x = interleave_embeddings(*(tok + time for tok in tokens))  # (B, n T, d)
+        x = self.drop(self.embed_ln(x))
+        key_padding = None
+        if mask is not None and not bool(mask.all()):  # all real: the fused causal kernel, no mask
+            key_padding = interleave_embeddings(*([mask.bool()] * len(tokens)))  # (B, n T)
+        for block in self.blocks:
+            x = block(x, key_padding)
+        return deinterleave_embeddings(self.ln_f(x), len(tokens))
+
+
+# ----------------------------------------------------------------------------------------------
+# Models
+
+
+class BC(nn.Module):
+    """Behaviour cloning: ``a_t = tanh(MLP(s_t)) * max_action``, two hidden layers (thesis 5.2.5.3).
+
+    Applied step by step to a window, so it trains on the same batches as DT and HDT and its
+    loss is the same masked MSE.
+
+    Used in: HDT chapter (Table 5.3).
+    """
+
+    def __init__(self, config: BCConfig) -> None:
+        super().__init__()
+        self.config = config
+        h = config.hidden_dim
+        self.net = nn.Sequential(
+            nn.Linear(config.state_dim, h), nn.ReLU(), nn.Dropout(config.dropout),
+            nn.Linear(h, h), nn.ReLU(), nn.Dropout(config.dropout),
+            nn.Linear(h, config.act_dim), nn.Tanh(),
+        )  # fmt: skip
+
+    def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
+        """Predict ``a_t`` from ``s_t``; with ``targets`` (``targets["actions"]``) also the loss."""
+        _check_inputs(self, batch, ("states",))
+        actions = self.net(batch["states"]) * self.config.max_action  # (B, T, act_dim)
+        if targets is None:
+            return SeqOutput(actions)
+        loss = masked_mse(actions, targets["actions"], batch.get("mask"))
+        return SeqOutput(actions, loss=loss, losses={"action": loss.item()})
+
+    @torch.no_grad()
+    def act(self, history: Tensors) -> SeqOutput:
+        """Action for the last state of each history: ``SeqOutput.actions`` is ``(B, act_dim)``."""
+        out = self.forward({"states": history["states"][:, -1:]})
+        return SeqOutput(out.actions[:, -1])
+
+
+class DecisionTransformer(nn.Module):
+    """Decision Transformer (Chen et al. 2021; thesis 2.8): tokens ``(rtg_t, s_t, a_t)``.
+
+    ``a_t`` is read at the ``s_t`` token, which sees ``rtg_{<=t}``, ``s_{<=t}``, ``a_{<t}``.
+    ``use_rtg=False`` drops the RTG token (Table 5.1's "DT w/o desired returns");
+    ``paper_compat=True`` puts ``a_{t-1}`` in the action slot as the authors' code.
+
+    Used in: HDT chapter (Tables 5.1, 5.3); Decision Mamba chapter.
+    """
+
+    def __init__(self, config: DTConfig) -> None:
+        super().__init__()
+        self.config = config
+        d = config.d_model
+        self.embed_rtg = nn.Linear(1, d) if config.use_rtg else None
+        self.embed_state = nn.Linear(config.state_dim, d)
+        self.embed_action = nn.Linear(config.act_dim, d)
+        self.transformer = TokenTransformer(config)
+        self.predict_action = _action_head(d, config.act_dim)
+
+    def _keys(self) -> tuple[str, ...]:
+        action_key = "prev_actions" if self.config.paper_compat else "actions"
+        return ("states", action_key, "timesteps") + (("returns_to_go",) if self.config.use_rtg else ())
+
+    def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
+        """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the loss."""
+        _check_inputs(self, batch, self._keys())
+        a_tok = batch["prev_actions"] if self.config.paper_compat else batch["actions"]  # (B, T, act_dim)
+        tokens = [self.embed_state(batch["states"]), self.embed_action(a_tok)]
+        if self.embed_rtg is not None:
+            tokens.insert(0, self.embed_rtg(batch["returns_to_go"]))  # (rtg_t, s_t, a_t)
+        h = self.transformer(tokens, batch["timesteps"], batch.get("mask"))
+        h_state = h[-2]  # (B, T, d): output at the s_t tokens
+        actions = self.predict_action(h_state) * self.config.max_action
+        if targets is None:
+            return SeqOutput(actions)
+        loss = masked_mse(actions, targets["actions"], batch.get("mask"))
+        return SeqOutput(actions, loss=loss, losses={"action": loss.item()})
+
+    @torch.no_grad()
+    def act(self, history: Tensors) -> SeqOutput:
+        """Action at the last step of each history ``(B, T <= K, ...)``; ``.actions`` is ``(B, act_dim)``.
+
+        The last step's ``actions`` entry is not yet known; any value works (zeros): the
+        causal mask hides it from the ``s_t`` token.
+        """
+        return SeqOutput(self.forward(history).actions[:, -1])
+
+
+class HDT(nn.Module):
+    """Hierarchical Decision Transformer (thesis 5.2): a high level proposes sub-goals, a low level acts.
+
+    * high level: tokens ``(s_t, g_{t-1})``; ``g_t`` is read at the ``g_{t-1}`` token
+      (linear head, z-scored state space, no Tanh);
+    * low level: tokens ``(g_t, s_t, a_t)`` (``(rtg_t, g_t, s_t, a_t)`` with ``low_use_rtg``);
+      ``a_t`` is read at the ``s_t`` token (Tanh x ``max_action``).
+
+    In training the low level sees the data set's sub-goals (teacher forcing) and both levels
+    learn at once (Algorithm 3): ``loss = L_high + L_low``; they share no parameters, so the
+    sum gives each level its own gradient. At evaluation :meth:`act` runs the high level,
+    then the low level on the predicted sub-goal.
+
+    Used in: HDT chapter (Tables 5.2, 5.3).
+    """
+
+    def __init__(self, config: HDTConfig) -> None:
+        super().__init__()
+        self.config = config
+        d, sd = config.d_model, config.state_dim
+        # high level
+        self.high_embed_state = nn.Linear(sd, d)
+        self.high_embed_subgoal = nn.Linear(sd, d)
+        self.high = TokenTransformer(config)
+        self.predict_subgoal = nn.Linear(d, sd)
+        # low level
+        self.low_embed_rtg = nn.Linear(1, d) if config.low_use_rtg else None
+        self.low_embed_subgoal = nn.Linear(sd, d)
+        self.low_embed_state = nn.Linear(sd, d)
+        self.low_embed_action = nn.Linear(config.act_dim, d)
+        self.low = TokenTransformer(config)
+        self.predict_action = _action_head(d, config.act_dim)
+
+    def clip_groups(self) -> list[list[nn.Parameter]]:
+        """Parameters of each level: the trainer clips their gradient norms separately, as the authors."""
+        high = [p for n, p in self.named_parameters() if n.startswith(("high", "predict_subgoal"))]
+        ids = {id(p) for p in high}
+        return [high, [p for p in self.parameters() if id(p) not in ids]]
+
+    def high_forward(self, batch: Tensors) -> torch.Tensor:
+        """Sub-goal predictions ``g_t`` ``(B, T, state_dim)`` from ``(s_t, g_{t-1})`` tokens."""
+        tokens = [self.high_embed_state(batch["states"]), self.high_embed_subgoal(batch["prev_subgoals"])]
+        _, h_goal = self.high(tokens, batch["timesteps"], batch.get("mask"))  # (B, T, d) at g_{t-1}
+        return self.predict_subgoal(h_goal)
+
+    def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
+        """Actions ``a_t`` ``(B, T, act_dim)`` from ``([rtg_t,] g_t, s_t, a_t)`` tokens."""
+        a_tok = batch["prev_actions"] if self.config.paper_compat else batch["actions"]
+        tokens = [self.low_embed_subgoal(subgoals), self.low_embed_state(batch["states"]), self.low_embed_action(a_tok)]
+        if self.low_embed_rtg is not None:
+            tokens.insert(0, self.low_embed_rtg(batch["returns_to_go"]))
+        h = self.low(tokens, batch["timesteps"], batch.get("mask"))
+        return self.predict_action(h[-2]) * self.config.max_action  # read at s_t
+
+    def _keys(self) -> tuple[str, ...]:
+        action_key = "prev_actions" if self.config.paper_compat else "actions"
+        keys = ("states", action_key, "timesteps", "subgoals", "prev_subgoals")
+        return keys + (("returns_to_go",) if self.config.low_use_rtg else ())
+
+    def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
+        """Predict ``g_t`` (high) and ``a_t`` (low, on ``batch["subgoals"]``); with targets, ``L_high + L_low``."""
+        _check_inputs(self, batch, self._keys())
+        subgoals = self.high_forward(batch)  # (B, T, state_dim)
+        actions = self.low_forward(batch, batch["subgoals"])  # teacher forcing
+        if targets is None:
+            return SeqOutput(actions, subgoals)
+        mask = batch.get("mask")
+        l_high = masked_mse(subgoals, targets["subgoals"], mask)
+        l_low = masked_mse(actions, targets["actions"], mask)
+        loss = l_high + l_low
+        return SeqOutput(actions, subgoals, loss, {"subgoal": l_high.item(), "action": l_low.item()})
+
+    @torch.no_grad()
+    def act(self, history: Tensors) -> SeqOutput:
+        """Sub-goal and action at the last step of each history.
+
+        ``history["prev_subgoals"]`` holds the sub-goals the high level predicted before
+        (zero at the episode start); ``history["subgoals"][:, -1]`` is overwritten with the
+        new prediction. Returns ``SeqOutput(actions (B, act_dim), subgoals (B, state_dim))``.
+        """
+        _check_inputs(self, history, self._keys())
+        g = self.high_forward(history)[:, -1]  # (B, state_dim)
+        subgoals = history["subgoals"].clone()
+        subgoals[:, -1] = g
+        actions = self.low_forward(history, subgoals)[:, -1]  # (B, act_dim)
+        return SeqOutput(actions, g)
+

@@ -1,0 +1,330 @@
+"""One trainer for every sequence model: BC, DT, HDT (thesis 5.2.5), later DM/HDM (5.3).
+
+The authors' settings (``notes/original-code.md``): AdamW, lr 1e-4, weight decay 1e-4, a
+linear warm-up over 10k steps (``lr * min((step + 1) / warmup, 1)``), gradient norms clipped
+to 0.25 (HDT: each level separately, as its two optimisers did), masked MSE. The thesis trains
+100k iterations with batch 64 and K 20, evaluating every 1000 iterations.
+
+>>> trainer = Trainer(model, seq, TrainConfig(iterations=1000), eval_fn=my_eval)  # doctest: +SKIP
+>>> history = trainer.train()                      # DataFrame: iteration, loss, ... # doctest: +SKIP
+
+Randomness: batches come from the data set's own generator (``SequenceDataset(seed=...)``),
+dropout from the trainer's own torch generator state (``TrainConfig.seed``); the global
+torch RNG is left as it was. A checkpoint holds the model, optimiser, scheduler, both RNG
+states, the iteration and the history, so a resumed run continues with the same numbers as
+an uninterrupted one.
+
+Used in: HDT chapter (thesis 5.2.5); Decision Mamba chapter (5.3).
+"""
+from __future__ import annotations
+
+import functools
+import math
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+import torch
+import torch.nn as nn
+from tqdm.auto import tqdm
+
+__all__ = ["TrainConfig", "Trainer", "batch_to_torch"]
+
+
+@dataclass
+class TrainConfig:
+    """Training settings; defaults are the thesis's (5.2.5) and the authors' code's.
+
+    Used in: HDT chapter (thesis 5.2.5); Decision Mamba chapter.
+    """
+
+    iterations: int = 100_000
+    """Total gradient steps (a resumed run continues up to this number)."""
+    batch_size: int = 64
+    """Windows per batch (64 in the thesis text, 16 in the authors' repositories)."""
+    lr: float = 1e-4
+    """Peak AdamW learning rate."""
+    weight_decay: float = 1e-4
+    """AdamW weight decay (applied to every parameter, as the authors' code)."""
+    warmup_steps: int = 10_000
+    """Linear warm-up: ``lr * min((step + 1) / warmup_steps, 1)``."""
+    grad_clip: float = 0.25
+    """Max gradient norm (per HDT level); ``0`` disables clipping."""
+    eval_every: int = 1000
+    """Call ``eval_fn`` every this many iterations (``0``: never)."""
+    checkpoint_path: str | None = None
+    """Where to save checkpoints; ``None``: never save."""
+    checkpoint_every: int = 1000
+    """Save a checkpoint every this many iterations (and at the end) when a path is set."""
+    resume: bool = True
+    """Load ``checkpoint_path`` at construction when it exists."""
+    seed: int = 0
+    """Seed of the trainer's torch generator (dropout)."""
+    device: str = "cpu"
+    """``"cpu"``, ``"cuda"``, or ``"auto"`` (CUDA when available)."""
+    progress: bool = True
+    """Show a tqdm bar with the loss and the last evaluation return."""
+
+    def __post_init__(self) -> None:
+        for name in ("iterations", "batch_size", "warmup_steps"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"Expect `{name}` >= 1, actually: {getattr(self, name)!r}.")
+        for name in ("eval_every", "checkpoint_every"):
+            if int(getattr(self, name)) < 0:
+                raise ValueError(f"Expect `{name}` >= 0 (0 = never), actually: {getattr(self, name)!r}.")
+        if not self.lr > 0 or self.weight_decay < 0 or self.grad_clip < 0:
+            raise ValueError(
+                f"Expect lr > 0, weight_decay >= 0 and grad_clip >= 0, got lr={self.lr}, "
+                f"weight_decay={self.weight_decay}, grad_clip={self.grad_clip}."
+            )
+        if self.device not in ("cpu", "cuda", "auto") and not self.device.startswith("cuda:"):
+            raise ValueError(f"Unknown device {self.device!r}. Valid: cpu, cuda, cuda:N, auto.")
+
+
+def _warmup(step: int, warmup_steps: int) -> float:
+    return min((step + 1) / warmup_steps, 1.0)
+
+
+def batch_to_torch(dataset: Any, batch: Any, device: str | torch.device = "cpu") -> dict[str, torch.Tensor]:
+    """A :class:`~thesis_lib.data.SequenceBatch` as model inputs, with HDT's ``prev_subgoals``.
+
+    ``prev_subgoals[b, k]`` is the sub-goal of the step before ``k``: inside the window the
+    previous entry, at the window's first step the data set's sub-goal of the step before the
+    window, and zero at an episode's first step (the HDT high level's start token ``g_{-1}``).
+
+    Used in: HDT chapter (thesis 5.2).
+
+    Args:
+        dataset: The :class:`~thesis_lib.data.SequenceDataset` the batch came from.
+        batch: A batch from ``dataset.sample`` / ``dataset.windows``.
+        device: Device of the tensors.
+
+    Returns:
+        ``batch.to_torch(device)`` plus ``prev_subgoals`` ``(B, K, goal_dim)`` when the data
+        set has sub-goals.
+    """
+    out = batch.to_torch(device)
+    if batch.subgoals is not None:
+        g = batch.subgoals  # (B, K, goal_dim)
+        prev = np.zeros_like(g)
+        prev[:, 1:] = g[:, :-1]
+        start = np.asarray(batch.start)
+        inside = start > 0  # the window does not start the episode: take g_{start-1}
+        flat = dataset.offsets[np.asarray(batch.episode_index)[inside]] + start[inside] - 1
+        prev[inside, 0] = dataset.subgoals[flat]
+        prev[~np.asarray(batch.mask)] = 0.0
+        out["prev_subgoals"] = torch.from_numpy(prev).to(device)
+    return out
+
+
+def _mean_return(result: Any) -> float:
+    if hasattr(result, "returns"):
+        return float(np.mean(result.returns))
+    return float(result)
+
+
+class Trainer:
+    """Train a sequence model on a :class:`~thesis_lib.data.SequenceDataset` (thesis Algorithm 3).
+
+    Used in: HDT chapter (thesis 5.2.5); Decision Mamba chapter.
+
+    Args:
+        model: :class:`~thesis_lib.seq.models.BC`, ``DecisionTransformer``, ``HDT`` or any
+            module with ``forward(batch, targets) -> SeqOutput`` and a ``config`` holding
+            ``state_dim``, ``act_dim`` and ``K``.
+        dataset: Where batches come from.
+        config: :class:`TrainConfig`.
+        eval_fn: Called as ``eval_fn(model)`` (model in eval mode) every
+            ``config.eval_every`` iterations; returns a float or an object with ``returns``
+            (e.g. :class:`~thesis_lib.seq.evaluate.EvalResult`); its mean is logged.
+
+    Raises:
+        ValueError: If the data set and the model disagree on dimensions, or an HDT gets a
+            data set without sub-goals.
+    """
+
+    def __init__(
+        self,
+        model: nn.Module,
+        dataset: Any,
+        config: TrainConfig | None = None,
+        eval_fn: Callable[[nn.Module], Any] | None = None,
+    ) -> None:
+        self.config = config = config or TrainConfig()
+        self.model, self.dataset, self.eval_fn = model, dataset, eval_fn
+        _check_compatible(model, dataset)
+        if config.device == "auto":
+            self.device = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+        else:
+            self.device = torch.device(config.device)
+        self.model.to(self.device)
+        self.optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+            self.optimizer, functools.partial(_warmup, warmup_steps=config.warmup_steps)
+        )
+        self.iteration = 0
+        self.history: list[dict[str, float]] = []
+        self.last_eval: float = math.nan
+        self._rng_state = torch.Generator().manual_seed(config.seed).get_state()
+        if config.resume and config.checkpoint_path and Path(config.checkpoint_path).exists():
+            self.load(config.checkpoint_path)
+
+    # -- one step ---------------------------------------------------------------------------
+
+    def step(self) -> dict[str, float]:
+        """One gradient step on a fresh batch; returns ``{"loss": ..., "loss_<part>": ...}``."""
+        batch = batch_to_torch(self.dataset, self.dataset.sample(self.config.batch_size), self.device)
+        self.model.train()
+        with torch.random.fork_rng(devices=[]):  # our own dropout stream; global RNG untouched
+            torch.set_rng_state(self._rng_state)
+            out = self.model(batch, targets=batch)
+            self.optimizer.zero_grad(set_to_none=True)
+            out.loss.backward()
+            self._rng_state = torch.get_rng_state()
+        if self.config.grad_clip > 0:
+            groups = self.model.clip_groups() if hasattr(self.model, "clip_groups") else [list(self.model.parameters())]
+            for params in groups:
+                torch.nn.utils.clip_grad_norm_(params, self.config.grad_clip)
+        self.optimizer.step()
+        self.scheduler.step()
+        self.iteration += 1
+        row = {"iteration": self.iteration, "loss": out.loss.item()}
+        row.update({f"loss_{k}": v for k, v in (out.losses or {}).items()})
+        return row
+
+    def evaluate(self) -> Any:
+        """Run ``eval_fn`` on the model in eval mode; record and return its result."""
+        if self.eval_fn is None:
+            raise ValueError("This Trainer has no eval_fn; pass eval_fn=lambda m: evaluate(m, task, ...).")
+        self.model.eval()
+        try:
+            result = self.eval_fn(self.model)
+        finally:
+            self.model.train()
+        self.last_eval = _mean_return(result)
+        return result
+
+    # -- the loop ---------------------------------------------------------------------------
+
+    def train(self, iterations: int | None = None) -> pd.DataFrame:
+        """Train until ``iterations`` (default ``config.iterations``) steps in total.
+
+        Returns:
+            The history, one row per iteration: ``iteration``, ``loss``, ``loss_<part>``,
+            ``lr``, ``eval_return`` (NaN where no evaluation ran).
+        """
+        cfg = self.config
+        total = cfg.iterations if iterations is None else int(iterations)
+        bar = tqdm(total=total, initial=self.iteration, disable=not cfg.progress, desc=type(self.model).__name__)
+        try:
+            while self.iteration < total:
+                row = self.step()
+                row["lr"] = self.scheduler.get_last_lr()[0]
+                row["eval_return"] = math.nan
+                if self.eval_fn is not None and cfg.eval_every and self.iteration % cfg.eval_every == 0:
+                    self.evaluate()
+                    row["eval_return"] = self.last_eval
+                self.history.append(row)
+                if cfg.checkpoint_path and cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0:
+                    self.save(cfg.checkpoint_path)
+                bar.update(1)
+                if self.iteration % 10 == 0 or self.iteration == total:
+                    bar.set_postfix(loss=f"{row['loss']:.4f}", eval=f"{self.last_eval:.1f}", refresh=False)
+        finally:
+            bar.close()
+        if cfg.checkpoint_path:
+            self.save(cfg.checkpoint_path)
+        return self.history_frame()
+
+    def history_frame(self) -> pd.DataFrame:
+        """The history as a DataFrame (one row per iteration)."""
+        return pd.DataFrame(self.history)
+
+    # -- checkpoints ------------------------------------------------------------------------
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything a resumed run needs."""
+        return {
+            "model_class": type(self.model).__name__,
+            "model_config": asdict(self.model.config) if hasattr(self.model, "config") else None,
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "torch_rng": self._rng_state,
+            "dataset_rng": self.dataset.rng.bit_generator.state,
+            "iteration": self.iteration,
+            "history": self.history,
+            "last_eval": self.last_eval,
+            "train_config": asdict(self.config),
+        }
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write a checkpoint (atomically: a crash mid-write keeps the previous one)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(path.suffix + ".tmp")
+        torch.save(self.state_dict(), tmp)
+        os.replace(tmp, path)
+
+    def load(self, path: str | os.PathLike) -> None:
+        """Restore a checkpoint written by :meth:`save` into this trainer (model included).
+
+        Raises:
+            FileNotFoundError: If there is no checkpoint at ``path``.
+            ValueError: If it was written for another model class.
+        """
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"No checkpoint at '{path}'. Train with TrainConfig(checkpoint_path=...) first.")
+        ckpt = torch.load(path, map_location=self.device, weights_only=True)
+        if ckpt["model_class"] != type(self.model).__name__:
+            raise ValueError(
+                f"Checkpoint '{path}' holds a {ckpt['model_class']}, not a {type(self.model).__name__}; "
+                f"build the matching model (config: {ckpt['model_config']})."
+            )
+        self.model.load_state_dict(ckpt["model"])
+        self.optimizer.load_state_dict(ckpt["optimizer"])
+        self.scheduler.load_state_dict(ckpt["scheduler"])
+        self._rng_state = ckpt["torch_rng"].cpu()
+        self.dataset.rng.bit_generator.state = ckpt["dataset_rng"]
+        self.iteration = int(ckpt["iteration"])
+        self.history = list(ckpt["history"])
+        self.last_eval = float(ckpt["last_eval"])
+
+
+def _check_compatible(model: nn.Module, dataset: Any) -> None:
+    cfg = getattr(model, "config", None)
+    if cfg is None:
+        return
+    name = type(model).__name__
+    state_dim, act_dim = dataset.states.shape[-1], dataset.actions.shape[-1]
+    if state_dim != cfg.state_dim:
+        raise ValueError(
+            f"{name} expects states of size state_dim={cfg.state_dim}, but the data set's states have "
+            f"size {state_dim} (shape {dataset.states.shape}). Build the model with state_dim={state_dim}."
+        )
+    if act_dim != cfg.act_dim:
+        raise ValueError(
+            f"{name} expects actions of size act_dim={cfg.act_dim}, but the data set's actions have "
+            f"size {act_dim}. Build the model with act_dim={act_dim}."
+        )
+    if dataset.K > cfg.K:
+        raise ValueError(f"The data set's windows have K={dataset.K} steps; {name} was built with K={cfg.K}.")
+    if getattr(cfg, "paper_compat", False) and not dataset.prepend_zero_action:
+        raise ValueError(
+            f"{name}(paper_compat=True) reads a_(t-1) tokens: build the SequenceDataset with prepend_zero_action=True."
+        )
+    if name == "HDT":
+        if dataset.subgoals is None:
+            raise ValueError(
+                "HDT needs sub-goals: build the data set with "
+                "SequenceDataset(data, K, subgoal_fn=thesis_lib.seq.subgoals.subgoal_fn())."
+            )
+        if dataset.subgoals.shape[-1] != cfg.state_dim:
+            raise ValueError(
+                f"HDT predicts sub-goals of size state_dim={cfg.state_dim}, the data set's have "
+                f"size {dataset.subgoals.shape[-1]}."
+            )
