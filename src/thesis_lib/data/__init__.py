@@ -1,0 +1,89 @@
+"""Demonstration data sets: made here by D4RL's recipe, stored in the Minari format.
+
+>>> from thesis_lib import data
+>>> ds = data.get_dataset("hopper", "medium")          # doctest: +SKIP
+>>> ds = data.load("thesis/hopper/medium-v0")          # doctest: +SKIP
+>>> ds = data.load("mujoco/hopper/medium-v0")          # a real Minari set  # doctest: +SKIP
+>>> seq = data.SequenceDataset(ds, K=20)               # doctest: +SKIP
+>>> batch = seq.sample(64)                             # doctest: +SKIP
+
+Used by HDT 5.2, Decision Mamba 5.3 (D4RL-recipe sets) and DEFENDER 4.3
+(InvertedDoublePendulum demonstrations).
+"""
+
+from .card import (
+    QUALITY_TARGETS,
+    check_environments,
+    cards_table,
+    data_card,
+    expert_quality,
+    format_card,
+    maze_success_rate,
+    plot_return_histograms,
+    record_maze_experts,
+)
+from .experts import LinearPolicy, load_policy, load_policy_record, train_experts
+from .generate import (
+    PROFILE_SIZES,
+    action_noise_for,
+    generate,
+    get_dataset,
+    make_env,
+    make_episodes,
+    rollout,
+)
+from .maze import WaypointExpert, bfs_distances
+from .scores import normalized_score
+from .sequence import SequenceBatch, SequenceDataset, discounted_cumsum
+from .storage import (
+    Episode,
+    EpisodeFormatError,
+    OfflineDataset,
+    data_dir,
+    list_datasets,
+    load,
+    minari_root,
+    write_dataset,
+)
+from .tasks import TASKS, TaskSpec, gen_dataset_id, get_task, parse_dataset_id
+
+__all__ = [
+    "Episode",
+    "action_noise_for",
+    "record_maze_experts",
+    "EpisodeFormatError",
+    "LinearPolicy",
+    "OfflineDataset",
+    "PROFILE_SIZES",
+    "QUALITY_TARGETS",
+    "SequenceBatch",
+    "SequenceDataset",
+    "TASKS",
+    "TaskSpec",
+    "WaypointExpert",
+    "bfs_distances",
+    "cards_table",
+    "check_environments",
+    "data_card",
+    "data_dir",
+    "discounted_cumsum",
+    "expert_quality",
+    "format_card",
+    "gen_dataset_id",
+    "generate",
+    "get_dataset",
+    "get_task",
+    "list_datasets",
+    "load",
+    "load_policy",
+    "load_policy_record",
+    "make_env",
+    "make_episodes",
+    "maze_success_rate",
+    "minari_root",
+    "normalized_score",
+    "parse_dataset_id",
+    "rollout",
+    "train_experts",
+    "write_dataset",
+]

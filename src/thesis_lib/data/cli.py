@@ -1,0 +1,159 @@
+"""``thesis data generate | list | card | train-experts``.
+
+The main CLI (``thesis_lib/cli.py``) calls :func:`register` with its sub-parsers; each
+sub-command's handler is set with ``set_defaults(func=...)`` and takes the parsed args.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _generate(args: argparse.Namespace) -> int:
+    from .generate import generate
+    from .tasks import TASKS, get_task
+
+    tasks = list(TASKS) if args.task == "all" else [args.task]
+    for task in tasks:
+        spec = get_task(task)
+        tiers = spec.tiers if args.tier == "all" else (args.tier,)
+        for tier in tiers:
+            if args.task == "all" and spec.kind == "mujoco" and not _has(task):
+                print(f"skip {task}: no shipped policy", file=sys.stderr)
+                continue
+            did = generate(
+                task,
+                tier,
+                n_transitions=args.n_transitions,
+                profile=args.profile,
+                seed=args.seed,
+                action_noise=args.action_noise,
+            )
+            print(did)
+    return 0
+
+
+def _has(task: str) -> bool:
+    from .experts import has_policies
+
+    return has_policies(task)
+
+
+def _list(args: argparse.Namespace) -> int:
+    from .storage import list_datasets, search_dirs
+    from .tasks import TASKS
+
+    if args.tasks:
+        for name, spec in TASKS.items():
+            print(f"{name:26s} {spec.env_id:30s} {spec.kind:9s} {', '.join(spec.tiers) or '-'}")
+        return 0
+    print("searched: " + ", ".join(str(d) for d in search_dirs()))
+    for did in list_datasets():
+        print(did)
+    return 0
+
+
+def _card(args: argparse.Namespace) -> int:
+    from .card import data_card, expert_quality, format_card
+
+    if args.markdown:
+        from .card import render_markdown
+
+        print(render_markdown())
+        return 0
+    if args.experts:
+        print(expert_quality().to_string(index=False))
+        return 0
+    if not args.dataset_id:
+        print("give a data-set id, or --experts", file=sys.stderr)
+        return 2
+    card = data_card(args.dataset_id)
+    print(json.dumps(card, default=str, indent=1) if args.json else format_card(card))
+    return 0
+
+
+def _train(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from .experts import ARS_CONFIGS, train_experts
+
+    tasks = [*ARS_CONFIGS, "maze2d"] if args.task == "all" else [args.task]
+    for task in tasks:
+        if task == "maze2d":
+            from .card import record_maze_experts
+
+            print(json.dumps(record_maze_experts(args.eval_episodes, out_dir=args.out), indent=1))
+            continue
+        if task not in ARS_CONFIGS:
+            print(
+                f"No ARS recipe for '{task}'. Valid: {', '.join(ARS_CONFIGS)}, maze2d, all.",
+                file=sys.stderr,
+            )
+            return 2
+        cfg = ARS_CONFIGS[task]
+        if args.steps is not None:
+            cfg = replace(cfg, total_steps=args.steps)
+        if args.seed is not None:
+            cfg = replace(cfg, seed=args.seed)
+        rec = train_experts(
+            task, cfg, out_dir=args.out, n_eval_episodes=args.eval_episodes,
+            max_wall_s=args.max_wall_s, log=lambda s: print(s, flush=True),
+        )
+        print(json.dumps({"task": task, "expert": rec.expert_return_mean,
+                          "medium": rec.medium_return_mean}))
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``data`` sub-command (``generate``, ``list``, ``card``, ``train-experts``)."""
+    p = subparsers.add_parser("data", help="demonstration data sets (Minari format)")
+    sub = p.add_subparsers(dest="data_command", required=True)
+
+    g = sub.add_parser("generate", help="make thesis/<task>/<tier>-v0 by the D4RL recipe")
+    g.add_argument("--task", required=True, help="task name, or 'all' (see 'data list --tasks')")
+    g.add_argument(
+        "--tier", default="all", help="expert|medium|medium-replay|medium-expert|random|all"
+    )
+    g.add_argument("--profile", choices=["smoke", "full"], default="smoke",
+                   help="smoke: 20k transitions; full: D4RL's 1M")
+    g.add_argument("--n-transitions", type=int, default=None, help="overrides --profile")
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--action-noise", type=float, default=None, help="std; default per task kind")
+    g.set_defaults(func=_generate)
+
+    lst = sub.add_parser("list", help="data sets found on disk (or --tasks)")
+    lst.add_argument("--tasks", action="store_true", help="list tasks and their tiers instead")
+    lst.set_defaults(func=_list)
+
+    c = sub.add_parser("card", help="statistics of a data set (or --experts)")
+    c.add_argument("dataset_id", nargs="?", help="e.g. thesis/hopper/medium-v0")
+    c.add_argument("--json", action="store_true")
+    c.add_argument("--experts", action="store_true", help="shipped experts vs quality targets")
+    c.add_argument("--markdown", action="store_true", help="the whole data card as Markdown")
+    c.set_defaults(func=_card)
+
+    t = sub.add_parser("train-experts", help="re-train the shipped ARS expert/medium policies")
+    t.add_argument("--task", default="all", help="an ARS task, 'maze2d' (measure the scripted "
+                   "expert) or 'all'")
+    t.add_argument("--steps", type=int, default=None, help="override the recipe's step count")
+    t.add_argument("--seed", type=int, default=None)
+    t.add_argument("--max-wall-s", type=float, default=None,
+                   help="stop at the first checkpoint past this time (record says where)")
+    t.add_argument("--eval-episodes", type=int, default=100)
+    t.add_argument("--out", default=None, help="output dir (default: the package's policies/)")
+    t.set_defaults(func=_train)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry: ``python -m thesis_lib.data.cli data …``."""
+    parser = argparse.ArgumentParser(prog="thesis")
+    sub = parser.add_subparsers(dest="command", required=True)
+    register(sub)
+    args = parser.parse_args(argv)
+    return int(args.func(args) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,350 @@
+"""Make data sets by D4RL's recipe and store them in the Minari format.
+
+Tiers (D4RL, Fu et al. 2020):
+
+- ``expert``: the shipped expert policy, with Gaussian action noise.
+- ``medium``: a policy at about one third of the expert's return (an earlier checkpoint
+  of the same seeded ARS training), with the same noise.
+- ``medium-replay``: the experience of training up to medium: the zero policy ARS starts
+  from and every shipped checkpoint up to the medium one, each rolled out with ARS's own
+  ± weight perturbations (its exploration), in training order.
+- ``medium-expert``: the ``medium`` and ``expert`` episodes concatenated (each of the
+  full requested size, as D4RL's 2M-transition sets).
+- ``random``: uniform random actions.
+- Maze2D ``expert``: the BFS + PD waypoint planner of :mod:`thesis_lib.data.maze` with
+  action noise; ``random``: uniform random actions.
+
+Everything is drawn from one ``np.random.default_rng(seed)``, so the same seed gives the
+same arrays, byte for byte.
+
+Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3 (InvertedDoublePendulum).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable, Literal
+
+import numpy as np
+
+from .storage import Episode, OfflineDataset, find_dataset, load, write_dataset
+from .tasks import TaskSpec, check_tier, gen_dataset_id, get_task
+
+Profile = Literal["smoke", "full"]
+
+#: transitions per data set by profile (D4RL's full size is 1M; medium-expert doubles).
+PROFILE_SIZES: dict[str, int] = {"smoke": 20_000, "full": 1_000_000}
+
+#: default action-noise std per task kind. Maze: D4RL's maze2d used a noisy planner.
+#: MuJoCo: 0, because the linear ARS policies are brittle (measured on 30k transitions:
+#: std 0.01 costs Hopper 5% and InvertedDoublePendulum 6% of the return, std 0.1 costs
+#: Hopper 35%); episodes still differ through the environments' reset noise.
+DEFAULT_NOISE: dict[str, float] = {"mujoco": 0.0, "maze": 0.5, "robotics": 0.0}
+#: per-task overrides where the kind's default breaks the policy (measured, see the card).
+TASK_NOISE: dict[str, float] = {}
+
+
+def action_noise_for(task: str) -> float:
+    """Default action-noise std of ``task``'s expert/medium tiers."""
+    return TASK_NOISE.get(task, DEFAULT_NOISE[get_task(task).kind])
+
+
+def make_env(task: str, **kwargs: object):  # -> gym.Env
+    """``gymnasium.make`` for ``task``, with its episode limit (and robotics envs registered)."""
+    import gymnasium as gym
+
+    spec = get_task(task)
+    if spec.kind in ("maze", "robotics"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import gymnasium_robotics
+
+            gym.register_envs(gymnasium_robotics)
+    kw = {**spec.env_kwargs, **kwargs}
+    return gym.make(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw)
+
+
+Policy = Callable[[object, np.random.Generator], np.ndarray]
+
+
+def rollout(
+    env: object,
+    policy: Policy,
+    n_transitions: int,
+    rng: np.random.Generator,
+    on_reset: Callable[[object], None] | None = None,
+    first_id: int = 0,
+    max_episodes: int | None = None,
+) -> list[Episode]:
+    """Roll ``policy`` out until ``n_transitions`` actions are collected.
+
+    The last episode is cut at exactly ``n_transitions`` (its last step marked truncated),
+    as D4RL cut its data sets at 1M steps. Each episode resets with a seed drawn from
+    ``rng``; the policy draws its noise from ``rng`` too.
+
+    Args:
+        env: a Gymnasium environment.
+        policy: ``policy(obs, rng) -> action``.
+        n_transitions: actions to collect.
+        rng: the only source of randomness.
+        on_reset: called with ``env`` after each reset (the maze expert reads the goal).
+        first_id: id of the first episode.
+        max_episodes: stop after this many episodes even if short of ``n_transitions``.
+
+    Returns:
+        The episodes; their lengths sum to ``n_transitions`` (unless ``max_episodes`` hit).
+    """
+    episodes: list[Episode] = []
+    total = 0
+    while total < n_transitions and (max_episodes is None or len(episodes) < max_episodes):
+        obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)))  # type: ignore[attr-defined]
+        if on_reset is not None:
+            on_reset(env)
+        obs_l, dg_l, ag_l, act_l, rew_l, term_l, trunc_l = [], [], [], [], [], [], []
+
+        def keep(o: object) -> None:
+            if isinstance(o, dict):
+                obs_l.append(o["observation"])
+                dg_l.append(o["desired_goal"])
+                ag_l.append(o["achieved_goal"])
+            else:
+                obs_l.append(o)
+
+        keep(obs)
+        done = False
+        while not done:
+            a = np.asarray(policy(obs, rng), dtype=np.float32)
+            obs, r, term, trunc, _ = env.step(a)  # type: ignore[attr-defined]
+            keep(obs)
+            act_l.append(a), rew_l.append(r), term_l.append(term)
+            total += 1
+            cut = total >= n_transitions
+            trunc_l.append(bool(trunc) or (cut and not term))
+            done = term or trunc or cut
+        goals = bool(dg_l)
+        episodes.append(
+            Episode(
+                id=first_id + len(episodes),
+                observations=np.asarray(obs_l, dtype=np.float64),
+                actions=np.asarray(act_l, dtype=np.float32),
+                rewards=np.asarray(rew_l, dtype=np.float64),
+                terminations=np.asarray(term_l, dtype=bool),
+                truncations=np.asarray(trunc_l, dtype=bool),
+                desired_goals=np.asarray(dg_l, dtype=np.float64) if goals else None,
+                achieved_goals=np.asarray(ag_l, dtype=np.float64) if goals else None,
+            )
+        )
+    return episodes
+
+
+def _random_policy(env: object) -> Policy:
+    space = env.action_space  # type: ignore[attr-defined]
+    low, high = space.low.astype(np.float64), space.high.astype(np.float64)
+    return lambda obs, rng: rng.uniform(low, high)
+
+
+def _noisy(pol: Callable[[np.ndarray], np.ndarray], std: float, low, high) -> Policy:
+    def act(obs: object, rng: np.random.Generator) -> np.ndarray:
+        a = pol(obs)  # type: ignore[arg-type]
+        if std > 0:
+            a = a + std * rng.standard_normal(a.shape)
+        return np.clip(a, low, high)
+
+    return act
+
+
+def _renumber(episodes: list[Episode]) -> list[Episode]:
+    from dataclasses import replace
+
+    return [replace(e, id=i) for i, e in enumerate(episodes)]
+
+
+def make_episodes(
+    task: str,
+    tier: str,
+    n_transitions: int,
+    seed: int = 0,
+    action_noise: float | None = None,
+) -> tuple[list[Episode], dict]:
+    """Roll out the episodes of one tier (no storage).
+
+    Args:
+        task: task name (see :data:`thesis_lib.data.tasks.TASKS`).
+        tier: one of the task's tiers.
+        n_transitions: actions per data set (``medium-expert``: twice this).
+        seed: seed of the whole roll-out.
+        action_noise: Gaussian action-noise std; :func:`action_noise_for` when ``None``.
+
+    Returns:
+        ``(episodes, info)``, ``info`` a JSON-able record of how they were made.
+    """
+    spec: TaskSpec = get_task(task)
+    check_tier(task, tier)
+    noise = action_noise_for(task) if action_noise is None else float(action_noise)
+    info: dict = {
+        "task": task,
+        "tier": tier,
+        "env_id": spec.env_id,
+        "seed": seed,
+        "n_transitions": n_transitions,
+        "action_noise": noise,
+    }
+    env = make_env(task)
+    low = env.action_space.low.astype(np.float64)
+    high = env.action_space.high.astype(np.float64)
+    rng = np.random.default_rng(seed)
+    if tier == "random":
+        info["algorithm"] = "uniform random actions"
+        info["action_noise"] = 0.0
+        eps = rollout(env, _random_policy(env), n_transitions, rng)
+    elif spec.kind == "maze":
+        from .maze import WaypointExpert
+
+        ex = WaypointExpert(noise_std=noise)
+        info["algorithm"] = (
+            f"BFS waypoints + PD (p={ex.p_gain}, d={ex.d_gain}) + N(0, {noise}) action noise"
+        )
+        eps = rollout(env, ex, n_transitions, rng, on_reset=ex.reset)
+    elif tier == "medium-expert":
+        env.close()
+        med, _ = make_episodes(task, "medium", n_transitions, seed, action_noise)
+        exp, _ = make_episodes(task, "expert", n_transitions, seed, action_noise)
+        info["algorithm"] = "medium episodes then expert episodes (same seed as each)"
+        return _renumber(med + exp), info
+    else:
+        from .experts import load_policy, load_policy_record
+
+        rec = load_policy_record(task)
+        info["policy"] = {
+            "algorithm": rec.algorithm,
+            "steps_trained": rec.steps_trained,
+            "seed": rec.config.get("seed"),
+            "expert_return_mean": rec.expert_return_mean,
+            "medium_return_mean": rec.medium_return_mean,
+        }
+        if tier in ("expert", "medium"):
+            pol = load_policy(task, tier)
+            info["algorithm"] = f"ARS linear {tier} policy + N(0, {noise}) action noise"
+            eps = rollout(env, _noisy(pol, noise, low, high), n_transitions, rng)
+        elif tier == "medium-replay":
+            std = float(rec.config["delta_std"])
+            n_ck = rec.medium_checkpoint + 1
+            pols = [load_policy(task, f"ckpt{i}") for i in range(n_ck)]
+            zero = pols[0].__class__(
+                np.zeros_like(pols[0].weights), pols[0].obs_mean, pols[0].obs_var, low, high
+            )
+            pols = [zero] + pols
+            info["action_noise"] = 0.0  # ARS explores in weight space, not action space
+            info["algorithm"] = (
+                f"ARS training replay: zero policy + checkpoints 0..{n_ck - 1}, each with "
+                f"±{std} weight perturbations"
+            )
+            share = np.full(len(pols), n_transitions // len(pols))
+            share[: n_transitions - share.sum()] += 1
+            eps = []
+            for pol, n in zip(pols, share):
+                got = 0
+                while got < n:
+                    d = std * rng.standard_normal(pol.weights.shape)
+                    for sign in (1.0, -1.0):
+                        if got >= n:
+                            break
+                        cand = pol.__class__(
+                            pol.weights + sign * d, pol.obs_mean, pol.obs_var, low, high
+                        )
+                        e = rollout(
+                            env,
+                            _noisy(cand, 0.0, low, high),
+                            int(n - got),
+                            rng,
+                            first_id=len(eps),
+                            max_episodes=1,
+                        )
+                        got += len(e[0])
+                        eps += e
+        else:  # pragma: no cover - check_tier guards this
+            raise ValueError(tier)
+    env.close()
+    return eps, info
+
+
+def generate(
+    task: str,
+    tier: str,
+    n_transitions: int | None = None,
+    profile: Profile = "smoke",
+    seed: int = 0,
+    action_noise: float | None = None,
+    overwrite: bool = True,
+) -> str:
+    """Make one data set and store it as ``thesis/<task>/<tier>-v0``.
+
+    Args:
+        task: e.g. ``"hopper"``, ``"maze2d-umaze"``.
+        tier: ``expert``, ``medium``, ``medium-replay``, ``medium-expert``, ``random``.
+        n_transitions: size; ``PROFILE_SIZES[profile]`` when ``None``.
+        profile: ``smoke`` (20k transitions) or ``full`` (D4RL's 1M).
+        seed: roll-out seed; same seed, same arrays.
+        action_noise: action-noise std; per-kind default when ``None``.
+        overwrite: replace an existing set.
+
+    Returns:
+        The data-set id.
+
+    Raises:
+        ValueError: unknown task or tier (lists the valid ones).
+    """
+    spec = get_task(task)
+    dataset_id = gen_dataset_id(task, tier)
+    n = PROFILE_SIZES[profile] if n_transitions is None else int(n_transitions)
+    t0 = time.time()
+    eps, info = make_episodes(task, tier, n, seed, action_noise)
+    rets = np.array([e.episode_return for e in eps])
+    info.update(
+        profile=profile if n_transitions is None else "custom",
+        rollout_s=round(time.time() - t0, 2),
+        return_mean=float(rets.mean()),
+        return_std=float(rets.std()),
+    )
+    env = make_env(task)
+    write_dataset(
+        dataset_id,
+        eps,
+        env.spec,
+        spec.ref_min_score,
+        spec.ref_max_score,
+        description=f"{spec.env_id} {tier}: {info.get('algorithm', '')}",
+        info=info,
+        overwrite=overwrite,
+    )
+    env.close()
+    return dataset_id
+
+
+def get_dataset(
+    task: str,
+    tier: str,
+    profile: Profile = "smoke",
+    seed: int = 0,
+    n_transitions: int | None = None,
+) -> OfflineDataset:
+    """Load ``thesis/<task>/<tier>-v0``, generating it first if missing or of another size/seed.
+
+    This is what chapter notebooks call: on a fresh machine the data set is made on first
+    use at the chosen scale and cached under :func:`thesis_lib.data.storage.data_dir`.
+    """
+    dataset_id = gen_dataset_id(task, tier)
+    n = PROFILE_SIZES[profile] if n_transitions is None else int(n_transitions)
+    if find_dataset(dataset_id) is not None:
+        ds = load(dataset_id)
+        ti = ds.metadata.get("thesis_info", {})
+        if isinstance(ti, dict) and ti.get("n_transitions") == n and ti.get("seed") == seed:
+            return ds
+    generate(task, tier, n_transitions=n, seed=seed)
+    return load(dataset_id)
+
+
+__all__ = ["generate", "get_dataset", "make_env", "make_episodes", "rollout", "PROFILE_SIZES"]
+

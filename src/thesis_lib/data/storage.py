@@ -1,0 +1,396 @@
+"""Minari-format storage: where data sets live, writing them, and loading them as episodes.
+
+Data sets made here and real Minari/D4RL data sets load through the same :func:`load`
+and come back as the same :class:`Episode` objects.
+
+Where data sets live (searched in this order):
+
+1. ``$THESIS_DATA_DIR`` when set (our generated sets are written there too);
+2. Minari's own root: ``$MINARI_DATASETS_PATH`` when set, else ``~/.minari/datasets``.
+
+Without ``THESIS_DATA_DIR``, generated sets go to Minari's root, so ``minari list local``
+and ``minari.load_dataset("thesis/hopper/medium-v0")`` see them too.
+
+Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from .tasks import NAMESPACE, TASKS, parse_dataset_id
+
+
+class EpisodeFormatError(ValueError):
+    """An episode whose arrays do not fit together (e.g. observations ≠ actions + 1)."""
+
+
+def minari_root() -> Path:
+    """Minari's data-set root: ``$MINARI_DATASETS_PATH`` or ``~/.minari/datasets``."""
+    p = os.environ.get("MINARI_DATASETS_PATH")
+    return Path(p) if p else Path.home() / ".minari" / "datasets"
+
+
+def data_dir() -> Path:
+    """Where generated data sets are written: ``$THESIS_DATA_DIR``, else :func:`minari_root`."""
+    p = os.environ.get("THESIS_DATA_DIR")
+    return Path(p) if p else minari_root()
+
+
+def search_dirs() -> list[Path]:
+    """Roots searched by :func:`load`, in order (duplicates removed)."""
+    out: list[Path] = []
+    for d in (data_dir(), minari_root()):
+        if d not in out:
+            out.append(d)
+    return out
+
+
+_MINARI_ID = re.compile(r"^([\w\-]+/)*[\w\-]+-v\d+$")
+
+
+def check_minari_id(dataset_id: str) -> None:
+    """Raise ``ValueError`` unless ``dataset_id`` reads as Minari's ``[namespace/]name-vN``."""
+    if not _MINARI_ID.match(dataset_id):
+        raise ValueError(
+            f"Data-set id '{dataset_id}' does not read as 'namespace/task/tier-vN' (ours, e.g. "
+            "'thesis/hopper/medium-v0') or Minari's '[namespace/]name-vN' "
+            "(e.g. 'mujoco/hopper/medium-v0', 'D4RL/door/human-v2')."
+        )
+
+
+def find_dataset(dataset_id: str) -> Path | None:
+    """Directory of ``dataset_id`` (the one holding ``data/``) or ``None``."""
+    check_minari_id(dataset_id)
+    for root in search_dirs():
+        p = root / dataset_id
+        if (p / "data" / "metadata.json").exists() or (p / "data" / "main_data.hdf5").exists():
+            return p
+    return None
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One trajectory, whatever data set it came from.
+
+    ``T`` is the number of actions. Observations include the final one, so there are
+    ``T + 1`` of them (Minari's convention). For goal-conditioned environments (PointMaze,
+    AntMaze: dict observations) ``observations`` is the ``observation`` entry and the goals
+    are kept beside it.
+
+    Attributes:
+        id: episode index in its data set.
+        observations: ``(T + 1, obs_dim)``.
+        actions: ``(T, act_dim)``.
+        rewards: ``(T,)``.
+        terminations: ``(T,)`` bool, the MDP ended (fell over).
+        truncations: ``(T,)`` bool, the time limit (or the data-set size) cut it.
+        desired_goals: ``(T + 1, goal_dim)`` or ``None``.
+        achieved_goals: ``(T + 1, goal_dim)`` or ``None``.
+    """
+
+    id: int
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    terminations: np.ndarray
+    truncations: np.ndarray
+    desired_goals: np.ndarray | None = None
+    achieved_goals: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.rewards)
+
+    @property
+    def episode_return(self) -> float:
+        """Undiscounted return."""
+        return float(np.sum(self.rewards, dtype=np.float64))
+
+    def validate(self, where: str = "") -> None:
+        """Raise :class:`EpisodeFormatError` naming the episode if lengths disagree."""
+        t = len(self.actions)
+        name = f"Episode {self.id}{' of ' + where if where else ''}"
+        if len(self.observations) != t + 1:
+            raise EpisodeFormatError(
+                f"{name} has {len(self.observations)} observations and {t} actions; "
+                f"expected {t + 1} observations (actions + 1, the final observation included)."
+            )
+        for k in ("rewards", "terminations", "truncations"):
+            n = len(getattr(self, k))
+            if n != t:
+                raise EpisodeFormatError(f"{name} has {n} {k} and {t} actions; expected {t}.")
+
+
+@dataclass
+class OfflineDataset:
+    """A loaded data set: its episodes plus what Minari knows about it.
+
+    Attributes:
+        id: the data-set id.
+        episodes: the :class:`Episode` list.
+        env_id: Gymnasium id of the environment, when recorded.
+        ref_min_score: return of normalised score 0, when recorded.
+        ref_max_score: return of normalised score 100, when recorded.
+        metadata: the rest of Minari's metadata (``thesis_info`` parsed from JSON).
+        path: the directory it was read from.
+    """
+
+    id: str
+    episodes: list[Episode]
+    env_id: str | None
+    ref_min_score: float | None
+    ref_max_score: float | None
+    metadata: dict[str, Any] = field(default_factory=dict)
+    path: Path | None = None
+
+    def __len__(self) -> int:
+        return len(self.episodes)
+
+    def __iter__(self) -> Iterator[Episode]:
+        return iter(self.episodes)
+
+    def __getitem__(self, i: int) -> Episode:
+        return self.episodes[i]
+
+    @property
+    def n_transitions(self) -> int:
+        """Total number of actions over all episodes."""
+        return int(sum(len(e) for e in self.episodes))
+
+    @property
+    def returns(self) -> np.ndarray:
+        """Episode returns, shape ``(n_episodes,)``."""
+        return np.array([e.episode_return for e in self.episodes])
+
+    def normalized_scores(self, returns: np.ndarray | None = None) -> np.ndarray | None:
+        """``100 · (R − ref_min) / (ref_max − ref_min)``, ``None`` without references."""
+        if self.ref_min_score is None or self.ref_max_score is None:
+            return None
+        r = self.returns if returns is None else np.asarray(returns, dtype=np.float64)
+        return 100.0 * (r - self.ref_min_score) / (self.ref_max_score - self.ref_min_score)
+
+    def recover_environment(self, **kwargs: Any) -> Any:
+        """``gymnasium.make`` of the recorded environment."""
+        import gymnasium as gym
+
+        if self.env_id is None:
+            raise ValueError(f"Data set '{self.id}' records no environment.")
+        return gym.make(self.env_id, **kwargs)
+
+
+def _missing_message(dataset_id: str) -> str:
+    roots = " or ".join(str(r) for r in search_dirs())
+    msg = f"No Minari dataset '{dataset_id}' under {roots}."
+    try:
+        ns, task, tier, _ = parse_dataset_id(dataset_id)
+    except ValueError:
+        ns = task = tier = ""
+    if ns == NAMESPACE and task in TASKS:
+        msg += (
+            f" Create it with 'thesis data generate --task {task} --tier {tier}' "
+            f"(or thesis_lib.data.generate('{task}', '{tier}')),"
+            " or set MINARI_DATASETS_PATH to an existing copy."
+        )
+    else:
+        msg += (
+            " Set MINARI_DATASETS_PATH to the directory holding it (e.g. a copy of a real "
+            "Minari/D4RL download), or make ours with 'thesis data generate'."
+        )
+    return msg
+
+
+def _flat(x: Any) -> np.ndarray:
+    # Nested dict goals (FrankaKitchen: one entry per sub-task): concatenated by sorted key.
+    if isinstance(x, dict):
+        return np.concatenate([_flat(x[k]).reshape(len(_flat(x[k])), -1) for k in sorted(x)], 1)
+    return np.asarray(x)
+
+
+def _split_obs(obs: Any) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    if isinstance(obs, dict):
+        return (
+            _flat(obs["observation"]),
+            None if "desired_goal" not in obs else _flat(obs["desired_goal"]),
+            None if "achieved_goal" not in obs else _flat(obs["achieved_goal"]),
+        )
+    return np.asarray(obs), None, None
+
+
+def load(dataset_id: str, validate: bool = True) -> OfflineDataset:
+    """Load a data set made here (``thesis/…``) or a real Minari one, as :class:`Episode` s.
+
+    Args:
+        dataset_id: e.g. ``"thesis/hopper/medium-v0"`` or ``"mujoco/hopper/medium-v0"``.
+        validate: check every episode's array lengths.
+
+    Returns:
+        The :class:`OfflineDataset`.
+
+    Raises:
+        FileNotFoundError: no such data set; the message says how to make it.
+        EpisodeFormatError: an episode's observations are not actions + 1 (names it).
+    """
+    from minari import MinariDataset
+
+    path = find_dataset(dataset_id)
+    if path is None:
+        raise FileNotFoundError(_missing_message(dataset_id))
+    mds = MinariDataset(path / "data")
+    md = dict(mds.storage.metadata)
+    episodes = []
+    for ep in mds.iterate_episodes():
+        obs, dg, ag = _split_obs(ep.observations)
+        e = Episode(
+            id=int(ep.id),
+            observations=obs,
+            actions=np.asarray(ep.actions),
+            rewards=np.asarray(ep.rewards),
+            terminations=np.asarray(ep.terminations, dtype=bool),
+            truncations=np.asarray(ep.truncations, dtype=bool),
+            desired_goals=dg,
+            achieved_goals=ag,
+        )
+        if validate:
+            e.validate(dataset_id)
+        episodes.append(e)
+    env_id = mds.env_spec.id if mds.env_spec is not None else None
+    if "thesis_info" in md and isinstance(md["thesis_info"], str):
+        md["thesis_info"] = json.loads(md["thesis_info"])
+    return OfflineDataset(
+        id=dataset_id,
+        episodes=episodes,
+        env_id=env_id,
+        ref_min_score=md.get("ref_min_score"),
+        ref_max_score=md.get("ref_max_score"),
+        metadata=md,
+        path=path,
+    )
+
+
+@contextlib.contextmanager
+def _minari_path(root: Path) -> Iterator[None]:
+    old = os.environ.get("MINARI_DATASETS_PATH")
+    os.environ["MINARI_DATASETS_PATH"] = str(root)
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["MINARI_DATASETS_PATH"]
+        else:
+            os.environ["MINARI_DATASETS_PATH"] = old
+
+
+def write_dataset(
+    dataset_id: str,
+    episodes: Sequence[Episode],
+    env_id: Any,
+    ref_min_score: float | None = None,
+    ref_max_score: float | None = None,
+    description: str = "",
+    info: dict[str, Any] | None = None,
+    overwrite: bool = True,
+    root: Path | str | None = None,
+) -> Path:
+    """Write ``episodes`` as a Minari HDF5 data set with ``create_dataset_from_buffers``.
+
+    The reference scores are stored so ``minari.get_normalized_score`` works; both are
+    given, so Minari rolls out nothing to estimate them. Goal-conditioned episodes are
+    stored with the environment's dict observations.
+
+    Args:
+        dataset_id: ``thesis/<task>/<tier>-v0``.
+        episodes: validated episodes.
+        env_id: Gymnasium id or ``EnvSpec`` recorded as the data set's (and evaluation)
+            environment.
+        ref_min_score: normalised-score 0 return (D4RL's), or ``None``.
+        ref_max_score: normalised-score 100 return, or ``None``.
+        description: free text.
+        info: JSON-serialisable generation record stored as ``thesis_info``.
+        overwrite: replace an existing data set of that id.
+        root: data-set root; :func:`data_dir` by default.
+
+    Returns:
+        The data set's directory.
+    """
+    import shutil
+
+    import gymnasium as gym
+    from minari import create_dataset_from_buffers
+    from minari.data_collector import EpisodeBuffer
+
+    root = Path(root) if root is not None else data_dir()
+    path = root / dataset_id
+    if path.exists():
+        if not overwrite:
+            raise FileExistsError(f"Data set '{dataset_id}' exists at {path}.")
+        shutil.rmtree(path)
+    env = gym.make(env_id)
+    dict_obs = isinstance(env.observation_space, gym.spaces.Dict)
+    buffers = []
+    for i, e in enumerate(episodes):
+        e.validate(dataset_id)
+        obs: Any = e.observations
+        if dict_obs:
+            obs = {
+                "observation": e.observations,
+                "desired_goal": e.desired_goals,
+                "achieved_goal": e.achieved_goals,
+            }
+        buffers.append(
+            EpisodeBuffer(
+                id=i,
+                observations=obs,
+                actions=e.actions,
+                rewards=e.rewards,
+                terminations=e.terminations,
+                truncations=e.truncations,
+                infos={},
+            )
+        )
+    has_ref = ref_min_score is not None and ref_max_score is not None
+    import warnings
+
+    with _minari_path(root), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*author_email.*")
+        create_dataset_from_buffers(
+            dataset_id,
+            buffers,
+            env=env_id,
+            eval_env=env_id,
+            algorithm_name=(info or {}).get("algorithm", "thesis_lib.data"),
+            author="thesis_lib",
+            code_permalink="thesis_lib.data.generate (this project)",
+            ref_min_score=ref_min_score if has_ref else None,
+            ref_max_score=ref_max_score if has_ref else None,
+            description=description or dataset_id,
+            data_format="hdf5",
+        )
+    if info is not None:
+        from minari.dataset.minari_storage import MinariStorage
+
+        MinariStorage.read(path / "data").update_metadata(
+            {"thesis_info": json.dumps(info, default=float)}
+        )
+    env.close()
+    return path
+
+
+def list_datasets() -> list[str]:
+    """Ids of every data set found under :func:`search_dirs` (ours and Minari's)."""
+    found: list[str] = []
+    for root in search_dirs():
+        if not root.exists():
+            continue
+        for meta in root.glob("**/data/metadata.json"):
+            did = str(meta.parent.parent.relative_to(root))
+            if did not in found:
+                found.append(did)
+    return sorted(found)

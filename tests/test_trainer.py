@@ -1,0 +1,295 @@
+"""Tests for thesis_lib.seq.trainer and thesis_lib.seq.evaluate (thesis 5.2.5)."""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+import torch.nn as nn
+
+from thesis_lib.data import Episode, SequenceDataset
+from thesis_lib.seq.evaluate import evaluate
+from thesis_lib.seq.models import HDT, BC, BCConfig, DecisionTransformer, DTConfig, HDTConfig, SeqOutput
+from thesis_lib.seq.subgoals import subgoal_fn
+from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
+
+torch.set_num_threads(1)
+SD, AD, K = 3, 2, 4
+SMALL = dict(K=K, d_model=16, n_layer=1, n_head=1, dropout=0.1)
+
+
+def _expert(obs):
+    return np.tanh(obs[..., :AD] * 2.0)
+
+
+def _episodes(n=6, T=30, seed=0):
+    rng = np.random.default_rng(seed)
+    eps = []
+    for i in range(n):
+        obs = rng.normal(size=(T + 1, SD))
+        act = _expert(obs[:-1]).astype(np.float32)
+        eps.append(Episode(i, obs, act, obs[:-1, 0] + 1.0, np.zeros(T, bool), np.zeros(T, bool)))
+    return eps
+
+
+def _dataset(seed=0, paper_compat=False):
+    return SequenceDataset(_episodes(), K=K, subgoal_fn=subgoal_fn(paper_compat), paper_compat=paper_compat, seed=seed)
+
+
+def _model(kind, paper_compat=False):
+    torch.manual_seed(0)
+    if kind == "bc":
+        return BC(BCConfig(SD, AD, K=K, hidden_dim=32))
+    if kind == "dt":
+        return DecisionTransformer(DTConfig(SD, AD, paper_compat=paper_compat, **SMALL))
+    return HDT(HDTConfig(SD, AD, paper_compat=paper_compat, **SMALL))
+
+
+def _cfg(**kw):
+    return TrainConfig(**{**dict(iterations=60, batch_size=8, warmup_steps=5, lr=3e-3, progress=False), **kw})
+
+
+@pytest.mark.parametrize("kind,paper_compat", [("bc", False), ("dt", False), ("hdt", False), ("dt", True), ("hdt", True)])
+def test_loss_falls_on_a_tiny_dataset(kind, paper_compat):
+    trainer = Trainer(_model(kind, paper_compat), _dataset(paper_compat=paper_compat), _cfg())
+    h = trainer.train()
+    assert len(h) == 60 and h["iteration"].tolist() == list(range(1, 61))
+    assert h["loss"].iloc[-10:].mean() < 0.5 * h["loss"].iloc[:10].mean()
+    if kind == "hdt":
+        assert {"loss_subgoal", "loss_action"} <= set(h.columns)
+
+
+def test_trainer_leaves_the_global_rng_alone():
+    torch.manual_seed(5)
+    expected = torch.rand(3)
+    trainer = Trainer(_model("dt"), _dataset(), _cfg(iterations=3))
+    torch.manual_seed(5)
+    trainer.train()
+    torch.testing.assert_close(torch.rand(3), expected)
+
+
+def test_same_seed_same_numbers():
+    def run(seed):
+        trainer = Trainer(_model("hdt"), _dataset(seed=seed), _cfg(iterations=15, seed=seed))
+        return trainer.train()["loss"].to_numpy(), torch.nn.utils.parameters_to_vector(trainer.model.parameters())
+
+    (l1, p1), (l2, p2), (l3, _) = run(0), run(0), run(1)
+    np.testing.assert_array_equal(l1, l2)
+    torch.testing.assert_close(p1, p2, rtol=0, atol=0)
+    assert not np.array_equal(l1, l3)
+
+
+@pytest.mark.parametrize("kind", ["dt", "hdt"])
+def test_resume_matches_an_uninterrupted_run(kind, tmp_path):
+    full = Trainer(_model(kind), _dataset(), _cfg(iterations=12))
+    h_full = full.train()
+
+    path = tmp_path / "ckpt.pt"
+    first = Trainer(_model(kind), _dataset(), _cfg(iterations=12, checkpoint_path=str(path), checkpoint_every=5))
+    first.train(iterations=6)  # stopped after 6 of 12
+    torch.manual_seed(123)  # a fresh process: other global RNG, other initial weights
+    second = Trainer(_model(kind), _dataset(seed=99), _cfg(iterations=12, checkpoint_path=str(path)))
+    assert second.iteration == 6  # resumed from the checkpoint at construction
+    h_resumed = second.train()
+    np.testing.assert_array_equal(h_resumed["loss"].to_numpy(), h_full["loss"].to_numpy())
+    for a, b in zip(full.model.parameters(), second.model.parameters()):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+
+
+def test_dataset_model_mismatch_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"state_dim=11, but the data set's states have size 3"):
+        Trainer(DecisionTransformer(DTConfig(11, AD, **SMALL)), _dataset(), _cfg())
+    no_goals = SequenceDataset(_episodes(), K=K)
+    with pytest.raises(ValueError, match="HDT needs sub-goals"):
+        Trainer(_model("hdt"), no_goals, _cfg())
+    with pytest.raises(ValueError, match="K=4"):
+        Trainer(_model("dt"), SequenceDataset(_episodes(), K=8), _cfg())
+    with pytest.raises(ValueError, match="Unknown device"):
+        TrainConfig(device="gpu")
+
+
+def test_prev_subgoals_come_from_the_episode():
+    seq = _dataset()
+    batch = seq.windows(np.array([0, 1, 2]), np.array([0, 5, 28]))  # starts: episode start, inside, near the end
+    t = batch_to_torch(seq, batch)
+    prev = t["prev_subgoals"].numpy()
+    np.testing.assert_array_equal(prev[0, 0], 0.0)  # g_{-1} = 0
+    np.testing.assert_array_equal(prev[1, 0], seq.subgoals[seq.offsets[1] + 4])  # g_4 before a window at 5
+    np.testing.assert_array_equal(prev[:, 1:][batch.mask[:, 1:]], batch.subgoals[:, :-1][batch.mask[:, 1:]])
+    assert not prev[2, 2:].any()  # padding
+
+
+def test_eval_callback_every_n_iterations():
+    calls = []
+
+    def eval_fn(model):
+        calls.append(model.training)
+        return float(len(calls))
+
+    h = Trainer(_model("bc"), _dataset(), _cfg(iterations=10, eval_every=4), eval_fn=eval_fn).train()
+    assert calls == [False, False]  # called in eval mode, at 4 and 8
+    assert h["eval_return"].notna().tolist() == [i in (4, 8) for i in range(1, 11)]
+    assert h.loc[h.iteration == 8, "eval_return"].item() == 2.0
+
+
+# ----------------------------------------------------------------------------------------------
+# Evaluation
+
+
+class _ScriptedEnv(gym.Env):
+    """obs = (t, 0, 0); reward r_t from a fixed list; terminates after the list."""
+
+    def __init__(self, rewards):
+        self.rewards = list(rewards)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (SD,), np.float64)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (AD,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.array([0.0, 0.0, 0.0]), {}
+
+    def step(self, action):
+        r = self.rewards[self.t]
+        self.t += 1
+        return np.array([float(self.t), 0.0, 0.0]), r, self.t == len(self.rewards), False, {}
+
+
+class _Recorder(nn.Module):
+    """Duck-typed model: records each history it is shown, returns known actions/sub-goals."""
+
+    def __init__(self, hdt=False):
+        super().__init__()
+        self.config = HDTConfig(SD, AD, K=2, low_use_rtg=True) if hdt else DTConfig(SD, AD, K=2)
+        self.hdt = hdt
+        self.seen = []
+        self.dummy = nn.Parameter(torch.zeros(1))
+
+    def act(self, history):
+        self.seen.append({k: v.clone() for k, v in history.items()})
+        n = len(self.seen)
+        B = history["states"].shape[0]
+        g = torch.full((B, SD), float(n)) if self.hdt else None  # sub-goal n at call n
+        return SeqOutput(torch.full((B, AD), 0.1 * n), g)
+
+
+def test_rtg_bookkeeping_and_history_window():
+    model = _Recorder()
+    res = evaluate(model, lambda: _ScriptedEnv([1.0, 2.0, 3.0, 4.0]), n_episodes=2, target_return=100.0,
+                   rtg_scale=10.0, state_mean=np.zeros(SD), state_std=np.ones(SD))
+    np.testing.assert_array_equal(res.returns, [10.0, 10.0])
+    np.testing.assert_array_equal(res.lengths, [4, 4])
+    assert res.scores is None
+    last_rtg = [h["returns_to_go"][0, -1, 0].item() for h in model.seen]
+    np.testing.assert_allclose(last_rtg, [10.0, 9.9, 9.7, 9.4], rtol=1e-6)  # rtg -= r / scale
+    h3 = model.seen[3]  # step 3 with K = 2: steps 2 and 3 only
+    np.testing.assert_allclose(h3["returns_to_go"][0, :, 0], [9.7, 9.4], rtol=1e-6)
+    assert h3["timesteps"][0].tolist() == [2, 3]
+    assert h3["states"][0, :, 0].tolist() == [2.0, 3.0]
+    np.testing.assert_allclose(h3["prev_actions"][0, :, 0], [0.2, 0.3], rtol=1e-6)  # a_1, a_2
+    np.testing.assert_allclose(h3["actions"][0, :, 0], [0.3, 0.0], rtol=1e-6)  # a_2, placeholder
+    np.testing.assert_array_equal(model.seen[0]["prev_actions"][0, 0], 0.0)  # a_{-1} = 0
+
+
+def test_hdt_rolls_its_subgoals_forward():
+    model = _Recorder(hdt=True)
+    evaluate(model, lambda: _ScriptedEnv([0.0] * 4), n_episodes=1, target_return=0.0,
+             state_mean=np.zeros(SD), state_std=np.ones(SD))
+    # the high level sees its own earlier predictions g_{t-1} (call n predicted n), zero at the start
+    assert [h["prev_subgoals"][0, -1, 0].item() for h in model.seen] == [0.0, 1.0, 2.0, 3.0]
+    assert model.seen[3]["subgoals"][0, :, 0].tolist() == [3.0, 0.0]  # g_2, placeholder for g_3
+
+
+def test_episodes_of_different_lengths_and_rounds():
+    lengths = iter([2, 5, 3])
+
+    def make():
+        return _ScriptedEnv([1.0] * next(lengths))
+
+    res = evaluate(_Recorder(), make, n_episodes=3, target_return=1.0, state_mean=np.zeros(SD), state_std=np.ones(SD))
+    np.testing.assert_array_equal(res.lengths, [2, 5, 3])
+    np.testing.assert_array_equal(res.returns, [2.0, 5.0, 3.0])
+
+
+def test_evaluate_errors():
+    with pytest.raises(ValueError, match="target_return="):
+        evaluate(_Recorder(), lambda: _ScriptedEnv([1.0]), n_episodes=1)
+    wrong = BC(BCConfig(5, AD))
+    with pytest.raises(ValueError, match="state_dim=5, the environment gives observations of size 3"):
+        evaluate(wrong, lambda: _ScriptedEnv([1.0]), n_episodes=1, state_mean=np.zeros(5), state_std=np.ones(5))
+    with pytest.raises(ValueError, match="Unknown task 'hoper'. Did you mean: 'hopper'"):
+        evaluate(wrong, "hoper", n_episodes=1)
+
+
+def test_evaluate_on_a_real_task_gives_d4rl_scores():
+    model = HDT(HDTConfig(11, 3, K=5, d_model=16, n_layer=1))
+    res = evaluate(model, "hopper", n_episodes=2, max_steps=5, state_mean=np.zeros(11), state_std=np.ones(11))
+    assert res.returns.shape == (2,) and res.scores.shape == (2,)
+    np.testing.assert_allclose(res.scores, 100 * (res.returns + 20.272305) / (3234.3 + 20.272305))
+
+
+class _ImitationEnv(gym.Env):
+    """Random observations; reward 1 - ||a - expert(obs)||^2; 20 steps. The expert scores 20."""
+
+    def __init__(self):
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (SD,), np.float64)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (AD,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t, self.obs = 0, self.np_random.normal(size=SD)
+        return self.obs, {}
+
+    def step(self, action):
+        r = 1.0 - float(np.sum((np.asarray(action) - _expert(self.obs)) ** 2))
+        self.t += 1
+        self.obs = self.np_random.normal(size=SD)
+        return self.obs, r, False, self.t == 20, {}
+
+
+@pytest.mark.parametrize("kind", ["dt", "hdt"])
+def test_trained_models_beat_a_random_policy(kind):
+    rng = np.random.default_rng(0)
+    eps = []
+    for i in range(10):
+        obs = rng.normal(size=(21, SD))
+        eps.append(Episode(i, obs, _expert(obs[:-1]).astype(np.float32), np.ones(20), np.zeros(20, bool), np.zeros(20, bool)))
+    seq = SequenceDataset(eps, K=K, rtg_scale=10.0, subgoal_fn=subgoal_fn(), seed=0)
+    trainer = Trainer(_model(kind), seq, _cfg(iterations=150, batch_size=16))
+    trainer.train()
+    trained = evaluate(trainer.model, _ImitationEnv, n_episodes=4, target_return=20.0, dataset=seq)
+    env, random_returns = _ImitationEnv(), []
+    env.action_space.seed(0)
+    for k in range(4):
+        env.reset(seed=k)
+        random_returns.append(sum(env.step(env.action_space.sample())[1] for _ in range(20)))
+    assert trained.mean_return > np.mean(random_returns) + 10.0  # measured: about 19 vs -15
+
+
+def test_experiment_rows_and_both_metrics():
+    from thesis_lib.seq.experiments import HDTExperimentConfig, run_method, summarize
+
+    rng = np.random.default_rng(0)
+    data = []
+    for i in range(3):
+        obs = rng.normal(size=(16, 11))
+        data.append(Episode(i, obs, rng.uniform(-1, 1, (15, 3)).astype(np.float32), rng.normal(size=15) + 3 * i,
+                            np.zeros(15, bool), np.zeros(15, bool)))
+    cfg = HDTExperimentConfig(iterations=4, eval_every=2, eval_episodes=2, max_eval_steps=3, K=4, d_model=16,
+                              n_layer=1, batch_size=4, warmup_steps=2, seeds=(0, 1), progress=False)
+    curves = pd.concat([run_method(m, "hopper", "medium", s, cfg, data=data)
+                        for m in ("DT", "HDT") for s in cfg.seeds], ignore_index=True)
+    dt = curves[curves.method == "DT"]
+    assert sorted(dt.target.unique()) == ["10k", "half", "max"]
+    assert dt[dt.seed == 0].iteration.tolist() == [2, 2, 2, 4, 4, 4]
+    assert dt.target_return[dt.target == "max"].iloc[0] == pytest.approx(max(e.rewards.sum() for e in data))
+    assert curves[curves.method == "HDT"].target.unique().tolist() == ["none"]
+    s = summarize(curves)
+    assert len(s) == 4 and (s.n_seeds == 2).all()
+    row = s[(s.method == "HDT")].iloc[0]
+    hdt = curves[curves.method == "HDT"]
+    assert row.best_return == pytest.approx(hdt.groupby("seed").return_mean.max().mean())
+    assert row.final_return_mean == pytest.approx(hdt[hdt.iteration == 4].return_mean.mean())
+    with pytest.raises(ValueError, match="Unknown method 'HTD'. Did you mean: 'HDT'"):
+        HDTExperimentConfig(methods=("HTD",))
