@@ -320,16 +320,17 @@ def test_doctests(module):
 
 
 @pytest.mark.slow
-def test_every_task_generates_every_tier_at_small_scale():
-    """What CI's smoke profile does for all tasks, at a tenth of the size."""
+def test_every_task_generates_every_tier_at_smoke_scale():
+    """Every task's data sets at the smoke profile's size, as a fresh `make book` makes them."""
     from thesis_lib.data.cli import register  # noqa: F401  (same path as `thesis data generate`)
 
     for task, spec in data.TASKS.items():
         for tier in spec.tiers:
             if spec.kind == "mujoco" and tier != "random" and not has_policies(task):
                 continue
-            ds = load(generate(task, tier, n_transitions=2000, seed=0))
-            want = 4000 if tier == "medium-expert" else 2000
+            ds = load(generate(task, tier, profile="smoke", seed=0))
+            n = data.PROFILE_SIZES["smoke"]
+            want = 2 * n if tier == "medium-expert" else n
             assert ds.n_transitions == want, (task, tier)
 
 
