@@ -1,0 +1,514 @@
+"""The experiments of the DEFENDER chapter (thesis 4.3.2-4.3.3), as functions returning DataFrames.
+
+``notebooks/03_defender.ipynb`` calls these in order:
+
+1. :func:`make_demonstrations` one SAC run per task; its roll-outs become the demonstrations and
+   its training episodes the ablation's log.
+2. :func:`run_ablation` the 576-strategy ablation for state and state-action trajectories.
+3. :func:`run_tables_4_3_4_4` SAC and TD3 with and without DEFENDER; :func:`run_table_4_5`
+   SAC with MeanDemoW5/MeanDemoW10 and 10/20/50 demonstrations.
+4. :func:`summarise` mean ± std over seeds, % Time; :func:`compare_tables` beside the thesis.
+
+Used in: DEFENDER chapter (thesis 4.3).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+from thesis_lib.defender.ablation import rank_strategies, strategy_ablation
+from thesis_lib.defender.demos import DemoRun, DemoSet, collect_demonstrations, select_diverse
+from thesis_lib.defender.methods import parse_strategy
+from thesis_lib.defender.wrapper import DefenderWrapper
+
+__all__ = [
+    "RUN_COLUMNS",
+    "THESIS_STATE_ACTION_STRATEGIES",
+    "THESIS_STATE_STRATEGIES",
+    "DefenderConfig",
+    "TableRuns",
+    "compare_table_4_5",
+    "compare_tables",
+    "crash_curves",
+    "demos_subset",
+    "describe_effects",
+    "make_demonstrations",
+    "plot_curves",
+    "rank_thesis_strategies",
+    "run_ablation",
+    "run_table_4_5",
+    "run_tables_4_3_4_4",
+    "summarise",
+    "thesis_env_name",
+    "top_strategies",
+    "train_run",
+]
+
+THESIS_STATE_STRATEGIES: tuple[str, ...] = (
+    "MinDemoW5/MinDemoW10", "MeanBothW5/MeanBothW5", "MeanBothW10/MeanBothW10",
+    "MeanDemoW5/MeanDemoW10", "MinDemoW10/MinDemoW10",
+)  # fmt: skip
+"""The thesis's top 5 for state trajectories, as printed in Table 4.3 (safe/unsafe)."""
+
+THESIS_STATE_ACTION_STRATEGIES: tuple[str, ...] = (
+    "MeanBothW5/MeanBothW5", "MeanBothW10/MeanBothW10", "MinTrajW5/MinTrajW10",
+    "MinBoth/MinTrajW10", "MinBoth/MinTrajW5",
+)  # fmt: skip
+"""The thesis's top 5 for state-action trajectories, as printed in Table 4.4."""
+
+RUN_COLUMNS: tuple[str, ...] = (
+    "task", "algo", "trajectory", "strategy", "safe_strategy", "unsafe_strategy", "n_demos", "paper_compat",
+    "seed", "acc_reward", "crash_pct", "filtered_pct", "mean_last_100", "n_episodes", "wall_time_s",
+)  # fmt: skip
+"""Columns of one training run's summary row (:func:`train_run`)."""
+
+
+@dataclass
+class DefenderConfig:
+    """Parameters of ``notebooks/03_defender.ipynb`` (one field per notebook parameter).
+
+    Defaults are the smoke scale (a few minutes on 2 CPU cores); ``params/03_defender.full.yml``
+    holds the thesis's (5,000 episodes x 3 seeds, 50 demonstrations, horizon 1000, 256-256 nets).
+    """
+
+    seed: int = 0
+    """Seed of the demonstration run (and the chapter's other draws)."""
+    seeds: list[int] = field(default_factory=lambda: [0])
+    """Seeds of every training run in Tables 4.3-4.5 (the thesis: 3)."""
+    tasks: list[str] = field(default_factory=lambda: ["Hopper-v5"])
+    """Gymnasium tasks (the thesis: Hopper, InvertedDoublePendulum, Walker2d)."""
+    max_episode_steps: int | None = 100
+    """Episode horizon; None = the task's own (1000, the thesis's)."""
+    demo_timesteps: int = 4000
+    """SAC training steps of the demonstration run."""
+    demo_every: int = 1
+    """Training episodes between two demonstration roll-outs."""
+    demo_deterministic: bool = True
+    """Roll out the policy's mean action (True) or sample it."""
+    n_demos: int = 10
+    """Demonstrations per group in Tables 4.3-4.4 (the thesis: 50)."""
+    n_demos_list: list[int] = field(default_factory=lambda: [3, 6, 10])
+    """Demonstrations per group in Table 4.5 (the thesis: 10, 20, 50)."""
+    algos: list[str] = field(default_factory=lambda: ["SAC", "TD3"])
+    """Agents of Tables 4.3-4.4."""
+    train_timesteps: int = 1000
+    """Environment steps per training run (used when ``train_episodes`` is None)."""
+    train_episodes: int | None = None
+    """Episodes per training run (the thesis: 5000); None = use ``train_timesteps``."""
+    state_strategies: list[str] = field(default_factory=lambda: ["MeanDemoW5/MeanDemoW10"])
+    """Safe/unsafe strategies run with state trajectories (Table 4.3)."""
+    state_action_strategies: list[str] = field(default_factory=lambda: ["MeanBothW5/MeanBothW5"])
+    """Safe/unsafe strategies run with state-action trajectories (Table 4.4)."""
+    net_arch: list[int] = field(default_factory=lambda: [64, 64])
+    """Hidden layers of actor and critics (the thesis: 256, 256)."""
+    learning_rate: float = 1e-3
+    """Adam learning rate of actor and critics (the thesis: 3e-4)."""
+    max_trajectory: int | None = None
+    """Cap of the agent's trajectory before each comparison; None = whole episode (the thesis's
+    text), 20 = the authors' code."""
+    paper_compat_check: bool = True
+    """Also run the first state strategy with SAC and ``paper_compat=True`` (FastDTW radius 1,
+    20-step cap, strict >) to measure what the authors' code changes."""
+    n_jobs: int = 1
+    """Processes for the ablation replay (training runs stay sequential so % Time is fair)."""
+
+    def __post_init__(self) -> None:
+        from thesis_lib.rl import ALGOS
+
+        for name in ("demo_timesteps", "demo_every", "n_demos", "train_timesteps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"DefenderConfig.{name} must be a positive int, got {value!r}.")
+        for name in ("max_episode_steps", "train_episodes", "max_trajectory"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+                raise ValueError(f"DefenderConfig.{name} must be a positive int or None, got {value!r}.")
+        if not self.seeds or not self.tasks or not self.algos:
+            raise ValueError("DefenderConfig needs at least one seed, one task and one algo.")
+        bad = [a for a in self.algos if a not in ALGOS]
+        if bad:
+            raise ValueError(f"Unknown algo {bad[0]!r} in DefenderConfig.algos. Valid: {', '.join(ALGOS)}.")
+        if not self.n_demos_list or any(int(n) < 1 for n in self.n_demos_list):
+            raise ValueError(f"n_demos_list must list positive counts, got {self.n_demos_list!r}.")
+        for s in [*self.state_strategies, *self.state_action_strategies]:
+            parse_strategy(s)  # raises with the valid names
+
+
+# --------------------------------------------------------------------------- demonstrations
+def thesis_env_name(task: str) -> str:
+    """The thesis's table label of a gymnasium id: ``"Hopper-v5"`` -> ``"Hopper"``.
+
+    >>> thesis_env_name("InvertedDoublePendulum-v5")
+    'InvertedDoublePendulum'
+    """
+    return task.split("-v")[0]
+
+
+def _make_env(task: str, horizon: int | None) -> gym.Env:
+    return gym.make(task, max_episode_steps=horizon) if horizon else gym.make(task)
+
+
+def make_demonstrations(cfg: DefenderConfig, progress: bool = False) -> dict[str, DemoRun]:
+    """One SAC run per task, rolled out every ``demo_every`` episodes (thesis 4.3.3).
+
+    Keeps ``max(n_demos, max(n_demos_list))`` diverse demonstrations per group in ``pool``-order
+    (fewer if fewer were seen).
+
+    Used in: DEFENDER chapter (thesis 4.3).
+    """
+    n = max(cfg.n_demos, *cfg.n_demos_list)
+    return {
+        task: collect_demonstrations(
+            task, n_safe=n, n_unsafe=n, total_timesteps=cfg.demo_timesteps, every=cfg.demo_every,
+            seed=cfg.seed, max_episode_steps=cfg.max_episode_steps, deterministic=cfg.demo_deterministic,
+            rl_overrides={"net_arch": list(cfg.net_arch), "learning_rate": cfg.learning_rate}, progress=progress,
+        )
+        for task in cfg.tasks
+    }
+
+
+def demos_subset(run: DemoRun, n: int) -> DemoSet:
+    """``n`` diverse demonstrations per group from a run's pool (as the authors picked theirs)."""
+    pool = run.pool
+    return DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), pool.env_id)
+
+
+# --------------------------------------------------------------------------- ablation
+def run_ablation(cfg: DefenderConfig, runs: dict[str, DemoRun]) -> pd.DataFrame:
+    """The 576-strategy ablation on each task's logged SAC episodes, for both trajectory kinds.
+
+    Returns:
+        One row per (task, trajectory, strategy): ``task``, ``trajectory`` and
+        :data:`~thesis_lib.defender.ablation.ABLATION_COLUMNS`.
+
+    Used in: DEFENDER chapter (thesis 4.3.2).
+    """
+    frames = []
+    for task, run in runs.items():
+        demos = demos_subset(run, cfg.n_demos)
+        for trajectory in ("state", "state_action"):
+            scores = strategy_ablation(run.episodes, demos, trajectory=trajectory, horizon=cfg.max_episode_steps
+                                       or _make_env(task, None).spec.max_episode_steps,
+                                       max_trajectory=cfg.max_trajectory, n_jobs=cfg.n_jobs)
+            scores.insert(0, "trajectory", trajectory)
+            scores.insert(0, "task", task)
+            frames.append(scores)
+    return pd.concat(frames, ignore_index=True)
+
+
+def top_strategies(scores: pd.DataFrame, top: int = 5) -> pd.DataFrame:
+    """The ``top`` strategies per trajectory kind, ranked by the score averaged over tasks."""
+    return rank_strategies(scores, top=top, by=("trajectory",))
+
+
+def rank_thesis_strategies(scores: pd.DataFrame) -> pd.DataFrame:
+    """Where the thesis's top-5 strategies (Tables 4.3-4.4) land in our ablation.
+
+    Returns:
+        One row per thesis strategy: ``trajectory``, ``thesis strategy`` (as printed), ``score``,
+        ``kept_fraction``, ``crashes_stopped`` (averaged over tasks) and ``our rank`` among 576.
+
+    Used in: DEFENDER chapter (thesis 4.3.2).
+    """
+    cols = ["score", "kept_fraction", "crashes_stopped"]
+    mean = scores.groupby(["trajectory", "strategy"])[cols].mean()
+    mean["our rank"] = mean.groupby(level=0)["score"].rank(ascending=False, method="min")
+    rows = []
+    for kind, printed in (("state", THESIS_STATE_STRATEGIES), ("state_action", THESIS_STATE_ACTION_STRATEGIES)):
+        for label in printed:
+            key = (kind, parse_strategy(label).name)
+            if key in mean.index:
+                rows.append({"trajectory": kind, "thesis strategy": label, **mean.loc[key].to_dict()})
+    out = pd.DataFrame(rows, columns=["trajectory", "thesis strategy", *cols, "our rank"])
+    out["our rank"] = out["our rank"].astype(int)
+    return out
+
+
+# --------------------------------------------------------------------------- training runs
+def train_run(
+    task: str,
+    algo: str,
+    seed: int,
+    cfg: DefenderConfig,
+    demos: DemoSet | None = None,
+    strategy: str | None = None,
+    trajectory: str = "state",
+    paper_compat: bool = False,
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """Train one agent, with DEFENDER when ``demos`` and ``strategy`` are given.
+
+    Returns:
+        ``(row, episodes)``: a summary row (:data:`RUN_COLUMNS`; Acc Reward = best training
+        episode return, % Crash = share of training episodes that crashed, filtered episodes not
+        counted as crashes) and the episode log with the run's keys.
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+    from thesis_lib.rl import config_from_params, train
+
+    env = _make_env(task, cfg.max_episode_steps)
+    safe_s = unsafe_s = None
+    if demos is not None and strategy is not None:
+        safe_s, unsafe_s = strategy.split("/")
+        env = DefenderWrapper(env, demos.safe, demos.unsafe, safe_method=safe_s, unsafe_method=unsafe_s,
+                              trajectory=trajectory, max_trajectory=cfg.max_trajectory, paper_compat=paper_compat,
+                              seed=seed,  # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
+                              dynamics_kwargs={"hidden": list(cfg.net_arch), "learning_rate": cfg.learning_rate})
+    callbacks = []
+    steps = cfg.train_timesteps
+    if cfg.train_episodes:
+        horizon = cfg.max_episode_steps or env.spec.max_episode_steps or 1000
+        steps = cfg.train_episodes * horizon  # an upper bound; the callback stops at the episode count
+        callbacks.append(StopTrainingOnMaxEpisodes(cfg.train_episodes))
+    rl = config_from_params({"algo": algo, "env_id": None, "total_timesteps": int(steps), "seed": int(seed),
+                             "net_arch": list(cfg.net_arch), "learning_rate": cfg.learning_rate})
+    res = train(rl, env=env, callbacks=callbacks, progress=False, info_keys=["filtered", "filter_step"])
+    ep = res.episodes
+    ep["filtered"] = ep["filtered"].astype("boolean").fillna(False).astype(bool)
+    ep["crashed"] = ep["crashed"] & ~ep["filtered"]  # a filtered episode is not a crash (4.3.3)
+    keys = {"task": task, "algo": algo, "trajectory": trajectory if strategy else "none",
+            "strategy": strategy or "none", "safe_strategy": safe_s, "unsafe_strategy": unsafe_s,
+            "n_demos": len(demos.safe) if demos is not None and strategy else 0,
+            "paper_compat": bool(paper_compat), "seed": int(seed)}
+    row = {**keys,
+           "acc_reward": float(ep["return"].max()) if len(ep) else np.nan,
+           "crash_pct": 100 * float(ep["crashed"].mean()) if len(ep) else np.nan,
+           "filtered_pct": 100 * float(ep["filtered"].mean()) if len(ep) else np.nan,
+           "mean_last_100": float(ep["return"].tail(100).mean()) if len(ep) else np.nan,
+           "n_episodes": len(ep), "wall_time_s": res.wall_time_s}
+    for k, v in reversed(keys.items()):
+        ep.insert(0, k, v)
+    return row, ep
+
+
+class TableRuns(NamedTuple):
+    """Training runs: one summary row each, and every episode of every run."""
+
+    runs: pd.DataFrame
+    """One row per run, :data:`RUN_COLUMNS`."""
+    episodes: pd.DataFrame
+    """Every training episode, with the run's keys."""
+
+
+def _run_all(specs: list[dict[str, Any]], cfg: DefenderConfig, demos_for: Any, progress: bool) -> TableRuns:
+    from tqdm.auto import tqdm
+
+    rows, eps = [], []
+    for spec in tqdm(specs, desc="DEFENDER runs", disable=not progress):
+        demos = demos_for(spec) if spec.get("strategy") else None
+        row, ep = train_run(cfg=cfg, demos=demos, **spec)
+        rows.append(row)
+        eps.append(ep)
+    return TableRuns(pd.DataFrame(rows, columns=list(RUN_COLUMNS)), pd.concat(eps, ignore_index=True))
+
+
+def run_tables_4_3_4_4(cfg: DefenderConfig, demo_runs: dict[str, DemoRun], progress: bool = True) -> TableRuns:
+    """SAC and TD3 with and without DEFENDER on every task and seed (Tables 4.3 and 4.4).
+
+    Runs each algorithm plain, with each of ``state_strategies`` on state trajectories, with
+    each of ``state_action_strategies`` on state-action trajectories, and (``paper_compat_check``)
+    SAC with the first state strategy in the authors' setting.
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    specs = []
+    for task in cfg.tasks:
+        for seed in cfg.seeds:
+            for algo in cfg.algos:
+                specs.append({"task": task, "algo": algo, "seed": seed})
+                specs += [{"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state"}
+                          for s in cfg.state_strategies]
+                specs += [{"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state_action"}
+                          for s in cfg.state_action_strategies]
+            if cfg.paper_compat_check and cfg.state_strategies and "SAC" in cfg.algos:
+                specs.append({"task": task, "algo": "SAC", "seed": seed, "strategy": cfg.state_strategies[0],
+                              "trajectory": "state", "paper_compat": True})
+    subsets = {task: demos_subset(run, cfg.n_demos) for task, run in demo_runs.items()}
+    return _run_all(specs, cfg, lambda spec: subsets[spec["task"]], progress)
+
+
+def run_table_4_5(
+    cfg: DefenderConfig,
+    demo_runs: dict[str, DemoRun],
+    reuse: TableRuns | None = None,
+    strategy: str = "MeanDemoW5/MeanDemoW10",
+    progress: bool = True,
+) -> TableRuns:
+    """SAC with DEFENDER (state trajectories, ``strategy``) and each of ``n_demos_list`` demonstrations.
+
+    A run already in ``reuse`` (same task, seed, strategy and number of demonstrations) is not
+    repeated.
+
+    Used in: DEFENDER chapter (thesis 4.3.3, Table 4.5).
+    """
+    done = reuse.runs if reuse is not None else pd.DataFrame(columns=list(RUN_COLUMNS))
+    specs, kept = [], []
+    for task in cfg.tasks:
+        available = min(len(demo_runs[task].pool.safe), len(demo_runs[task].pool.unsafe))
+        for n in cfg.n_demos_list:
+            for seed in cfg.seeds:
+                m = (done.task == task) & (done.seed == seed) & (done.algo == "SAC") & (done.strategy == strategy) \
+                    & (done.trajectory == "state") & (done.n_demos == min(n, available)) & ~done.paper_compat.astype(bool)
+                if m.any():
+                    kept.append(done[m].iloc[[0]])
+                else:
+                    specs.append({"task": task, "algo": "SAC", "seed": seed, "strategy": strategy,
+                                  "trajectory": "state", "_n": n})
+    ns = {id(s): s.pop("_n") for s in specs}
+    new = _run_all(specs, cfg, lambda spec: demos_subset(demo_runs[spec["task"]], ns[id(spec)]), progress)
+    runs = pd.concat([*kept, new.runs], ignore_index=True) if kept else new.runs
+    eps = new.episodes
+    if reuse is not None and kept:
+        keys = pd.concat(kept)[["task", "seed", "strategy", "n_demos"]]
+        eps = pd.concat([eps, reuse.episodes.merge(keys, on=["task", "seed", "strategy", "n_demos"])],
+                        ignore_index=True)
+    return TableRuns(runs.sort_values(["task", "n_demos", "seed"]).reset_index(drop=True), eps)
+
+
+# --------------------------------------------------------------------------- summaries
+def summarise(runs: pd.DataFrame) -> pd.DataFrame:
+    """Mean ± std over seeds, and % Time relative to the plain algorithm (thesis Tables 4.3-4.5).
+
+    Returns:
+        One row per (task, algo, trajectory, strategy, n_demos, paper_compat) with
+        ``acc_reward_mean/std``, ``crash_pct_mean/std``, ``filtered_pct``, ``mean_last_100``,
+        ``time_pct`` (100 x wall time / the same algorithm's plain run on the same task and seed,
+        averaged over seeds) and ``n_seeds``.
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    r = runs.copy()
+    base = r[r.strategy == "none"].set_index(["task", "algo", "seed"])["wall_time_s"]
+    idx = pd.MultiIndex.from_frame(r[["task", "algo", "seed"]])
+    r["time_pct"] = 100 * r["wall_time_s"].to_numpy() / base.reindex(idx).to_numpy()
+    keys = ["task", "algo", "trajectory", "strategy", "safe_strategy", "unsafe_strategy", "n_demos", "paper_compat"]
+    g = r.groupby(keys, dropna=False, sort=False)
+    out = g.agg(acc_reward_mean=("acc_reward", "mean"), acc_reward_std=("acc_reward", "std"),
+                crash_pct_mean=("crash_pct", "mean"), crash_pct_std=("crash_pct", "std"),
+                filtered_pct=("filtered_pct", "mean"), mean_last_100=("mean_last_100", "mean"),
+                time_pct=("time_pct", "mean"), n_seeds=("seed", "nunique")).reset_index()
+    return out
+
+
+def compare_tables(summary: pd.DataFrame, differs: dict[str, str] | None = None) -> pd.DataFrame:
+    """Tables 4.3 and 4.4 beside the thesis: Acc Reward, % Crash and % Time per row.
+
+    Returns:
+        ``compare_with_paper`` rows with extra columns ``table`` and ``metric``.
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    from thesis_lib.book import compare_with_paper
+
+    s = summary[~summary.paper_compat.astype(bool)].copy()
+    s["env"] = s.task.map(thesis_env_name)
+    s["algorithm"] = s.algo
+    frames = []
+    for table, kind in (("4.3", "state"), ("4.4", "state_action")):
+        part = s[s.trajectory.isin(["none", kind])].copy()
+        for col in ("safe_strategy", "unsafe_strategy"):
+            part[col] = part[col].where(part.strategy != "none", np.nan)
+        for metric, ours, paper in (("Acc Reward", "acc_reward_mean", "acc_reward_mean"),
+                                    ("% Crash", "crash_pct_mean", "crash_pct_mean"),
+                                    ("% Time", "time_pct", "time_pct")):
+            cmp = compare_with_paper("4_3_4_4", part, on=["algorithm", "safe_strategy", "unsafe_strategy", "env"],
+                                     value=ours, paper_value=paper, differs=differs, where={"table": table})
+            cmp.insert(0, "metric", metric)
+            cmp.insert(0, "table", table)
+            frames.append(cmp)
+    return pd.concat(frames, ignore_index=True)
+
+
+def compare_table_4_5(summary: pd.DataFrame, differs: dict[str, str] | None = None) -> pd.DataFrame:
+    """Table 4.5 beside the thesis (Acc Reward and % Crash per number of demonstrations).
+
+    Our demonstration counts are matched to the thesis's by rank (smallest to 10, ...), since the
+    smoke scale uses fewer; the ``n_demos`` column keeps ours.
+    """
+    from thesis_lib.book import compare_with_paper
+
+    s = summary.copy()
+    s["env"] = s.task.map(thesis_env_name)
+    thesis_ns = [10, 20, 50]
+    ours_ns = sorted(s.n_demos.unique())
+    rank = {n: thesis_ns[i] if i < len(thesis_ns) else n for i, n in enumerate(ours_ns)}
+    s["n_demos_ours"] = s.n_demos
+    s["n_demos"] = s.n_demos.map(rank)
+    frames = []
+    for metric, col in (("Acc Reward", "acc_reward_mean"), ("% Crash", "crash_pct_mean")):
+        cmp = compare_with_paper("4.5", s, on=["n_demos", "env"], value=col, differs=differs)
+        cmp.insert(0, "metric", metric)
+        frames.append(cmp)
+    out = pd.concat(frames, ignore_index=True)
+    back = {str(v): k for k, v in rank.items()}
+    out.insert(2, "n_demos_ours", out.n_demos.map(back))
+    return out
+
+
+def describe_effects(summary: pd.DataFrame) -> list[str]:
+    """One sentence per DEFENDER run group: crash rate, filtered share and best return vs the plain agent.
+
+    Used in: DEFENDER chapter (thesis 4.3.3), so the narration follows the numbers of each run.
+    """
+    base = summary[summary.strategy == "none"].set_index(["task", "algo"])
+    lines = []
+    for _, r in summary[summary.strategy != "none"].iterrows():
+        if (r.task, r.algo) not in base.index:
+            continue
+        b = base.loc[(r.task, r.algo)]
+        setting = f"{r.trajectory}" + (", paper_compat" if r.paper_compat else "")
+        lines.append(
+            f"{thesis_env_name(r.task)} {r.algo} with {r.strategy} ({setting}): crashed episodes "
+            f"{b.crash_pct_mean:.0f}% -> {r.crash_pct_mean:.0f}%, {r.filtered_pct:.0f}% of episodes ended by "
+            f"the filter, best return {b.acc_reward_mean:.0f} -> {r.acc_reward_mean:.0f}, "
+            f"time {r.time_pct:.0f}% of the plain run."
+        )
+    return lines
+
+
+def crash_curves(episodes: pd.DataFrame, keys: Sequence[str] = ("task", "algo", "trajectory", "strategy", "seed")) -> pd.DataFrame:
+    """Cumulative crash rate (%) and filter rate (%) after each training episode, per run."""
+    e = episodes.copy()
+    g = e.groupby(list(keys), sort=False)
+    e["episode_in_run"] = g.cumcount() + 1
+    e["crash_rate_pct"] = 100 * g["crashed"].cumsum() / e["episode_in_run"]
+    e["filter_rate_pct"] = 100 * g["filtered"].cumsum() / e["episode_in_run"]
+    return e
+
+
+def plot_curves(episodes: pd.DataFrame, window: int = 10) -> Any:
+    """Learning curves (return vs step, rolling mean) and cumulative crash rate, with and without the filter.
+
+    One column per (task, algo); one line per strategy (seed-averaged on a common step grid).
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    import matplotlib.pyplot as plt
+
+    e = crash_curves(episodes)
+    e = e[~e.paper_compat.astype(bool)] if "paper_compat" in e else e
+    panels = list(e.groupby(["task", "algo"], sort=False).groups)
+    fig, axes = plt.subplots(2, len(panels), figsize=(5 * len(panels), 6.5), squeeze=False)
+    for col, (task, algo) in enumerate(panels):
+        sub = e[(e.task == task) & (e.algo == algo)]
+        for (traj, strat), run in sub.groupby(["trajectory", "strategy"], sort=False):
+            label = "no filter" if strat == "none" else f"{strat} ({traj})"
+            style = {"color": "black", "lw": 2} if strat == "none" else {}
+            for seed, one in run.groupby("seed"):
+                lab = label if seed == run.seed.min() else None
+                axes[0, col].plot(one.timestep, one["return"].rolling(window, min_periods=1).mean(), label=lab, **style)
+                axes[1, col].plot(one.timestep, one.crash_rate_pct, label=lab, **style)
+        axes[0, col].set_title(f"{thesis_env_name(task)}, {algo}")
+        axes[0, col].set_ylabel(f"return (rolling mean of {window})")
+        axes[1, col].set_ylabel("crashed episodes so far (%)")
+        axes[1, col].set_xlabel("environment step")
+        axes[0, col].legend(fontsize=7)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,236 @@
+"""DEFENDER as a ``gymnasium.Wrapper``: any RL library gets the filter (thesis 4.3.1, Algorithm 2).
+
+Before each step the wrapper appends the current state (or state||action) to the episode's
+trajectory and compares it with both demonstration groups. If the cost to the safe group is
+lower, the real environment steps. Otherwise it is **not** stepped: the wrapper returns the
+next state predicted by a dynamics model, the lowest single-step reward found in the
+demonstrations, ``terminated=True`` and ``info["filtered"] = True``. The dynamics model trains
+online on real transitions only.
+
+Used in: DEFENDER (thesis 4.3).
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+from thesis_lib import dtw as _dtw
+from thesis_lib.defender.compare import GroupCost
+from thesis_lib.defender.demos import TRAJECTORIES, Trajectory, as_demonstration, trajectory_features
+from thesis_lib.defender.dynamics import DynamicsModel
+from thesis_lib.defender.methods import parse_method
+
+__all__ = ["EPISODE_LOG_COLUMNS", "PAPER_MAX_TRAJECTORY", "DefenderWrapper"]
+
+PAPER_MAX_TRAJECTORY = 20
+"""The authors' code cut the agent's trajectory to its last 20 steps before every comparison."""
+
+EPISODE_LOG_COLUMNS: tuple[str, ...] = (
+    "episode", "return", "length", "terminated", "truncated", "crashed", "filtered", "filter_step",
+)  # fmt: skip
+"""Columns of :attr:`DefenderWrapper.episodes`."""
+
+
+def _find_horizon(env: gym.Env) -> int | None:
+    inner: Any = env
+    while inner is not None:
+        if isinstance(inner, gym.wrappers.TimeLimit):
+            return inner._max_episode_steps
+        inner = getattr(inner, "env", None)
+    spec = getattr(env, "spec", None)
+    return None if spec is None else spec.max_episode_steps
+
+
+class DefenderWrapper(gym.Wrapper):
+    """Filter unsafe episodes with DTW against safe and unsafe demonstrations (DEFENDER).
+
+    Args:
+        env: the task, with flat ``Box`` observations and actions (and usually a ``TimeLimit``).
+        safe_demos: demonstrations that reached the horizon: :class:`~thesis_lib.defender.Demonstration`
+            objects, Minari-like episodes (``observations``, ``actions``, ``rewards``) or dicts.
+        unsafe_demos: demonstrations that ended in an unsafe state.
+        safe_method: how to compare the trajectory with the safe group (one of the 24
+            :data:`~thesis_lib.defender.METHODS`, e.g. ``"MeanDemoW5"``).
+        unsafe_method: the same for the unsafe group (e.g. ``"MeanDemoW10"``).
+        trajectory: ``"state"`` (states only) or ``"state_action"`` (state||action).
+        max_trajectory: compare only the trajectory's last this-many steps; None (default, the
+            thesis's text) = the whole episode so far; the authors' code used 20.
+        metric: DTW local cost (the authors' code: L1).
+        paper_compat: the authors' code: FastDTW radius 1 with L1, trajectory cut to its last 20
+            steps, and the filter fires only when safe cost > unsafe cost (the thesis's Algorithm 2
+            also fires on a tie). Default False: exact DTW, the whole trajectory, ties fire.
+        filter_reward: reward of a filtered step; None = the lowest single-step reward in the
+            demonstrations (the thesis: "the lowest reward from the reward function").
+        dynamics: a :class:`DynamicsModel` to use (e.g. pre-trained); None builds one.
+        dynamics_kwargs: keyword arguments for the :class:`DynamicsModel` built when ``dynamics``
+            is None (e.g. ``{"train_every": 2}``).
+        seed: seed of the dynamics model.
+
+    Each step's ``info`` has ``"filtered"`` (bool); a filtered step also has ``"filter_step"``
+    (how many real steps the episode had taken), ``"cost_safe"`` and ``"cost_unsafe"``.
+    :attr:`episodes` logs every finished episode. A crash is a real termination before the
+    horizon; a filtered episode is not a crash.
+
+    Raises:
+        ValueError: an empty group, demonstrations whose feature size does not match the
+            environment, an unknown method name (with the valid ones), a non-Box space.
+
+    Used in: DEFENDER (thesis 4.3).
+
+    Example::
+
+        env = DefenderWrapper(gym.make("Hopper-v5"), demos.safe, demos.unsafe,
+                              safe_method="MeanDemoW5", unsafe_method="MeanDemoW10")
+        SAC("MlpPolicy", env).learn(10_000)
+        env.episodes  # return, length, crashed, filtered, filter_step per episode
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        safe_demos: Sequence[Any],
+        unsafe_demos: Sequence[Any],
+        *,
+        safe_method: str = "MeanDemoW5",
+        unsafe_method: str = "MeanDemoW10",
+        trajectory: Trajectory = "state",
+        max_trajectory: int | None = None,
+        metric: _dtw.Metric = "l1",
+        paper_compat: bool = False,
+        filter_reward: float | None = None,
+        dynamics: DynamicsModel | None = None,
+        dynamics_kwargs: Mapping[str, Any] | None = None,
+        seed: int = 0,
+    ) -> None:
+        super().__init__(env)
+        if trajectory not in TRAJECTORIES:
+            raise ValueError(f"Unknown trajectory {trajectory!r}. Valid: {', '.join(TRAJECTORIES)}.")
+        obs_space, act_space = env.observation_space, env.action_space
+        for name, space in (("observation", obs_space), ("action", act_space)):
+            if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
+                raise ValueError(
+                    f"DefenderWrapper needs a flat Box {name} space (1-D), got {space}. Flatten it first "
+                    "(e.g. gymnasium.wrappers.FlattenObservation) or encode images into features."
+                )
+        self.safe_method = parse_method(safe_method).name
+        self.unsafe_method = parse_method(unsafe_method).name
+        self.trajectory: Trajectory = trajectory
+        self.paper_compat = bool(paper_compat)
+        if self.paper_compat and max_trajectory is None:
+            max_trajectory = PAPER_MAX_TRAJECTORY
+        self.max_trajectory = max_trajectory
+        self.metric = "l1" if self.paper_compat else metric
+        backend = "fastdtw" if self.paper_compat else "exact"
+        self.obs_dim, self.act_dim = int(obs_space.shape[0]), int(act_space.shape[0])
+        n_features = self.obs_dim + (self.act_dim if trajectory == "state_action" else 0)
+
+        groups = {}
+        min_reward = np.inf
+        for group, demos in (("safe", safe_demos), ("unsafe", unsafe_demos)):
+            demos = list(demos) if demos is not None else []
+            if not demos:
+                raise ValueError(
+                    f"DefenderWrapper needs at least one {group} demonstration, got none. DEFENDER compares "
+                    "the trajectory with both groups; make them with "
+                    "thesis_lib.defender.collect_demonstrations."
+                )
+            parsed = [as_demonstration(d, f"{group} demonstration {i}") for i, d in enumerate(demos)]
+            for i, d in enumerate(parsed):
+                if d.observations.shape[1] != self.obs_dim or d.actions.shape[1] != self.act_dim:
+                    raise ValueError(
+                        f"{group} demonstration {i} has states of size {d.observations.shape[1]} and actions "
+                        f"of size {d.actions.shape[1]}, but the environment has observations of size "
+                        f"{self.obs_dim} and actions of size {self.act_dim}; the demonstrations must "
+                        f"come from the same task ({getattr(env.spec, 'id', env)})."
+                    )
+                min_reward = min(min_reward, float(np.min(d.rewards)))
+            features = [trajectory_features(d, trajectory) for d in parsed]
+            assert features[0].shape[1] == n_features, (features[0].shape, n_features)
+            groups[group] = _dtw.pack_references(features)
+        self.n_safe, self.n_unsafe = groups["safe"].n_sequences, groups["unsafe"].n_sequences
+        self.filter_reward = float(min_reward if filter_reward is None else filter_reward)
+        kw = dict(metric=self.metric, max_trajectory=self.max_trajectory, backend=backend)
+        self._safe = GroupCost(groups["safe"], self.safe_method, **kw)
+        self._unsafe = GroupCost(groups["unsafe"], self.unsafe_method, **kw)
+        self.dynamics = dynamics if dynamics is not None else DynamicsModel(
+            self.obs_dim, self.act_dim, seed=seed, **dict(dynamics_kwargs or {}))
+        self.horizon = _find_horizon(env)
+        self._step = np.empty(n_features)
+        self._obs: np.ndarray | None = None
+        self._ended = False
+        self._rows: list[dict[str, Any]] = []
+        self._return, self._length = 0.0, 0
+        self.n_filtered_steps = 0
+        self.n_real_steps = 0
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+        """Reset the real environment and clear the trajectory."""
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._safe.reset()
+        self._unsafe.reset()
+        self._obs = np.asarray(obs)
+        self._ended = False
+        self._return, self._length = 0.0, 0
+        info = dict(info)
+        info["filtered"] = False
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Filter, then step the real environment or answer with the dynamics model."""
+        if self._obs is None or self._ended:
+            raise RuntimeError("DefenderWrapper.step called before reset() or after the episode ended; call reset().")
+        action_arr = np.asarray(action, dtype=np.float64).reshape(-1)
+        self._step[: self.obs_dim] = self._obs.reshape(-1)
+        if self.trajectory == "state_action":
+            self._step[self.obs_dim :] = action_arr
+        cost_safe = self._safe.append(self._step)
+        cost_unsafe = self._unsafe.append(self._step)
+        # Algorithm 2: step only if Safe(tau) < Unsafe(tau); the authors' code filtered only on ">".
+        fire = cost_safe > cost_unsafe if self.paper_compat else not cost_safe < cost_unsafe
+        if fire:
+            next_obs = self.dynamics.predict(self._obs, action_arr).astype(self.observation_space.dtype)
+            reward, terminated, truncated = self.filter_reward, True, False
+            info: dict[str, Any] = {"filtered": True, "filter_step": self._length,
+                                    "cost_safe": cost_safe, "cost_unsafe": cost_unsafe}
+            self.n_filtered_steps += 1
+        else:
+            next_obs, reward, terminated, truncated, info = self.env.step(action)
+            self.dynamics.observe(self._obs, action_arr, next_obs)  # real transitions only
+            info = dict(info)
+            info["filtered"] = False
+            self.n_real_steps += 1
+        self._obs = np.asarray(next_obs)
+        self._return += float(reward)
+        self._length += 1
+        if terminated or truncated:
+            self._ended = True
+            self._log(bool(terminated), bool(truncated), fire)
+        return next_obs, reward, terminated, truncated, info
+
+    # ------------------------------------------------------------------ episode log
+    def _log(self, terminated: bool, truncated: bool, filtered: bool) -> None:
+        crashed = terminated and not filtered and (self.horizon is None or self._length < self.horizon)
+        self._rows.append({
+            "episode": len(self._rows), "return": self._return, "length": self._length,
+            "terminated": terminated, "truncated": truncated, "crashed": crashed, "filtered": filtered,
+            "filter_step": self._length - 1 if filtered else None,
+        })
+
+    @property
+    def episodes(self) -> pd.DataFrame:
+        """One row per finished episode, columns :data:`EPISODE_LOG_COLUMNS`.
+
+        ``crashed``: a real termination before the horizon (a filtered episode is never one);
+        ``filter_step``: real steps taken before the filter fired (None if it did not).
+        """
+        return pd.DataFrame(self._rows, columns=list(EPISODE_LOG_COLUMNS))
+
+    def __repr__(self) -> str:
+        return (f"DefenderWrapper({self.env}, safe={self.n_safe}x{self.safe_method}, "
+                f"unsafe={self.n_unsafe}x{self.unsafe_method}, trajectory={self.trajectory!r}, "
+                f"max_trajectory={self.max_trajectory}, paper_compat={self.paper_compat})")

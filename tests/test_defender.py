@@ -1,0 +1,401 @@
+"""DEFENDER (thesis 4.3): methods against a direct computation, the wrapper's contract, errors."""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from thesis_lib.defender import (
+    METHODS,
+    STRATEGIES,
+    DefenderWrapper,
+    Demonstration,
+    DemoSet,
+    DynamicsModel,
+    GroupCost,
+    cost_curves,
+    load_demonstrations,
+    method_cost,
+    parse_method,
+    parse_strategy,
+    save_demonstrations,
+    select_diverse,
+)
+from thesis_lib.defender.ablation import first_fire_steps, rank_strategies, strategy_ablation
+from thesis_lib.dtw import pack_references
+
+
+# --------------------------------------------------------------------------- a direct computation
+def naive_dtw(x: np.ndarray, y: np.ndarray) -> float:
+    """The thesis's recursion with L1 local cost, written out in pure Python."""
+    n, m = len(x), len(y)
+    d = [[float("inf")] * (m + 1) for _ in range(n + 1)]
+    d[0][0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, m + 1):
+            cost = float(np.abs(x[i - 1] - y[j - 1]).sum())
+            d[i][j] = cost + min(d[i - 1][j], d[i - 1][j - 1], d[i][j - 1])
+    return d[n][m]
+
+
+def direct_cost(traj: np.ndarray, demos: list[np.ndarray], name: str) -> float:
+    """A method's cost spelled out from its definition in thesis 4.3.2 (no library windowing)."""
+    agg = {"Min": min, "Max": max, "Mean": lambda v: sum(v) / len(v)}[name[: 4 if name.startswith("Mean") else 3]]
+    rest = name[4:] if name.startswith("Mean") else name[3:]
+    costs = []
+    for demo in demos:
+        if rest == "Full":
+            x, y = traj, demo
+        elif rest == "Same":  # the demo's last L steps, L = the trajectory's length
+            x, y = traj, demo[-len(traj):]
+        else:
+            kind, w = rest.split("W")
+            w = int(w)
+            x = traj[-w:] if kind in ("Traj", "Both") else traj
+            y = demo[-w:] if kind in ("Demo", "Both") else demo
+        costs.append(naive_dtw(x, y))
+    return agg(costs)
+
+
+@pytest.fixture(scope="module")
+def small_groups():
+    rng = np.random.default_rng(3)
+    demos = [rng.integers(-3, 4, size=(n, 2)).astype(float) for n in (4, 13, 8)]
+    traj = rng.integers(-3, 4, size=(12, 2)).astype(float)
+    return traj, demos
+
+
+def test_there_are_24_methods_and_576_strategies():
+    assert len(METHODS) == 24 == len(set(METHODS))
+    assert len(STRATEGIES) == 576 == len({s.name for s in STRATEGIES})
+    assert {parse_method(m).name for m in METHODS} == set(METHODS)
+    assert parse_strategy("MinBoth/MinTrajW10").name == "MinSame/MinTrajW10"  # Table 4.4's name
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_each_method_matches_direct_computation(small_groups, name):
+    traj, demos = small_groups
+    # one-shot and streaming (every prefix) both equal the definition
+    assert method_cost(traj, demos, name) == pytest.approx(direct_cost(traj, demos, name))
+    g = GroupCost(demos, name)
+    for t in range(len(traj)):
+        assert g.append(traj[t]) == pytest.approx(direct_cost(traj[: t + 1], demos, name)), (name, t)
+
+
+@pytest.mark.parametrize("name", ["MeanFull", "MinSame", "MaxDemoW5", "MeanTrajW10", "MinBothW5"])
+def test_capped_trajectory_uses_last_steps(small_groups, name):
+    traj, demos = small_groups
+    g = GroupCost(demos, name, max_trajectory=5)
+    for t in range(len(traj)):
+        got = g.append(traj[t])
+        assert got == pytest.approx(direct_cost(traj[max(0, t - 4): t + 1], demos, name)), (name, t)
+    assert not g.incremental
+
+
+def test_incremental_used_where_possible(small_groups):
+    _, demos = small_groups
+    assert GroupCost(demos, "MeanDemoW5").incremental and GroupCost(demos, "MinFull").incremental
+    assert not GroupCost(demos, "MeanTrajW5").incremental and not GroupCost(demos, "MeanSame").incremental
+
+
+def test_fastdtw_backend_never_undercuts_exact(small_groups):
+    traj, demos = small_groups
+    a = GroupCost(demos, "MeanBothW5", backend="fastdtw", max_trajectory=20)
+    b = GroupCost(demos, "MeanBothW5", max_trajectory=20)
+    for step in traj:
+        assert a.append(step) >= b.append(step) - 1e-12  # fastdtw never undercuts exact DTW
+
+
+def test_cost_curves_match_group_cost(small_groups):
+    traj, demos = small_groups
+    curves = cost_curves(traj, demos)
+    for name in METHODS:
+        g = GroupCost(demos, name)
+        np.testing.assert_allclose(curves[name], [g.append(s) for s in traj])
+
+
+def test_first_fire_steps_agrees_with_the_rule(small_groups):
+    traj, demos = small_groups
+    safe, unsafe = pack_references(demos[:2]), pack_references(demos[2:])
+    fires = first_fire_steps(traj, safe, unsafe)
+    for i, j in [(0, 0), (5, 17), (18, 3), (23, 23)]:
+        gs, gu = GroupCost(safe, METHODS[i]), GroupCost(unsafe, METHODS[j])
+        first = next((t for t, s in enumerate(traj) if not gs.append(s) < gu.append(s)), len(traj))
+        assert fires[i, j] == first
+
+
+# --------------------------------------------------------------------------- errors
+def test_unknown_method_lists_valid_and_close_match():
+    with pytest.raises(ValueError, match=r"Unknown DEFENDER method 'MeanDemoW7'\. Did you mean: 'MeanDemoW5'\? Valid: MinFull"):
+        parse_method("MeanDemoW7")
+    with pytest.raises(ValueError, match="written 'safe/unsafe'"):
+        parse_strategy("MeanDemoW5")
+
+
+class CountingEnv(gym.Env):
+    """1-D walk: the state moves by the action; terminates when |x| > 3. Counts real steps."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
+    action_space = gym.spaces.Box(-1, 1, (1,), np.float32)
+
+    def __init__(self) -> None:
+        self.n_steps = 0
+        self.x = 0.0
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x = 0.0
+        return np.array([self.x, 0.0], np.float32), {}
+
+    def step(self, action):
+        self.n_steps += 1
+        self.x += float(np.asarray(action).reshape(-1)[0])
+        return np.array([self.x, 1.0], np.float32), 1.0, abs(self.x) > 3, False, {}
+
+
+def _demo(xs, terminated):
+    obs = np.stack([np.asarray(xs, float), np.ones(len(xs))], 1)
+    acts = np.diff(obs[:, :1], axis=0)
+    return Demonstration(obs, acts, np.full(len(acts), 1.0 if not terminated else -5.0), terminated, not terminated)
+
+
+@pytest.fixture()
+def walk_demos():
+    safe = [_demo(np.zeros(12), False), _demo(0.1 * np.sin(np.arange(12)), False)]
+    unsafe = [_demo(np.arange(6) * 1.0, True), _demo(-np.arange(6) * 1.0, True)]
+    return safe, unsafe
+
+
+def make_walk(walk_demos, **kw):
+    safe, unsafe = walk_demos
+    return DefenderWrapper(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe,
+                           safe_method=kw.pop("safe_method", "MinDemoW5"),
+                           unsafe_method=kw.pop("unsafe_method", "MinDemoW5"), **kw)
+
+
+def test_wrapper_errors_are_clear(walk_demos):
+    safe, unsafe = walk_demos
+    env = gym.wrappers.TimeLimit(CountingEnv(), 12)
+    with pytest.raises(ValueError, match="at least one unsafe demonstration"):
+        DefenderWrapper(env, safe, [])
+    bad = Demonstration(np.zeros((4, 3)), np.zeros((3, 1)), np.zeros(3), True, False)
+    with pytest.raises(ValueError, match=r"unsafe demonstration 2 has states of size 3 .* observations of size 2"):
+        DefenderWrapper(env, safe, [*unsafe, bad])
+    with pytest.raises(ValueError, match="Did you mean: 'MeanDemoW10'"):
+        DefenderWrapper(env, safe, unsafe, unsafe_method="MeanDemoW01")
+    with pytest.raises(ValueError, match="Unknown trajectory"):
+        DefenderWrapper(env, safe, unsafe, trajectory="actions")
+
+
+def test_wrapper_never_steps_real_env_when_it_filters(walk_demos):
+    env = make_walk(walk_demos)
+    inner = env.unwrapped
+    env.reset(seed=0)
+    n_real = 0
+    for t in range(12):
+        before = inner.n_steps
+        obs, reward, terminated, truncated, info = env.step(np.array([1.0], np.float32))
+        if info["filtered"]:
+            assert inner.n_steps == before, "a filtered step must not touch the real env"
+            assert terminated and not truncated
+            assert reward == pytest.approx(-5.0)  # the lowest single-step reward in the demos
+            assert info["filter_step"] == n_real
+            break
+        n_real += 1
+        assert inner.n_steps == before + 1
+    else:
+        pytest.fail("walking straight into the unsafe region should be filtered")
+    log = env.episodes
+    assert log.filtered.tolist() == [True] and log.crashed.tolist() == [False]
+    assert inner.x <= 3, "the filter stopped the walk before the crash"
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(np.array([0.0], np.float32))
+    env.reset()  # reset clears the trajectory: standing still is safe again
+    _, _, term, trunc, info = env.step(np.array([0.0], np.float32))
+    assert not info["filtered"] and not term
+
+
+def test_crash_labelling(walk_demos):
+    safe, unsafe = walk_demos
+    # a filter that never fires (unsafe cost always higher): real crashes are crashes
+    env = DefenderWrapper(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe, filter_reward=-1.0,
+                          safe_method="MinFull", unsafe_method="MinFull")
+    env._unsafe.append = lambda step: np.inf  # noqa: SLF001 (force "never fire")
+    env.reset(seed=0)
+    for _ in range(5):
+        *_, term, trunc, info = env.step(np.array([1.0], np.float32))
+        if term:
+            break
+    env.reset()
+    for _ in range(12):
+        *_, term, trunc, info = env.step(np.array([0.0], np.float32))
+        if term or trunc:
+            break
+    log = env.episodes
+    assert log.crashed.tolist() == [True, False]
+    assert log.truncated.tolist() == [False, True] and log.filtered.tolist() == [False, False]
+
+
+def test_wrapper_with_random_action_loop(walk_demos):
+    env = make_walk(walk_demos, trajectory="state_action", safe_method="MeanBothW5", unsafe_method="MeanBothW5")
+    env.action_space.seed(0)
+    env.reset(seed=0)
+    for _ in range(300):
+        _, _, term, trunc, _ = env.step(env.action_space.sample())
+        if term or trunc:
+            env.reset()
+    log = env.episodes
+    assert len(log) > 10
+    assert env.n_real_steps + env.n_filtered_steps == 300
+    assert env.unwrapped.n_steps == env.n_real_steps
+    assert not (log.crashed & log.filtered).any()
+
+
+@pytest.mark.parametrize("algo", ["SAC", "TD3"])
+def test_wrapper_trains_with_sb3(walk_demos, algo):
+    from thesis_lib.rl import RLConfig, train
+
+    env = make_walk(walk_demos)
+    cfg = RLConfig(algo=algo, env_id=None, total_timesteps=300, learning_starts=50, net_arch=[16, 16], batch_size=32)
+    res = train(cfg, env=env, progress=False, info_keys=["filtered", "filter_step"])
+    assert len(res.episodes) > 0 and "filtered" in res.episodes.columns
+    assert env.n_real_steps == env.unwrapped.n_steps
+    assert env.dynamics.n_updates == env.n_real_steps
+
+
+def test_paper_compat_settings(walk_demos):
+    env = make_walk(walk_demos, paper_compat=True)
+    assert env.max_trajectory == 20 and env.metric == "l1"
+    env.reset(seed=0)
+    env.step(np.array([0.5], np.float32))
+
+
+# --------------------------------------------------------------------------- dynamics model
+def test_dynamics_model_learns_a_linear_system():
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    a_mat, b_mat = np.array([[0.9, 0.1], [-0.2, 0.8]]), np.array([[0.5], [1.0]])
+    model = DynamicsModel(2, 1, hidden=(64, 64), learning_rate=3e-3, batch_size=64, seed=0)
+    for _ in range(2000):
+        s, a = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 1)
+        model.observe(s, a, a_mat @ s + b_mat @ a)
+    model.fit(500)
+    s, a = rng.uniform(-1, 1, (50, 2)), rng.uniform(-1, 1, (50, 1))
+    pred = np.stack([model.predict(si, ai) for si, ai in zip(s, a)])
+    true = s @ a_mat.T + a @ b_mat.T
+    assert np.abs(pred - true).mean() < 0.03
+    assert model.n_updates == 2500
+
+
+def test_dynamics_model_predicts_identity_before_training():
+    model = DynamicsModel(3, 1)
+    np.testing.assert_allclose(model.predict([1, 2, 3], [0.5]), [1, 2, 3])
+
+
+# --------------------------------------------------------------------------- demonstrations, ablation
+def test_demonstrations_round_trip_and_diverse_subset(tmp_path, walk_demos):
+    safe, unsafe = walk_demos
+    ds = DemoSet(list(safe), list(unsafe), "CountingEnv")
+    back = load_demonstrations(save_demonstrations(ds, tmp_path / "d.npz"))
+    assert back.env_id == "CountingEnv" and len(back.safe) == 2 and len(back.unsafe) == 2
+    for a, b in zip(ds.safe + ds.unsafe, back.safe + back.unsafe):
+        np.testing.assert_array_equal(a.observations, b.observations)
+        assert (a.terminated, a.truncated) == (b.terminated, b.truncated)
+    with pytest.raises(FileNotFoundError, match="collect_demonstrations"):
+        load_demonstrations(tmp_path / "missing.npz")
+    # farthest-point: from the longest, the next pick is the one farthest from it
+    pts = [_demo(np.full(4, v), False) for v in (0.0, 0.1, 5.0, 5.1)]
+    picked = select_diverse(pts, 2)
+    assert sorted(float(d.observations[0, 0]) for d in picked) == [0.0, 5.1]
+
+
+def test_strategy_ablation_scores(walk_demos):
+    safe, unsafe = walk_demos
+    demos = DemoSet(safe, unsafe, "walk")
+    episodes = [_demo(np.arange(6) * 1.0, True), _demo(np.zeros(12), False), _demo(np.linspace(0, -4, 9), True)]
+    scores = strategy_ablation(episodes, demos, horizon=11)
+    assert len(scores) == 576 and scores.n_crashed.iloc[0] == 2
+    assert scores.score.between(0, 1).all()
+    row = scores.set_index("strategy").loc["MinDemoW5/MinDemoW5"]
+    assert row.crashes_stopped == 1.0 and row.safe_episodes_cut == 0.0
+    ranked = rank_strategies(scores.assign(trajectory="state", task="walk"), top=5)
+    assert ranked["rank"].tolist() == [1, 2, 3, 4, 5]
+    assert ranked.score.is_monotonic_decreasing
+
+
+
+@pytest.mark.parametrize(("name", "cap"), [("MeanTrajW5", None), ("MinSame", None), ("MeanFull", 7), ("MaxDemoW10", 30)])
+def test_long_trajectories_past_the_buffer(name, cap):
+    """The trajectory buffer grows (uncapped) or slides (capped) past its first 64 rows correctly."""
+    rng = np.random.default_rng(5)
+    demos = [rng.normal(size=(n, 3)) for n in (15, 40)]
+    traj = rng.normal(size=(150, 3))
+    g = GroupCost(demos, name, max_trajectory=cap)
+    for t in range(len(traj)):
+        got = g.append(traj[t])
+        if t % 13 == 0 or t == len(traj) - 1:
+            assert got == pytest.approx(method_cost(traj[: t + 1], demos, name, max_trajectory=cap)), (name, t)
+
+
+# --------------------------------------------------------------------------- experiments (tables)
+def _fake_runs():
+    from thesis_lib.defender.experiments import RUN_COLUMNS
+
+    rows = []
+    for seed in (0, 1):
+        for algo in ("SAC", "TD3"):
+            rows.append({"task": "Hopper-v5", "algo": algo, "trajectory": "none", "strategy": "none",
+                         "safe_strategy": None, "unsafe_strategy": None, "n_demos": 0, "paper_compat": False,
+                         "seed": seed, "acc_reward": 100.0 + seed, "crash_pct": 60.0, "filtered_pct": 0.0,
+                         "mean_last_100": 50.0, "n_episodes": 10, "wall_time_s": 10.0})
+            rows.append({"task": "Hopper-v5", "algo": algo, "trajectory": "state", "strategy": "MeanDemoW5/MeanDemoW10",
+                         "safe_strategy": "MeanDemoW5", "unsafe_strategy": "MeanDemoW10", "n_demos": 5,
+                         "paper_compat": False, "seed": seed, "acc_reward": 90.0, "crash_pct": 10.0 + seed,
+                         "filtered_pct": 50.0, "mean_last_100": 40.0, "n_episodes": 20, "wall_time_s": 12.0})
+    return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
+
+
+def test_summarise_and_compare_with_thesis():
+    from thesis_lib.defender.experiments import compare_table_4_5, compare_tables, summarise
+
+    summary = summarise(_fake_runs())
+    row = summary[(summary.algo == "SAC") & (summary.strategy != "none")].iloc[0]
+    assert row.time_pct == pytest.approx(120.0) and row.crash_pct_mean == pytest.approx(10.5)
+    assert row.crash_pct_std == pytest.approx(np.std([10, 11], ddof=1)) and row.n_seeds == 2
+    cmp = compare_tables(summary, differs={"scale": "test"})
+    sac = cmp[(cmp.table == "4.3") & (cmp.metric == "% Crash") & (cmp.algorithm == "SAC") & (cmp.env == "Hopper")]
+    got = dict(zip(sac.safe_strategy.fillna("none").astype(str), zip(sac.paper, sac.ours)))
+    assert got["none"] == (64, 60.0) and got["MeanDemoW5"] == (11, 10.5)
+    assert (cmp[cmp.env == "Walker2d"]["what differs"] == "not run").all()
+    t45 = compare_table_4_5(summary[summary.strategy != "none"])
+    assert set(t45[t45.env == "Hopper"].n_demos_ours.dropna()) == {5}
+
+
+def test_defender_config_errors():
+    from thesis_lib.defender.experiments import DefenderConfig
+
+    with pytest.raises(ValueError, match="Did you mean: 'MeanDemoW10'"):
+        DefenderConfig(state_strategies=["MeanDemoW5/MeanDemoW1O"])
+    with pytest.raises(ValueError, match="Unknown algo 'PPO'"):
+        DefenderConfig(algos=["PPO"])
+    with pytest.raises(ValueError, match="train_timesteps must be a positive int"):
+        DefenderConfig(train_timesteps=0)
+
+
+@pytest.mark.slow
+def test_chapter_pipeline_at_tiny_scale():
+    """make_demonstrations -> ablation -> Tables 4.3-4.5 on Hopper with a 20-step horizon."""
+    from thesis_lib.defender import experiments as ex
+
+    cfg = ex.DefenderConfig(max_episode_steps=20, demo_timesteps=600, n_demos=3, n_demos_list=[2, 3],
+                            algos=["SAC"], train_timesteps=200, net_arch=[16, 16], paper_compat_check=False)
+    runs = ex.make_demonstrations(cfg)
+    scores = ex.run_ablation(cfg, runs)
+    assert len(scores) == 2 * 576
+    tables = ex.run_tables_4_3_4_4(cfg, runs, progress=False)
+    assert len(tables.runs) == 3 and set(tables.runs.trajectory) == {"none", "state", "state_action"}
+    t45 = ex.run_table_4_5(cfg, runs, reuse=tables, progress=False)
+    assert sorted(t45.runs.n_demos) == [2, 3]
+    assert (tables.episodes.crashed & tables.episodes.filtered).sum() == 0
