@@ -23,6 +23,7 @@ from thesis_lib.defender.compare import GroupCost
 from thesis_lib.defender.demos import TRAJECTORIES, Trajectory, as_demonstration, trajectory_features
 from thesis_lib.defender.dynamics import DynamicsModel
 from thesis_lib.defender.methods import parse_method
+from thesis_lib.rl.callbacks import find_horizon, is_crash
 
 __all__ = ["EPISODE_LOG_COLUMNS", "PAPER_MAX_TRAJECTORY", "DefenderWrapper"]
 
@@ -33,16 +34,6 @@ EPISODE_LOG_COLUMNS: tuple[str, ...] = (
     "episode", "return", "length", "terminated", "truncated", "crashed", "filtered", "filter_step",
 )  # fmt: skip
 """Columns of :attr:`DefenderWrapper.episodes`."""
-
-
-def _find_horizon(env: gym.Env) -> int | None:
-    inner: Any = env
-    while inner is not None:
-        if isinstance(inner, gym.wrappers.TimeLimit):
-            return inner._max_episode_steps
-        inner = getattr(inner, "env", None)
-    spec = getattr(env, "spec", None)
-    return None if spec is None else spec.max_episode_steps
 
 
 class DefenderWrapper(gym.Wrapper):
@@ -158,7 +149,7 @@ class DefenderWrapper(gym.Wrapper):
         self._unsafe = GroupCost(groups["unsafe"], self.unsafe_method, **kw)
         self.dynamics = dynamics if dynamics is not None else DynamicsModel(
             self.obs_dim, self.act_dim, seed=seed, **dict(dynamics_kwargs or {}))
-        self.horizon = _find_horizon(env)
+        self.horizon = find_horizon(env)
         self._step = np.empty(n_features)
         self._obs: np.ndarray | None = None
         self._ended = False
@@ -214,7 +205,7 @@ class DefenderWrapper(gym.Wrapper):
 
     # ------------------------------------------------------------------ episode log
     def _log(self, terminated: bool, truncated: bool, filtered: bool) -> None:
-        crashed = terminated and not filtered and (self.horizon is None or self._length < self.horizon)
+        crashed = not filtered and is_crash(terminated, self._length, self.horizon)
         self._rows.append({
             "episode": len(self._rows), "return": self._return, "length": self._length,
             "terminated": terminated, "truncated": truncated, "crashed": crashed, "filtered": filtered,
