@@ -116,3 +116,11 @@ def test_failing_chapter_names_the_cell_and_the_notebook(tmp_path):
     assert any(o.get("ename") == "RuntimeError" for c in executed.cells for o in c.get("outputs", []))
     with pytest.raises(ChapterFailed, match="boom 1"):
         run_chapters(["demo"], root=tmp_path)
+
+
+def test_thesis_cli_reports_bad_input_in_one_line():
+    proc = subprocess.run([sys.executable, "-m", "thesis_lib.cli", "data", "generate", "--task", "hoper",
+                           "--tier", "medium"], capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 1
+    assert proc.stderr.startswith("thesis data: Unknown task 'hoper'. Did you mean: 'hopper'?")
+    assert "Traceback" not in proc.stderr

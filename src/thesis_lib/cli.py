@@ -5,11 +5,14 @@
     thesis book -j 2                                    # every chapter, then the HTML book
     thesis data generate --task hopper --tier medium    # see 'thesis data --help'
     thesis bench dtw                                    # benchmarks/bench_dtw.py
+
+Errors in what you typed are reported in one line; THESIS_DEBUG=1 shows the traceback.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -110,7 +113,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args.func(args) or 0)
+    try:
+        return int(args.func(args) or 0)
+    except (ValueError, FileNotFoundError) as err:  # bad input: say what, not a traceback
+        if os.environ.get("THESIS_DEBUG"):
+            raise
+        print(f"thesis {args.command}: {err}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
