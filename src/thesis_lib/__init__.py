@@ -11,7 +11,12 @@ Sub-packages are imported on first use, so ``import thesis_lib`` is cheap and
 from __future__ import annotations
 
 import importlib
+import warnings
 from typing import Any
+
+# Executed notebooks have no ipywidgets (the built book is static HTML), so tqdm.auto falls back
+# to text progress bars; its warning about that says nothing the reader can act on.
+warnings.filterwarnings("ignore", message="IProgress not found")
 
 __version__ = "0.1.0"
 
