@@ -192,6 +192,64 @@ def test_rtg_bookkeeping_and_history_window():
     np.testing.assert_array_equal(model.seen[0]["prev_actions"][0, 0], 0.0)  # a_{-1} = 0
 
 
+def test_one_target_per_episode_in_one_batch():
+    model = _Recorder()
+    res = evaluate(model, lambda: _ScriptedEnv([1.0, 2.0]), n_episodes=3, target_return=[100.0, 50.0, 10.0],
+                   rtg_scale=10.0, state_mean=np.zeros(SD), state_std=np.ones(SD))
+    np.testing.assert_array_equal(res.returns, [3.0, 3.0, 3.0])
+    assert len(model.seen) == 2  # all three targets stepped together
+    np.testing.assert_allclose(model.seen[0]["returns_to_go"][:, 0, 0], [10.0, 5.0, 1.0], rtol=1e-6)
+    np.testing.assert_allclose(model.seen[1]["returns_to_go"][:, -1, 0], [9.9, 4.9, 0.9], rtol=1e-5)
+    # more episodes than environments: each round takes its own slice of the targets
+    model = _Recorder()
+    venv = gym.vector.SyncVectorEnv([lambda: _ScriptedEnv([1.0])] * 2)
+    evaluate(model, venv, n_episodes=3, target_return=[30.0, 20.0, 10.0], rtg_scale=10.0,
+             state_mean=np.zeros(SD), state_std=np.ones(SD))
+    assert [h["returns_to_go"][:, 0, 0].tolist() for h in model.seen] == [[3.0, 2.0], [1.0, 1.0]]
+    with pytest.raises(ValueError, match=r"one per episode \(3,\)"):
+        evaluate(_Recorder(), lambda: _ScriptedEnv([1.0]), n_episodes=3, target_return=[1.0, 2.0])
+
+
+def test_raw_state_datasets_are_evaluated_on_raw_observations():
+    seq = SequenceDataset(_episodes(), K=K, normalize_states=False)
+    assert not seq.normalize_states
+    np.testing.assert_array_equal(seq.normalize(np.ones((2, SD))), np.ones((2, SD)))
+    model = _Recorder()
+    evaluate(model, lambda: _ScriptedEnv([1.0, 1.0, 1.0]), n_episodes=1, target_return=1.0, dataset=seq)
+    assert model.seen[2]["states"][0, -1].tolist() == [2.0, 0.0, 0.0]  # obs as the env gave it
+    model = _Recorder()
+    z = SequenceDataset(_episodes(), K=K)
+    evaluate(model, lambda: _ScriptedEnv([1.0, 1.0, 1.0]), n_episodes=1, target_return=1.0, dataset=z)
+    want = (np.array([2.0, 0.0, 0.0]) - z.state_mean) / z.state_std
+    np.testing.assert_allclose(model.seen[2]["states"][0, -1].numpy(), want, rtol=1e-5)
+
+
+def test_dataset_returns_to_go_use_the_one_implementation():
+    from thesis_lib.data import discounted_cumsum
+    from thesis_lib.seq.tokens import returns_to_go
+
+    r = np.array([1.0, -2.0, 0.5, 3.0])
+    direct = [sum(0.9 ** (k - t) * r[k] for k in range(t, 4)) for t in range(4)]
+    np.testing.assert_allclose(discounted_cumsum(r, 0.9), direct)
+    np.testing.assert_array_equal(discounted_cumsum(r, 0.9), returns_to_go(r, 0.9))
+    eps = _episodes(n=2, T=5)
+    seq = SequenceDataset(eps, K=K, gamma=0.9, rtg_scale=2.0)
+    np.testing.assert_allclose(seq.returns_to_go[5:], returns_to_go(eps[1].rewards, 0.9) / 2.0, rtol=1e-6)
+
+
+def test_batch_prev_subgoals_are_the_shifted_episode_subgoals():
+    seq = _dataset()
+    batch = seq.sample(64)
+    assert batch.prev_subgoals.shape == batch.subgoals.shape
+    for b in range(64):
+        e, st = batch.episode_index[b], batch.start[b]
+        g = seq.subgoals[seq.offsets[e] : seq.offsets[e] + seq.lengths[e]]
+        want = np.vstack([np.zeros((1, SD)), g[:-1]])[st : st + K]  # g_{t-1}, zero at t = 0
+        np.testing.assert_array_equal(batch.prev_subgoals[b, : len(want)], want)
+        assert not batch.prev_subgoals[b, len(want):].any()  # padding
+    assert SequenceDataset(_episodes(), K=K).sample(2).prev_subgoals is None
+
+
 def test_hdt_rolls_its_subgoals_forward():
     model = _Recorder(hdt=True)
     evaluate(model, lambda: _ScriptedEnv([0.0] * 4), n_episodes=1, target_return=0.0,
@@ -291,5 +349,67 @@ def test_experiment_rows_and_both_metrics():
     hdt = curves[curves.method == "HDT"]
     assert row.best_return == pytest.approx(hdt.groupby("seed").return_mean.max().mean())
     assert row.final_return_mean == pytest.approx(hdt[hdt.iteration == 4].return_mean.mean())
+    assert curves.paper_compat.eq(False).all()
+    assert row.best_return_std == pytest.approx(hdt.groupby("seed").return_mean.max().std(ddof=0))
     with pytest.raises(ValueError, match="Unknown method 'HTD'. Did you mean: 'HDT'"):
         HDTExperimentConfig(methods=("HTD",))
+
+
+def test_experiment_config_errors_and_seeds():
+    from thesis_lib.seq.experiments import HDTExperimentConfig
+    from thesis_lib.seq.hdt_chapter import HDTChapterConfig
+
+    assert HDTChapterConfig is HDTExperimentConfig  # one config for the chapter and its experiments
+    cfg = HDTExperimentConfig(datasets=["hopper/medium", "maze2d-umaze/expert"], seeds=[0], extra_seeds=[1, 0],
+                              extra_seed_datasets=["maze2d-umaze/expert"])
+    assert cfg.pairs == [("hopper", "medium"), ("maze2d-umaze", "expert")]
+    assert cfg.seeds_for("hopper/medium") == [0] and cfg.seeds_for("maze2d-umaze/expert") == [0, 1]
+    per_set = cfg.experiment_configs()
+    assert [(c.datasets, c.seeds_for(c.datasets[0])) for c in per_set] == [
+        (["hopper/medium"], [0]), (["maze2d-umaze/expert"], [0, 1])]
+    with pytest.raises(ValueError, match="'task/tier'"):
+        HDTExperimentConfig(datasets=["hopper-medium"])
+    with pytest.raises(ValueError, match="not in datasets"):
+        HDTExperimentConfig(datasets=["hopper/medium"], extra_seed_datasets=["hopper/expert"])
+    with pytest.raises(ValueError, match="to be a list"):
+        HDTExperimentConfig(datasets="hopper/medium")
+    with pytest.raises(ValueError, match="Unknown method 'DTT'"):
+        HDTExperimentConfig(compat_methods=["DTT"])
+
+
+def test_paper_compat_is_measured_beside_the_default():
+    from thesis_lib.seq.experiments import compare_paper_compat
+
+    def rows(compat, offset):
+        return pd.DataFrame([
+            {"method": "HDT", "task": "hopper", "tier": "medium", "seed": s, "target": "none", "iteration": it,
+             "return_mean": offset + 10 * s + it, "score_mean": np.nan, "paper_compat": compat}
+            for s in (0, 1) for it in (1, 2)
+        ] + [{"method": "BC", "task": "hopper", "tier": "medium", "seed": 0, "target": "none", "iteration": 2,
+              "return_mean": 5.0, "score_mean": np.nan, "paper_compat": compat}])  # fmt: skip
+
+    c = compare_paper_compat(rows(False, 0.0), rows(True, 100.0)[lambda d: d.method == "HDT"])
+    assert c.method.unique().tolist() == ["HDT"]  # only what was measured both ways
+    final = c[c.metric == "final checkpoint"].iloc[0]
+    assert final.correct == pytest.approx(7.0) and final.paper_compat == pytest.approx(107.0)
+    assert final.difference == pytest.approx(100.0) and final.correct_std == pytest.approx(5.0)
+
+
+def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
+    from thesis_lib.seq.experiments import HDTExperimentConfig, compare_paper_compat, run_hdt_experiments, run_paper_compat
+
+    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))  # a tiny data set, not the cached smoke one
+    cfg = HDTExperimentConfig(datasets=["maze2d-open/expert"], methods=["DT", "HDT"], seeds=[0], extra_seeds=[1],
+                              extra_seed_datasets=["maze2d-open/expert"], compat_dataset="maze2d-open/expert",
+                              compat_methods=["HDT"], iterations=2, eval_every=1, eval_episodes=2, max_eval_steps=3,
+                              K=4, d_model=8, n_layer=1, batch_size=4, warmup_steps=1, n_transitions=300, progress=False)
+    curves = run_hdt_experiments(cfg)
+    # 2 seeds x (DT: 3 targets, HDT: 1) x 2 evaluations
+    assert len(curves) == 2 * (3 + 1) * 2 and set(curves.seed) == {0, 1} and not curves.paper_compat.any()
+    assert (curves.length_mean == 3).all()  # cut at max_eval_steps
+    again = run_hdt_experiments(cfg)
+    pd.testing.assert_frame_equal(curves, again)  # same seeds, same numbers
+    compat = run_paper_compat(cfg)
+    assert compat.paper_compat.all() and set(compat.method) == {"HDT"}
+    table = compare_paper_compat(curves, compat)
+    assert set(table.method) == {"HDT"} and (table.n_seeds == 2).all() and len(table) == 2  # two metrics

@@ -33,6 +33,9 @@ class SequenceBatch(NamedTuple):
         subgoals: ``(B, K, goal_dim)`` float32 from the sub-goal hook, or ``None``.
         episode_index: ``(B,)`` int64, which episode each window came from.
         start: ``(B,)`` int64, first step of each window in its episode.
+        prev_subgoals: ``(B, K, goal_dim)`` float32, g_{t-1}: the sub-goal of the step before
+            (also before the window's first step), zero at an episode's first step (the HDT
+            high level's start token) and on padding; ``None`` without sub-goals.
     """
 
     states: np.ndarray
@@ -45,6 +48,7 @@ class SequenceBatch(NamedTuple):
     subgoals: np.ndarray | None
     episode_index: np.ndarray
     start: np.ndarray
+    prev_subgoals: np.ndarray | None = None
 
     def to_torch(self, device: str = "cpu") -> dict:
         """The arrays as ``torch`` tensors on ``device`` (``None`` fields left out)."""
@@ -63,18 +67,16 @@ SubgoalFn = Callable[[Episode], np.ndarray]
 def discounted_cumsum(x: np.ndarray, gamma: float = 1.0) -> np.ndarray:
     """Returns-to-go of one episode: ``y_t = Σ_{t'≥t} γ^{t'-t} x_{t'}``.
 
+    The one implementation is :func:`thesis_lib.seq.tokens.returns_to_go` (a reversed cumsum,
+    or ``scipy.signal.lfilter`` for ``γ < 1``; no Python loop); this name is kept for callers
+    of ``thesis_lib.data``.
+
     >>> discounted_cumsum(np.array([1.0, 2.0, 3.0])).tolist()
     [6.0, 5.0, 3.0]
     """
-    x = np.asarray(x, dtype=np.float64)
-    if gamma == 1.0:
-        return np.cumsum(x[::-1])[::-1].copy()
-    out = np.empty_like(x)
-    acc = 0.0
-    for t in range(len(x) - 1, -1, -1):
-        acc = x[t] + gamma * acc
-        out[t] = acc
-    return out
+    from thesis_lib.seq.tokens import returns_to_go  # lazy: thesis_lib.seq imports torch/numba
+
+    return returns_to_go(x, gamma)
 
 
 class SequenceDataset:
@@ -95,6 +97,8 @@ class SequenceDataset:
         seed: seed of this dataset's own ``np.random.Generator``.
 
     Attributes:
+        normalize_states: whether ``states`` (and state-sized sub-goals) are z-scored; the
+            evaluator then z-scores observations the same way.
         state_mean: ``(obs_dim,)`` mean of all states.
         state_std: ``(obs_dim,)`` std of all states plus 1e-6.
         lengths: ``(n_episodes,)`` episode lengths T.
@@ -123,6 +127,7 @@ class SequenceDataset:
         for e in episodes:
             e.validate()
         self.K = K
+        self.normalize_states = bool(normalize_states)
         self.rtg_scale = float(rtg_scale)
         self.gamma = float(gamma)
         self.paper_compat = paper_compat
@@ -152,6 +157,7 @@ class SequenceDataset:
         ).astype(np.float32)
         self.timesteps = np.concatenate([np.arange(t) for t in self.lengths]).astype(np.int64)
         self.subgoals: np.ndarray | None = None
+        self.prev_subgoals: np.ndarray | None = None
         if subgoal_fn is not None:
             g = np.concatenate([np.asarray(subgoal_fn(e), dtype=np.float64) for e in episodes])
             if len(g) != len(self.states):
@@ -163,6 +169,10 @@ class SequenceDataset:
             if normalize_states and g.shape[1] == states.shape[1]:
                 g = (g - self.state_mean) / self.state_std
             self.subgoals = g.astype(np.float32)
+            prev_g = np.zeros_like(self.subgoals)  # g_{t-1}, zero at each episode start
+            prev_g[1:] = self.subgoals[:-1]
+            prev_g[self.offsets] = 0.0
+            self.prev_subgoals = prev_g
 
     def __len__(self) -> int:
         """Number of steps (= possible window starts)."""
@@ -174,7 +184,12 @@ class SequenceDataset:
         return len(self.lengths)
 
     def normalize(self, states: np.ndarray) -> np.ndarray:
-        """Z-score raw states ``(..., obs_dim)`` with this dataset's statistics (evaluation)."""
+        """Z-score raw states ``(..., obs_dim)`` with this dataset's statistics (evaluation).
+
+        Without ``normalize_states`` the states are returned as they are.
+        """
+        if not self.normalize_states:
+            return np.asarray(states)
         return (np.asarray(states) - self.state_mean) / self.state_std
 
     def windows(self, episode_index: np.ndarray, start: np.ndarray) -> SequenceBatch:
@@ -216,6 +231,7 @@ class SequenceDataset:
             subgoals=take(self.subgoals) if self.subgoals is not None else None,
             episode_index=ei,
             start=st,
+            prev_subgoals=take(self.prev_subgoals) if self.prev_subgoals is not None else None,
         )
 
     def sample(self, batch_size: int) -> SequenceBatch:

@@ -114,7 +114,7 @@ def evaluate(
     env: Any,
     n_episodes: int = 10,
     *,
-    target_return: float | None = None,
+    target_return: float | np.ndarray | None = None,
     seed: int = 0,
     dataset: Any = None,
     state_mean: np.ndarray | None = None,
@@ -133,14 +133,19 @@ def evaluate(
     Args:
         model: A model with ``config`` (``state_dim``, ``act_dim``, ``K``) and
             ``act(history) -> SeqOutput`` (:class:`~thesis_lib.seq.models.BC`, ``DecisionTransformer``, ``HDT``).
+            A model with ``recurrent_policy(n_envs)`` (DM, HDM) acts through the policy it
+            returns each round (one recurrent step per action), or windowed when it returns ``None``.
         env: A task name (``"hopper"``; scores are then D4RL-normalised), an env factory, a
             ``gym.make`` env (copied through its spec) or a ``gymnasium.vector.VectorEnv``.
         n_episodes: Episodes to run.
         target_return: Desired return (DT, HDT with RTG): the thesis uses the data set's max
-            return, half of it and 10,000. Required when the model reads returns-to-go.
+            return, half of it and 10,000. Required when the model reads returns-to-go. An
+            array of ``n_episodes`` values gives each episode its own target, so several
+            targets run in one batch of environments (episode ``k`` gets ``target_return[k]``).
         seed: Episode ``k`` resets with seed ``seed + k``.
         dataset: A :class:`~thesis_lib.data.SequenceDataset`: its ``state_mean``,
-            ``state_std`` and ``rtg_scale`` are used unless given explicitly.
+            ``state_std`` and ``rtg_scale`` are used unless given explicitly (none of the
+            statistics when it was built with ``normalize_states=False``).
         state_mean: ``(state_dim,)`` mean for z-scoring observations.
         state_std: ``(state_dim,)`` std for z-scoring observations.
         rtg_scale: Divides the returns-to-go (1000 in the authors' code).
@@ -166,11 +171,22 @@ def evaluate(
             f"{type(model).__name__} reads returns-to-go: pass target_return= (the thesis uses the "
             f"data set's maximum return, half of it, and 10000)."
         )
+    targets = np.zeros(n_episodes) if target_return is None else np.asarray(target_return, dtype=np.float64)
+    if targets.ndim == 0:
+        targets = np.full(n_episodes, float(targets))
+    if targets.shape != (n_episodes,) or not np.all(np.isfinite(targets)):
+        raise ValueError(
+            f"Expect target_return as one finite number or one per episode ({n_episodes},), "
+            f"got shape {targets.shape}{'' if np.all(np.isfinite(targets)) else ' with NaN/inf'}."
+        )
     factory, venv, task_name = _env_factory(env)  # unknown task names fail here, first
     if dataset is not None:
-        state_mean = dataset.state_mean if state_mean is None else state_mean
-        state_std = dataset.state_std if state_std is None else state_std
+        raw = not getattr(dataset, "normalize_states", True)  # trained on raw states
+        state_mean = (None if raw else dataset.state_mean) if state_mean is None else state_mean
+        state_std = (None if raw else dataset.state_std) if state_std is None else state_std
         rtg_scale = dataset.rtg_scale if rtg_scale is None else rtg_scale
+        if raw and state_mean is None:
+            state_mean, state_std = np.zeros(cfg.state_dim), np.ones(cfg.state_dim)
     rtg_scale = 1000.0 if rtg_scale is None else float(rtg_scale)
     if state_mean is None:
         warnings.warn("evaluate got no state statistics: observations are fed raw. Pass dataset=seq.", stacklevel=2)
@@ -204,7 +220,10 @@ def evaluate(
     try:
         done_so_far = 0
         while done_so_far < n_episodes:
-            r, l = _run_round(model, venv, seed + done_so_far, max_steps, mean, std, target_return or 0.0,
+            n_env = venv.num_envs
+            round_targets = targets[done_so_far : done_so_far + n_env]
+            round_targets = np.pad(round_targets, (0, n_env - len(round_targets)), mode="edge")
+            r, l = _run_round(model, venv, seed + done_so_far, max_steps, mean, std, round_targets,
                               rtg_scale, device, progress)
             take = min(len(r), n_episodes - done_so_far)
             returns.append(r[:take]), lengths.append(l[:take])
@@ -229,6 +248,10 @@ def _run_round(model, venv, seed, H, mean, std, target_return, rtg_scale, device
     N, K, sd, ad = venv.num_envs, cfg.K, cfg.state_dim, cfg.act_dim
     obs, _ = venv.reset(seed=seed)
     obs = _observation(obs)
+    # Models that can act recurrently (DM, HDM) give a per-round policy carrying each episode's
+    # state; None (or no such method) = windowed acting with model.act(history).
+    make_policy = getattr(model, "recurrent_policy", None)
+    policy = make_policy(N) if callable(make_policy) else None
     if obs.shape[1] != sd:
         raise ValueError(
             f"{type(model).__name__} expects states of size state_dim={sd}, the environment gives "
@@ -240,7 +263,7 @@ def _run_round(model, venv, seed, H, mean, std, target_return, rtg_scale, device
     actions = torch.zeros(N, H + 1, ad, **f32)  # actions[:, t + 1] = a_t; actions[:, 0] = a_{-1} = 0
     subgoals = torch.zeros(N, H + 1, sd, **f32)  # subgoals[:, t + 1] = g_t; subgoals[:, 0] = g_{-1} = 0
     timesteps = torch.arange(H, device=device)[None, :].expand(N, H)  # (N, H)
-    rtg = np.full(N, target_return / rtg_scale)
+    rtg = np.asarray(target_return, dtype=np.float64) / rtg_scale  # (N,) one target per env
     ret, length = np.zeros(N), np.zeros(N, dtype=np.int64)
     done = np.zeros(N, dtype=bool)
     for t in tqdm(range(H), disable=not progress, desc="evaluate", leave=False):
@@ -257,7 +280,7 @@ def _run_round(model, venv, seed, H, mean, std, target_return, rtg_scale, device
             "subgoals": subgoals[live, lo + 1 : t + 2],
             "prev_subgoals": subgoals[live, lo : t + 1],
         }
-        out = model.act(history)
+        out = model.act(history) if policy is None else policy.act(history, live)
         actions[live, t + 1] = out.actions.to(**f32)
         if out.subgoals is not None:
             subgoals[live, t + 1] = out.subgoals.to(**f32)  # roll the sub-goals forward

@@ -1,9 +1,8 @@
 """Helpers of the HDT chapter notebook (``notebooks/04_hdt.ipynb``, thesis 5.2).
 
-* :class:`HDTChapterConfig`: the notebook's parameters; ``datasets`` lists ``task/tier`` pairs
-  (not a task x tier product: a Maze2D task has other tiers than a locomotion task).
-* :func:`run_chapter_experiments`: :func:`thesis_lib.seq.experiments.run_hdt_experiments` on
-  every data set of the config, concatenated.
+* :data:`HDTChapterConfig`: the notebook's parameters, an alias of
+  :class:`thesis_lib.seq.experiments.HDTExperimentConfig` (one config for the chapter and
+  its experiments); :func:`run_chapter_experiments` = ``run_hdt_experiments``.
 * :func:`thesis_table_5_1`, :func:`thesis_table_5_2`, :func:`thesis_table_5_3`: our
   :func:`~thesis_lib.seq.experiments.summarize` output labelled as the thesis labels its tables
   and put beside its numbers with :func:`thesis_lib.book.compare_with_paper`, for both metrics.
@@ -14,8 +13,6 @@ Used in: HDT chapter (Tables 5.1-5.3, Figures of 5.2.2).
 """
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
@@ -25,7 +22,7 @@ from thesis_lib.seq.experiments import METHODS, HDTExperimentConfig, run_hdt_exp
 from thesis_lib.seq.subgoals import select_subgoal_indices
 
 __all__ = [
-    "HDTChapterConfig", "METRICS", "plot_maze_subgoals", "plot_subgoal_index", "plot_training_curves",
+    "HDTChapterConfig", "METRICS", "METRIC_STD", "plot_maze_subgoals", "plot_subgoal_index", "plot_training_curves",
     "run_chapter_experiments", "thesis_labels", "thesis_table_5_1", "thesis_table_5_2",
     "thesis_table_5_3", "win_counts",
 ]
@@ -35,6 +32,8 @@ METRICS: dict[str, str] = {
     "best during training (thesis)": "best_return",
     "final checkpoint": "final_return_mean",
 }
+#: The std over seeds of each metric's column.
+METRIC_STD: dict[str, str] = {"best_return": "best_return_std", "final_return_mean": "final_return_std"}
 
 # Task spellings of each thesis table (reference/README.md keeps them as printed).
 _TASK_NAMES = {
@@ -44,57 +43,13 @@ _TASK_NAMES = {
 _TIER_NAMES = {"medium-replay": "replay"}
 
 
-@dataclass
-class HDTChapterConfig:
-    """Parameters of the HDT chapter; defaults are the smoke scale (see ``params/04_hdt.*.yml``).
-
-    The training fields mean what they mean in :class:`HDTExperimentConfig`.
-    """
-
-    seed: int = 0
-    """Seed of the figures' episode choice (runs use ``seeds``)."""
-    datasets: list[str] = field(default_factory=lambda: ["hopper/medium", "maze2d-umaze/expert"])
-    """``task/tier`` pairs (``thesis_lib.data.TASKS``)."""
-    methods: list[str] = field(default_factory=lambda: list(METHODS))
-    seeds: list[int] = field(default_factory=lambda: [0])
-    iterations: int = 100_000
-    batch_size: int = 64
-    K: int = 20
-    d_model: int = 128
-    n_layer: int = 3
-    n_head: int = 1
-    dropout: float = 0.1
-    lr: float = 1e-4
-    warmup_steps: int = 10_000
-    eval_every: int = 1000
-    eval_episodes: int = 100
-    max_eval_steps: int | None = None
-    profile: str = "smoke"
-    n_transitions: int | None = None
-    paper_compat: bool = False
-    device: str = "cpu"
-    progress: bool = True
-
-    def __post_init__(self) -> None:
-        for d in self.datasets:
-            if d.count("/") != 1:
-                raise ValueError(f"Expect datasets as 'task/tier', e.g. 'hopper/medium'; got '{d}'.")
-        self.experiment_configs()  # validates methods, iterations ...
-
-    def experiment_configs(self) -> list[HDTExperimentConfig]:
-        """One :class:`HDTExperimentConfig` per data set."""
-        shared = {f.name: getattr(self, f.name) for f in dataclasses.fields(HDTExperimentConfig)
-                  if f.name not in ("tasks", "tiers") and hasattr(self, f.name)}
-        out = []
-        for d in self.datasets:
-            task, tier = d.split("/")
-            out.append(HDTExperimentConfig(tasks=(task,), tiers=(tier,), **shared))
-        return out
+HDTChapterConfig = HDTExperimentConfig
+"""The chapter's parameters: the one config of :mod:`thesis_lib.seq.experiments` (former name)."""
 
 
-def run_chapter_experiments(cfg: HDTChapterConfig) -> pd.DataFrame:
-    """Every data set x seed x method of ``cfg``: the evaluation rows of ``run_method``."""
-    return pd.concat([run_hdt_experiments(c) for c in cfg.experiment_configs()], ignore_index=True)
+def run_chapter_experiments(cfg: HDTExperimentConfig) -> pd.DataFrame:
+    """Every data set x seed x method of ``cfg``: :func:`~thesis_lib.seq.experiments.run_hdt_experiments`."""
+    return run_hdt_experiments(cfg)
 
 
 def thesis_labels(task: str, tier: str, table: str) -> tuple[str, str]:
@@ -137,6 +92,11 @@ def _compare(table: str, ours: pd.DataFrame, on: list[str], paper_value: str,
     for metric, col in METRICS.items():
         c = compare_with_paper(table, ours.assign(ours=ours[col]), on=on, value="ours",
                                paper_value=paper_value, differs=differs)
+        extra = [x for x in (METRIC_STD.get(col), "n_seeds") if x in ours]
+        if extra:  # ours: mean over seeds; beside it the std over seeds and their number
+            spread = ours[on + extra].rename(columns={METRIC_STD.get(col): "ours_std"})
+            spread[on] = spread[on].astype(str)  # compare_with_paper's keys are text
+            c = c.merge(spread.drop_duplicates(on), on=on, how="left")
         frames.append(c.assign(metric=metric))
     return pd.concat(frames, ignore_index=True)
 
@@ -165,7 +125,9 @@ def _by_column(table: str, rows: pd.DataFrame, differs: Any) -> pd.DataFrame:
         c = _compare(table, g, ["task", "dataset", "desired_return"], col, differs)
         frames.append(c.assign(method=col))
     out = pd.concat(frames, ignore_index=True)
-    return out[["metric", "method", "task", "dataset", "desired_return", "paper", "ours", "difference", "what differs"]]
+    cols = ["metric", "method", "task", "dataset", "desired_return", "paper", "ours", "ours_std", "n_seeds",
+            "difference", "what differs"]
+    return out.reindex(columns=cols)
 
 
 def thesis_table_5_1(summary: pd.DataFrame, differs: Any = None) -> pd.DataFrame:
@@ -208,7 +170,8 @@ def thesis_table_5_3(summary: pd.DataFrame, data_avg: Mapping[tuple[str, str], f
                      ["task", "dataset"], "data_avg", differs)
         frames.append(c[c.metric == metric].assign(method="data_avg"))
     out = pd.concat(frames, ignore_index=True).drop_duplicates(["metric", "method", "task", "dataset"])
-    return out[["metric", "method", "task", "dataset", "paper", "ours", "difference", "what differs"]]
+    cols = ["metric", "method", "task", "dataset", "paper", "ours", "ours_std", "n_seeds", "difference", "what differs"]
+    return out.reindex(columns=cols)
 
 
 def win_counts(table_5_3: pd.DataFrame, metric: str = "best during training (thesis)") -> pd.DataFrame:
@@ -281,26 +244,31 @@ def plot_subgoal_index(episode: Any, ax: Any = None, label: str | None = None) -
     return ax
 
 
-def plot_training_curves(curves: pd.DataFrame) -> Any:
+def plot_training_curves(curves: pd.DataFrame, ncols: int = 4) -> Any:
     """Evaluation return vs iteration per method (mean over seeds), one panel per data set.
 
-    RTG methods are drawn at their ``max`` target.
+    RTG methods are drawn at their ``max`` target; panels fill ``ncols`` columns.
     """
     import matplotlib.pyplot as plt
 
     c = curves[curves["target"].isin(["none", "max"])]
     sets = list(dict.fromkeys(zip(c["task"], c["tier"])))
-    fig, axes = plt.subplots(1, len(sets), figsize=(5.5 * len(sets), 4), squeeze=False)
-    for ax, (task, tier) in zip(axes[0], sets):
+    ncols = max(1, min(ncols, len(sets)))
+    nrows = -(-len(sets) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.5 * ncols, 3.4 * nrows), squeeze=False)
+    for ax in axes.flat[len(sets):]:
+        ax.set_visible(False)
+    for ax, (task, tier) in zip(axes.flat, sets):
         g = c[(c.task == task) & (c.tier == tier)]
         for method, gm in g.groupby("method", sort=False):
             m = gm.groupby("iteration")["return_mean"].agg(["mean", "std"]).reset_index()
             ax.plot(m["iteration"], m["mean"], marker="o", label=method)
             if gm["seed"].nunique() > 1:
                 ax.fill_between(m["iteration"], m["mean"] - m["std"], m["mean"] + m["std"], alpha=0.15)
-        ax.set_title(f"{task}/{tier}")
+        ax.set_title(f"{task}/{tier}", fontsize=10)
         ax.set_xlabel("iteration")
         ax.set_ylabel("evaluation return")
-        ax.legend(fontsize=8)
-    fig.tight_layout()
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, bbox_to_anchor=(0.5, -0.02))
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
     return fig

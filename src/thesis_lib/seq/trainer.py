@@ -89,35 +89,24 @@ def _warmup(step: int, warmup_steps: int) -> float:
 
 
 def batch_to_torch(dataset: Any, batch: Any, device: str | torch.device = "cpu") -> dict[str, torch.Tensor]:
-    """A :class:`~thesis_lib.data.SequenceBatch` as model inputs, with HDT's ``prev_subgoals``.
+    """A :class:`~thesis_lib.data.SequenceBatch` as model inputs (tensors on ``device``).
 
-    ``prev_subgoals[b, k]`` is the sub-goal of the step before ``k``: inside the window the
-    previous entry, at the window's first step the data set's sub-goal of the step before the
-    window, and zero at an episode's first step (the HDT high level's start token ``g_{-1}``).
+    The batch carries everything the models read, HDT's ``prev_subgoals`` included
+    (``g_{t-1}``: the previous step's sub-goal, also across the window's start, zero at an
+    episode's first step and on padding; see :class:`~thesis_lib.data.SequenceBatch`), so this
+    is ``batch.to_torch(device)``; ``dataset`` is kept for callers of the earlier signature.
 
-    Used in: HDT chapter (thesis 5.2).
+    Used in: HDT chapter (thesis 5.2); Decision Mamba chapter.
 
     Args:
-        dataset: The :class:`~thesis_lib.data.SequenceDataset` the batch came from.
+        dataset: The :class:`~thesis_lib.data.SequenceDataset` the batch came from (unused).
         batch: A batch from ``dataset.sample`` / ``dataset.windows``.
         device: Device of the tensors.
 
     Returns:
-        ``batch.to_torch(device)`` plus ``prev_subgoals`` ``(B, K, goal_dim)`` when the data
-        set has sub-goals.
+        ``{name: tensor}`` for every field of the batch that is not ``None``.
     """
-    out = batch.to_torch(device)
-    if batch.subgoals is not None:
-        g = batch.subgoals  # (B, K, goal_dim)
-        prev = np.zeros_like(g)
-        prev[:, 1:] = g[:, :-1]
-        start = np.asarray(batch.start)
-        inside = start > 0  # the window does not start the episode: take g_{start-1}
-        flat = dataset.offsets[np.asarray(batch.episode_index)[inside]] + start[inside] - 1
-        prev[inside, 0] = dataset.subgoals[flat]
-        prev[~np.asarray(batch.mask)] = 0.0
-        out["prev_subgoals"] = torch.from_numpy(prev).to(device)
-    return out
+    return batch.to_torch(device)
 
 
 def _mean_return(result: Any) -> float:
