@@ -1,7 +1,13 @@
 """Shared test settings."""
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# MuJoCo picks its OpenGL backend when it is first imported; offscreen rendering (CLfD cameras,
+# UR3 frames) needs EGL on a headless machine, whichever test module imports mujoco first.
+os.environ.setdefault("MUJOCO_GL", "egl")
 
 
 @pytest.fixture(autouse=True, scope="session")
