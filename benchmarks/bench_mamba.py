@@ -10,6 +10,10 @@ The thesis's DM size (6 layers, d_model 128, K 20 timesteps -> 60 tokens, batch 
          window (what the original DM code does) for each model, against thesis_lib's
          recurrent ``Mamba.step_tokens`` fed the 3 tokens (R, s, a) of one new timestep
          (fused kernel; the unfused torch-op path for reference).
+  models per-action inference of whole models (batch 1, no grad), as the evaluator calls them:
+         DT (``DecisionTransformer.act`` on the K-step history, 6 GPT blocks), DM with RTG
+         (gated MLP) re-running the window (``DecisionMamba.act``, the authors' way) and the
+         DM's ``RecurrentPolicy.act`` (embed 3 new tokens, one fused step, action head).
 
 Methods take turns repeat by repeat, so background load hits them alike; medians are reported,
 and ratios are taken between medians of one run. Numba's compile (cached on disk after the
@@ -21,6 +25,8 @@ first run) happens in the warm-up, outside the timings.
 Measured 2026-11-22 on the shared 2-core CI machine (load 3-4), one thread, 15 repeats:
 train ours 184 ms, mambapy 774 ms (4.2x), GPT x6 141 ms (ours 1.3x); per action: ours window
 12.1 ms, recurrent 2.0 ms (6.1x), GPT window 6.9 ms (3.5x the recurrent step).
+Whole models, 2026-11-23 (load 8-9, 7 repeats): DT act 17.3 ms, DM w/ RTG window 39.3 ms,
+DM recurrent policy step 6.5 ms (6.0x the DM window, 2.7x faster than the DT).
 """
 from __future__ import annotations
 
@@ -34,6 +40,7 @@ import torch
 from torch import nn
 
 from thesis_lib.seq import Block, GPTBlockConfig
+from thesis_lib.seq import DecisionMamba, DecisionTransformer, DMConfig, DTConfig
 from thesis_lib.seq.mamba import Mamba, MambaConfig
 
 try:
@@ -141,10 +148,28 @@ def main() -> None:
     act["thesis_lib Mamba: recurrent step, 3 tokens"] = lambda: ours.step_tokens(new_tokens, state0)[0][:, -1]
     act["  same, unfused torch ops"] = lambda: ours.step_tokens(new_tokens, state0, fused=False)[0][:, -1]
 
+    # Whole models, as thesis_lib.seq.evaluate calls them (Hopper sizes: state 11, action 3).
+    sd, ad = 11, 3
+    size = dict(state_dim=sd, act_dim=ad, K=args.K, d_model=d, n_layer=n_layers)
+    dt = DecisionTransformer(DTConfig(**size)).eval()
+    dm = DecisionMamba(DMConfig(use_rtg=True, **size)).eval()
+    history = {"states": torch.randn(1, args.K, sd), "actions": torch.rand(1, args.K, ad) * 2 - 1,
+               "returns_to_go": torch.randn(1, args.K, 1), "timesteps": torch.arange(args.K)[None]}
+    history["prev_actions"] = torch.cat([torch.zeros(1, 1, ad), history["actions"][:, :-1]], 1)
+    policy = dm.recurrent_policy(1)
+    with torch.no_grad():
+        policy.act(history)  # the first step (no action token yet); later calls feed 3 tokens
+    model_act: dict[str, Callable[[], object]] = {
+        f"DT ({n_layers} GPT blocks): act on {args.K}-step window": lambda: dt.act(history),
+        f"DM w/ RTG (gated MLP): act on {args.K}-step window": lambda: dm.act(history),
+        "DM w/ RTG (gated MLP): recurrent policy step": lambda: policy.act(history),
+    }
+
     with torch.no_grad():
         for m in eval_models.values():
             m.eval()
         act_t = timed(act, args.repeats, {k: args.act_loops for k in act})
+        model_t = timed(model_act, args.repeats, {k: args.act_loops for k in model_act})
     for m in (ours, ours_torch, ours_mlp, gpt) + ((mp,) if MambaPy is not None else ()):
         m.train()
     train_t = timed(train, args.repeats, {})
@@ -158,6 +183,9 @@ def main() -> None:
         print(f"  {k:<46}{v * 1e3:>10.1f}")
     print(f"\n{'per-action inference (batch 1)':<48}{'ms':>10}")
     for k, v in act_t.items():
+        print(f"  {k:<46}{v * 1e3:>10.2f}")
+    print(f"\n{'per-action inference, whole models (batch 1)':<48}{'ms':>10}")
+    for k, v in model_t.items():
         print(f"  {k:<46}{v * 1e3:>10.2f}")
 
     ours_train = train_t["thesis_lib Mamba (numba scan)"]
@@ -175,6 +203,9 @@ def main() -> None:
     print(f"  act: ours window / ours recurrent           {r:6.2f}x  (>= 5)  {'met' if r >= 5 else 'NOT met'}")
     r = act_t[f"GPT Block x{n_layers}: re-run {L}-token window"] / rec
     print(f"  act: transformer window / ours recurrent    {r:6.2f}x  (> 1)   {'met' if r > 1 else 'NOT met'}")
+    dt_t, dm_w, dm_r = model_t.values()
+    print(f"  models: DM window / DM recurrent            {dm_w / dm_r:6.2f}x  (>= 5)  {'met' if dm_w / dm_r >= 5 else 'NOT met'}")
+    print(f"  models: DT act / DM recurrent act           {dt_t / dm_r:6.2f}x  (> 1)   {'met' if dt_t > dm_r else 'NOT met'}")
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@
   sub-goal selection (5.2.2).
 * :mod:`thesis_lib.seq.mamba` - a Mamba-1 block with a fast CPU selective scan (numba, hand-written
   backward) and an O(1)-per-token recurrent step (Sec. 2.3, 5.3); ``mamba_ssm`` on CUDA.
+* :mod:`thesis_lib.seq.dm` - the Decision Mamba and the Hierarchical Decision Mamba (Sec. 5.3),
+  acting recurrently; :mod:`thesis_lib.seq.dm_experiments` - Tables 5.5-5.6, Figs 5.3-5.6.
 * :mod:`thesis_lib.seq.trainer` and :mod:`thesis_lib.seq.evaluate` - the one trainer and the
   one evaluator of every sequence model; :mod:`thesis_lib.seq.experiments` - Tables 5.1-5.3.
 
@@ -33,6 +35,7 @@ from thesis_lib.seq.attention import (
     padding_mask,
     sinusoidal_positional_encoding,
 )
+from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig, RecurrentPolicy, TokenMamba
 from thesis_lib.seq.evaluate import EvalResult, evaluate, target_returns
 from thesis_lib.seq.experiments import HDTExperimentConfig, run_hdt_experiments, run_method, summarize
 from thesis_lib.seq.mamba import (
@@ -82,6 +85,12 @@ from thesis_lib.seq.tokens import (
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 __all__ = [
+    "DMConfig",
+    "DecisionMamba",
+    "HDM",
+    "HDMConfig",
+    "RecurrentPolicy",
+    "TokenMamba",
     "ACTIVATIONS",
     "BC",
     "HDT",

@@ -1,0 +1,743 @@
+"""The Decision Mamba chapter's experiments (thesis 5.3) as functions returning tidy DataFrames.
+
+* :func:`run_dm_method` trains one method (``DT``, ``HDT``, ``DM-RTG``, ``DM``, ``HDM``) of one
+  architecture on one data set with one seed, evaluating every ``eval_every`` iterations
+  (RTG methods at the data set's max return, half of it and 10,000); one row per evaluation.
+* :func:`run_table_5_5` loops over data sets x seeds x methods at the chapter's architecture;
+  :func:`run_sweeps` over the architectures of Figs 5.3, 5.5, 5.6 (reusing the Table 5.5 runs
+  where the architecture is the same).
+* :func:`summarize_dm` gives, per method x data set x target x architecture x evaluation mode,
+  the thesis's metric (best evaluation average during training, mean +- std over seeds) and
+  the final checkpoint's.
+* :func:`thesis_table_5_5`, :func:`win_counts_5_5`: Table 5.5 beside the thesis's, and the
+  "wins out of N settings" the thesis quotes (5.3.3).
+* :func:`time_methods`, :func:`thesis_table_5_6`: Table 5.6 (train ms/iteration, inference
+  ms/step) plus the recurrent-step inference the thesis did not have.
+* :func:`plot_sweep` (Figs 5.3, 5.5, 5.6) and :func:`plot_methods` (Fig 5.4).
+
+Used in: Decision Mamba chapter (thesis 5.3; Tables 5.5, 5.6; Figs 5.3-5.6).
+"""
+from __future__ import annotations
+
+import difflib
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, NamedTuple
+
+import numpy as np
+import pandas as pd
+import torch
+from tqdm.auto import tqdm
+
+from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig
+from thesis_lib.seq.evaluate import EvalResult, evaluate, target_returns
+from thesis_lib.seq.models import HDT, DecisionTransformer, DTConfig, HDTConfig
+from thesis_lib.seq.subgoals import subgoal_fn
+from thesis_lib.seq.trainer import TrainConfig, Trainer
+
+__all__ = [
+    "Arch",
+    "DMChapterConfig",
+    "DM_METHODS",
+    "THESIS_METHOD",
+    "build_dm_model",
+    "parse_arch",
+    "plot_methods",
+    "plot_sweep",
+    "run_dm_method",
+    "run_sweeps",
+    "run_table_5_5",
+    "summarize_dm",
+    "thesis_labels_5_5",
+    "thesis_table_5_5",
+    "thesis_table_5_6",
+    "time_methods",
+    "win_counts_5_5",
+]
+
+DM_METHODS: tuple[str, ...] = ("DT", "HDT", "DM-RTG", "DM", "HDM")
+"""Our method names: DT (with RTG), HDT, DM with RTG, DM without RTG, HDM."""
+THESIS_METHOD: dict[str, str] = {"DT": "DT", "HDT": "HDT", "DM-RTG": "DM_with_R", "DM": "DM_without_R", "HDM": "HDM"}
+"""Our names -> the reference tables' (``table_5_5.csv``, ``table_5_6.csv``)."""
+RTG_METHODS = ("DT", "DM-RTG")
+HIERARCHICAL = ("HDT", "HDM")
+MAMBA_METHODS = ("DM-RTG", "DM", "HDM")
+TARGETS = ("half", "max", "10k")
+#: The two metrics: the thesis's (best evaluation during training) and the final checkpoint's.
+METRICS: dict[str, str] = {"best during training (thesis)": "best", "final checkpoint": "final"}
+
+
+class Arch(NamedTuple):
+    """An architecture of the sweeps: layers (per level), embedding size, context length."""
+
+    n_layer: int
+    d_model: int
+    K: int
+
+    @property
+    def label(self) -> str:
+        """``"L6 D128 K20"`` as the thesis's figure legends."""
+        return f"L{self.n_layer} D{self.d_model} K{self.K}"
+
+
+def parse_arch(text: str | Arch) -> Arch:
+    """``"6/128/20"`` (layers/d_model/K) -> :class:`Arch`.
+
+    Example:
+        >>> parse_arch("6/128/20")
+        Arch(n_layer=6, d_model=128, K=20)
+        >>> parse_arch("6-128")
+        Traceback (most recent call last):
+        ...
+        ValueError: Expect an architecture as 'layers/d_model/K', e.g. '6/128/20'; got '6-128'.
+    """
+    if isinstance(text, Arch):
+        return text
+    parts = str(text).split("/")
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) != 3 or min(values) < 1:
+        raise ValueError(f"Expect an architecture as 'layers/d_model/K', e.g. '6/128/20'; got '{text}'.")
+    return Arch(*values)
+
+
+@dataclass
+class DMChapterConfig:
+    """Parameters of the Decision Mamba chapter; defaults are the smoke scale.
+
+    ``params/05_decision_mamba.smoke.yml`` equals these defaults; ``.full.yml`` holds the
+    thesis's scale (5.3.3: batch 16, lr 1e-4, up to 1M iterations, evaluation every 1,000 on
+    100 episodes, 4 seeds, 6 layers, d 128, K 20).
+
+    Used in: Decision Mamba chapter.
+    """
+
+    seed: int = 0
+    """Seed of the chapter (figures); runs use ``seeds``."""
+    datasets: list[str] = field(default_factory=lambda: ["hopper/medium", "maze2d-umaze/expert"])
+    """``task/tier`` pairs of Table 5.5 and Fig 5.4."""
+    methods: list[str] = field(default_factory=lambda: list(DM_METHODS))
+    """Subset of :data:`DM_METHODS`."""
+    seeds: list[int] = field(default_factory=lambda: [0])
+    """One run per seed (4 in the thesis)."""
+    iterations: int = 100
+    """Training iterations per run (the thesis: up to 1M)."""
+    batch_size: int = 16
+    """Windows per batch (16 in the thesis)."""
+    arch: str = "2/32/20"
+    """Architecture of Table 5.5 and Fig 5.4, ``layers/d_model/K`` (the thesis: ``6/128/20``)."""
+    n_head: int = 1
+    """Attention heads of DT/HDT."""
+    dropout: float = 0.1
+    """Dropout of DT/HDT (the DM/HDM have none, as the authors' code)."""
+    gated_mlp: bool = True
+    """Gated MLP in each Mamba block (the authors' later DM/HDM code)."""
+    lr: float = 0.001
+    """Peak AdamW learning rate (1e-4 in the thesis)."""
+    warmup_steps: int = 30
+    """Linear warm-up steps (10k in the authors' code)."""
+    eval_every: int = 50
+    """Evaluate every this many iterations and at the end (1000 in the thesis)."""
+    eval_episodes: int = 4
+    """Episodes per evaluation (100 in the thesis)."""
+    max_eval_steps: int | None = 100
+    """Cap on evaluation episode length (``None``: the task's time limit)."""
+    eval_mode: str = "recurrent"
+    """How the DM/HDM act: ``recurrent`` (one O(1) step per action) or ``window`` (re-run the
+    last K steps, as the authors' code: ``paper_compat``)."""
+    compare_eval_modes: bool = True
+    """Also evaluate each final DM/HDM in the other mode (the difference is a table)."""
+    sweep_datasets: list[str] = field(default_factory=lambda: ["hopper/medium"])
+    """Data sets of the architecture sweeps (Figs 5.3, 5.5, 5.6)."""
+    sweep_methods: list[str] = field(default_factory=lambda: ["HDM", "DM", "DM-RTG"])
+    """Methods swept (Fig 5.3: HDM, 5.5: DM, 5.6: DM with RTG)."""
+    sweep_archs: list[str] = field(default_factory=lambda: ["1/32/10", "2/32/20", "2/64/20"])
+    """Architectures swept, ``layers/d_model/K`` (the thesis: layers 2-12, d 128/256, K 10/20/60)."""
+    timing_datasets: list[str] = field(default_factory=lambda: ["maze2d-umaze/expert"])
+    """Data sets (environments) of Table 5.6."""
+    timing_arch: str = "6/128/20"
+    """Architecture timed in Table 5.6 (the thesis's 6/128/20)."""
+    timing_batch_size: int = 16
+    """Batch size of the timed training iterations (16 in the thesis)."""
+    timing_train_iters: int = 2
+    """Timed training iterations per method (1000 in the thesis), after one untimed."""
+    timing_infer_steps: int = 40
+    """Environment steps per timed inference episode."""
+    timing_infer_episodes: int = 2
+    """Timed inference episodes per method and mode (after one untimed)."""
+    profile: str = "smoke"
+    """Data-set size profile of ``thesis_lib.data.get_dataset``."""
+    n_transitions: int | None = None
+    """Data-set size override."""
+    paper_compat: bool = False
+    """The authors' behaviours (a_{t-1} tokens, left-padded time-steps, last sub-goal = state 0,
+    HDM Tanh sub-goal head); with ``eval_mode`` ``window`` that is the authors' code."""
+    device: str = "cpu"
+    """Training device (``cpu``, ``cuda``, ``auto``)."""
+    progress: bool = False
+    """Progress bars of the runs."""
+
+    def __post_init__(self) -> None:
+        for name in ("methods", "sweep_methods"):
+            for m in getattr(self, name):
+                if m not in DM_METHODS:
+                    close = difflib.get_close_matches(m, DM_METHODS, n=1)
+                    hint = f" Did you mean: '{close[0]}'?" if close else ""
+                    raise ValueError(f"Unknown method '{m}' in {name}.{hint} Valid: {', '.join(DM_METHODS)}.")
+        for name in ("datasets", "sweep_datasets", "timing_datasets"):
+            for d in getattr(self, name):
+                if str(d).count("/") != 1:
+                    raise ValueError(f"Expect {name} as 'task/tier', e.g. 'hopper/medium'; got '{d}'.")
+        for a in [self.arch, self.timing_arch, *self.sweep_archs]:
+            parse_arch(a)
+        if self.eval_mode not in ("recurrent", "window"):
+            raise ValueError(f"Unknown eval_mode {self.eval_mode!r}. Valid: recurrent, window.")
+        for name in ("iterations", "batch_size", "eval_every", "eval_episodes", "timing_batch_size",
+                     "timing_train_iters", "timing_infer_steps", "timing_infer_episodes", "warmup_steps"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"Expect `{name}` >= 1, actually: {getattr(self, name)!r}.")
+
+    @property
+    def main_arch(self) -> Arch:
+        """:attr:`arch` parsed."""
+        return parse_arch(self.arch)
+
+
+# ----------------------------------------------------------------------------------------------
+# One run
+
+
+def build_dm_model(method: str, seq: Any, arch: Arch, cfg: DMChapterConfig, max_action: float = 1.0) -> torch.nn.Module:
+    """The model of ``method`` with architecture ``arch`` sized for the data set ``seq``.
+
+    Used in: Decision Mamba chapter.
+    """
+    sizes = dict(state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=arch.K,
+                 max_action=max_action, d_model=arch.d_model, n_layer=arch.n_layer, paper_compat=cfg.paper_compat)
+    if method in ("DT", "HDT"):
+        tf = dict(n_head=cfg.n_head, dropout=cfg.dropout, max_timestep=4096, **sizes)
+        return DecisionTransformer(DTConfig(use_rtg=True, **tf)) if method == "DT" else HDT(HDTConfig(**tf))
+    mb = dict(gated_mlp=cfg.gated_mlp, eval_mode=cfg.eval_mode, **sizes)
+    if method in ("DM", "DM-RTG"):
+        return DecisionMamba(DMConfig(use_rtg=method == "DM-RTG", **mb))
+    if method == "HDM":
+        return HDM(HDMConfig(**mb))
+    raise ValueError(f"Unknown method '{method}'. Valid: {', '.join(DM_METHODS)}.")
+
+
+def _sequence_dataset(data: Any, method: str, K: int, seed: int, paper_compat: bool) -> Any:
+    from thesis_lib.data import SequenceDataset
+
+    sg = subgoal_fn(paper_compat) if method in HIERARCHICAL else None
+    return SequenceDataset(data, K=K, subgoal_fn=sg, paper_compat=paper_compat, seed=seed)
+
+
+def _max_action(task: str) -> float:
+    from thesis_lib.data import make_env
+
+    env = make_env(task)
+    try:
+        return float(np.max(env.action_space.high))
+    finally:
+        env.close()
+
+
+def run_dm_method(method: str, task: str, tier: str, seed: int, cfg: DMChapterConfig, data: Any = None,
+                  arch: Arch | str | None = None, compare_eval_modes: bool = False,
+                  targets: tuple[str, ...] = TARGETS) -> pd.DataFrame:
+    """Train ``method`` on ``thesis/<task>/<tier>`` with ``seed``; evaluate along the way.
+
+    Used in: Decision Mamba chapter (Table 5.5, Figs 5.3-5.6).
+
+    Args:
+        method: One of :data:`DM_METHODS`.
+        task: Task name; evaluation runs in its environment.
+        tier: Data-set tier.
+        seed: Seed of the run (model init, batches, evaluation episodes).
+        cfg: :class:`DMChapterConfig` (training and evaluation settings).
+        data: The episodes (default ``get_dataset(task, tier, cfg.profile)``).
+        arch: Architecture (default ``cfg.arch``).
+        compare_eval_modes: For DM/HDM, also evaluate the final model in the other mode.
+        targets: The desired returns RTG methods are evaluated at (of ``half``, ``max``, ``10k``).
+
+    Returns:
+        One row per evaluation and target: ``method, task, tier, seed, arch, n_layer, d_model,
+        K, eval_mode, target, target_return, iteration, return_mean, return_std, score_mean,
+        length_mean, loss``.
+    """
+    from thesis_lib.data import get_dataset
+
+    arch = parse_arch(arch or cfg.arch)
+    if method not in DM_METHODS:
+        raise ValueError(f"Unknown method '{method}'. Valid: {', '.join(DM_METHODS)}.")
+    unknown = [t for t in targets if t not in TARGETS]
+    if unknown:
+        raise ValueError(f"Unknown target {unknown[0]!r}. Valid: {', '.join(TARGETS)}.")
+    if data is None:
+        data = get_dataset(task, tier, cfg.profile, n_transitions=cfg.n_transitions)
+    seq = _sequence_dataset(data, method, arch.K, seed, cfg.paper_compat)
+    torch.manual_seed(seed)
+    model = build_dm_model(method, seq, arch, cfg, _max_action(task))
+    if method in RTG_METHODS:
+        targets = {k: v for k, v in target_returns(data).items() if k in targets}
+    else:
+        targets = {"none": None}
+    base_mode = model.config.resolved_eval_mode if method in MAMBA_METHODS else "window"
+    rows: list[dict[str, Any]] = []
+
+    def run_eval(m: torch.nn.Module, mode: str) -> None:
+        # Every target in one batch of environments (one model call per step for all targets);
+        # episode k of the batch resets with seed ep_seed + k, so each target has its own starts.
+        E, values = cfg.eval_episodes, list(targets.values())
+        per_episode = None if values[0] is None else np.repeat(np.asarray(values, dtype=np.float64), E)
+        ep_seed = 10_000 * (seed + 1) + trainer.iteration
+        res_all = evaluate(m, task, E * len(values), target_return=per_episode, dataset=seq, seed=ep_seed,
+                           max_steps=cfg.max_eval_steps, n_envs=E * len(values))
+        for i, (name, target) in enumerate(targets.items()):
+            part = slice(i * E, (i + 1) * E)
+            res = EvalResult(res_all.returns[part], res_all.lengths[part],
+                             None if res_all.scores is None else res_all.scores[part])
+            rows.append({
+                "method": method, "task": task, "tier": tier, "seed": seed, "arch": arch.label,
+                "n_layer": arch.n_layer, "d_model": arch.d_model, "K": arch.K, "eval_mode": mode,
+                "target": name, "target_return": np.nan if target is None else target,
+                "iteration": trainer.iteration, "return_mean": res.mean_return,
+                "return_std": float(np.std(res.returns)),
+                "score_mean": np.nan if res.scores is None else res.mean_score,
+                "length_mean": float(np.mean(res.lengths)),
+                "loss": trainer.history[-1]["loss"] if trainer.history else np.nan,
+            })  # fmt: skip
+
+    def eval_fn(m: torch.nn.Module) -> float:
+        run_eval(m, base_mode)
+        return rows[-1]["return_mean"]
+
+    train_cfg = TrainConfig(iterations=cfg.iterations, batch_size=cfg.batch_size, lr=cfg.lr,
+                            warmup_steps=cfg.warmup_steps, eval_every=cfg.eval_every, seed=seed,
+                            device=cfg.device, progress=cfg.progress)
+    trainer = Trainer(model, seq, train_cfg, eval_fn=eval_fn)
+    trainer.train()
+    if cfg.iterations % cfg.eval_every:  # always evaluate the final model
+        trainer.evaluate()
+    if compare_eval_modes and method in MAMBA_METHODS:
+        other = "window" if base_mode == "recurrent" else "recurrent"
+        model.config.eval_mode = other
+        model.eval()
+        try:
+            run_eval(model, other)
+        finally:
+            model.config.eval_mode = cfg.eval_mode
+    return pd.DataFrame(rows)
+
+
+def _split(name: str) -> tuple[str, str]:
+    task, tier = name.split("/")
+    return task, tier
+
+
+def _load(names: list[str], cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None) -> dict:
+    from thesis_lib.data import get_dataset
+
+    out = dict(data or {})
+    for name in names:
+        key = _split(name)
+        if key not in out:
+            out[key] = get_dataset(*key, cfg.profile, n_transitions=cfg.n_transitions)
+    return out
+
+
+def run_table_5_5(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
+    """Every data set x seed x method of ``cfg`` at ``cfg.arch``: the :func:`run_dm_method` rows.
+
+    Used in: Decision Mamba chapter (Table 5.5, Fig 5.4).
+    """
+    data = _load(cfg.datasets, cfg, data)
+    jobs = [(m, *_split(d), s) for d in cfg.datasets for s in cfg.seeds for m in cfg.methods]
+    frames = [run_dm_method(m, task, tier, s, cfg, data=data[(task, tier)], compare_eval_modes=cfg.compare_eval_modes)
+              for m, task, tier, s in tqdm(jobs, desc="Table 5.5 runs", disable=not cfg.progress)]
+    return pd.concat(frames, ignore_index=True)
+
+
+def run_sweeps(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None,
+               reuse: pd.DataFrame | None = None) -> pd.DataFrame:
+    """The architecture sweeps of Figs 5.3 (HDM), 5.5 (DM) and 5.6 (DM with RTG, at the max target only).
+
+    Runs already in ``reuse`` (e.g. :func:`run_table_5_5`'s, same method, data set, seed and
+    architecture) are taken from there instead of trained again.
+
+    Used in: Decision Mamba chapter (Figs 5.3, 5.5, 5.6).
+    """
+    data = _load(cfg.sweep_datasets, cfg, data)
+    frames, jobs = [], []
+    for d in cfg.sweep_datasets:
+        task, tier = _split(d)
+        for a in map(parse_arch, cfg.sweep_archs):
+            for s in cfg.seeds:
+                for m in cfg.sweep_methods:
+                    if reuse is not None and len(reuse):
+                        hit = reuse[(reuse.method == m) & (reuse.task == task) & (reuse.tier == tier)
+                                    & (reuse.seed == s) & (reuse.arch == a.label)]
+                        if len(hit):
+                            frames.append(hit)
+                            continue
+                    jobs.append((m, task, tier, s, a))
+    for m, task, tier, s, a in tqdm(jobs, desc="sweep runs", disable=not cfg.progress):
+        frames.append(run_dm_method(m, task, tier, s, cfg, data=data[(task, tier)], arch=a, targets=("max",)))
+    return pd.concat(frames, ignore_index=True)
+
+
+# ----------------------------------------------------------------------------------------------
+# Summaries and the thesis's tables
+
+
+def summarize_dm(curves: pd.DataFrame) -> pd.DataFrame:
+    """Both metrics per ``method, task, tier, target, arch, eval_mode`` from :func:`run_dm_method` rows.
+
+    * ``best_mean``, ``best_std``: the thesis's metric, each run's highest evaluation average
+      during training, mean and std over seeds;
+    * ``final_mean``, ``final_std``: the last evaluation of each run, over seeds; ``n_seeds``.
+
+    Evaluations in a non-default ``eval_mode`` (only of the final model) count under that mode.
+
+    Used in: Decision Mamba chapter.
+    """
+    keys = ["method", "task", "tier", "target", "arch", "eval_mode"]
+    per_run = curves.sort_values("iteration").groupby(keys + ["seed"], sort=False)
+    runs = pd.DataFrame({"best": per_run["return_mean"].max(), "final": per_run["return_mean"].last()}).reset_index()
+    g = runs.groupby(keys, sort=False)
+    out = pd.DataFrame({
+        "best_mean": g["best"].mean(), "best_std": g["best"].std(ddof=0),
+        "final_mean": g["final"].mean(), "final_std": g["final"].std(ddof=0),
+        "n_seeds": g["seed"].nunique(),
+    }).reset_index()  # fmt: skip
+    order = {m: i for i, m in enumerate(DM_METHODS)} | {t: i for i, t in enumerate((*TARGETS, "none"))}
+    return out.sort_values(["task", "tier", "arch", "method", "target"],
+                           key=lambda c: c.map(order) if c.name in ("method", "target") else c).reset_index(drop=True)
+
+
+_TASKS_5_5 = {"hopper": "Hopper", "walker2d": "Walker2D", "halfcheetah": "HalfCheetah", "ant": "Ant"}
+_TASKS_5_6 = {"hopper": "Hopper", "walker2d": "Walker2d", "halfcheetah": "HalfCheetah", "ant": "Ant",
+              "maze2d": "Maze2d", "antmaze": "Antmaze", "kitchen": "Kitchen"}
+
+
+def thesis_labels_5_5(task: str, tier: str) -> tuple[str, str]:
+    """``(task, dataset)`` as Table 5.5 prints them.
+
+    Example:
+        >>> thesis_labels_5_5("maze2d-umaze", "expert")
+        ('Maze2D', 'umaze')
+        >>> thesis_labels_5_5("walker2d", "medium-replay")
+        ('Walker2D', 'medium-replay')
+    """
+    if task.startswith("maze2d-"):
+        return "Maze2D", task.split("-", 1)[1]
+    if task.startswith("antmaze-"):
+        return "Antmaze", task.split("-", 1)[1] + ("" if tier in ("expert", "play", "") else f"-{tier}")
+    if task == "kitchen":
+        return "Kitchen", tier
+    return _TASKS_5_5.get(task, task), tier
+
+
+def thesis_table_5_5(summary: pd.DataFrame, eval_mode: str = "recurrent", differs: Any = None) -> pd.DataFrame:
+    """Table 5.5 beside the thesis's, for both metrics.
+
+    DT and HDT rows are windowed (they have no other mode); DM/HDM rows use ``eval_mode``.
+
+    Args:
+        summary: :func:`summarize_dm` output at the Table 5.5 architecture (one ``arch``).
+        eval_mode: Which DM/HDM evaluation to show.
+        differs: What differs, for every row (see :func:`thesis_lib.book.compare_with_paper`).
+
+    Returns:
+        ``metric, method, task, dataset, desired_return, paper, paper_std, ours, ours_std,
+        difference, what differs`` (``method`` as the reference table names it).
+    """
+    from thesis_lib.book import compare_with_paper, load_reference
+
+    s = summary[(summary.eval_mode == eval_mode) | ~summary.method.isin(MAMBA_METHODS)].copy()
+    lab = [thesis_labels_5_5(t, r) for t, r in zip(s.task, s.tier)]
+    s["task"], s["dataset"] = [a for a, _ in lab], [b for _, b in lab]
+    s["method"] = s["method"].map(THESIS_METHOD)
+    s["desired_return"] = s["target"]
+    ref = load_reference("5.5")
+    frames = []
+    for metric, col in METRICS.items():
+        ours = s.assign(ours=s[f"{col}_mean"])
+        c = compare_with_paper("5.5", ours, on=["task", "dataset", "method", "desired_return"], value="ours",
+                               paper_value="return_mean", differs=differs)
+        c = c.merge(ref.rename(columns={"return_std": "paper_std"})[["task", "dataset", "method", "desired_return",
+                                                                    "paper_std"]].astype({"desired_return": str}),
+                    on=["task", "dataset", "method", "desired_return"], how="left")
+        std = ours.assign(ours_std=ours[f"{col}_std"])[["task", "dataset", "method", "desired_return", "ours_std"]]
+        c = c.merge(std.astype({"desired_return": str}), on=["task", "dataset", "method", "desired_return"], how="left")
+        frames.append(c.assign(metric=metric))
+    out = pd.concat(frames, ignore_index=True)
+    return out[["metric", "method", "task", "dataset", "desired_return", "paper", "paper_std", "ours", "ours_std",
+                "difference", "what differs"]]
+
+
+#: The comparisons the thesis quotes in 5.3.3 and its counts (out of 27 settings).
+WIN_COMPARISONS: dict[str, tuple[tuple[str, str], tuple[str, str], int]] = {
+    "DM wo/ R beats DT (all three targets)": (("DM_without_R", "none"), ("DT", "all"), 15),
+    "HDM beats HDT": (("HDM", "none"), ("HDT", "none"), 22),
+    "DM wo/ R beats DT at 10k": (("DM_without_R", "none"), ("DT", "10k"), 17),
+}
+
+
+def _wins(wide: pd.DataFrame, a: tuple[str, str], b: tuple[str, str]) -> tuple[int, int]:
+    if a not in wide.columns:
+        return 0, 0
+    if b[1] == "all":
+        cols = [(b[0], t) for t in TARGETS if (b[0], t) in wide.columns]
+        if not cols:
+            return 0, 0
+        sub = wide[[a, *cols]].dropna()
+        return int((sub[a].values[:, None] > sub[cols].values).all(axis=1).sum()), len(sub)
+    if b not in wide.columns:
+        return 0, 0
+    sub = wide[[a, b]].dropna()
+    return int((sub[a] > sub[b]).sum()), len(sub)
+
+
+def win_counts_5_5(table: pd.DataFrame) -> pd.DataFrame:
+    """The thesis's "wins out of N settings" (5.3.3): quoted, recounted from its Table 5.5, and ours.
+
+    Args:
+        table: :func:`thesis_table_5_5` output.
+
+    Returns:
+        One row per comparison and metric: ``comparison, metric, thesis text, thesis table
+        (all settings), thesis table (our settings), ours`` as ``"wins/settings"``.
+    """
+    from thesis_lib.book import load_reference
+
+    ref = load_reference("5.5")
+    paper_all = ref.pivot_table(index=["task", "dataset"], columns=["method", "desired_return"], values="return_mean")
+    rows = []
+    for metric in table.metric.unique():
+        t = table[table.metric == metric]
+        ours = t.pivot_table(index=["task", "dataset"], columns=["method", "desired_return"], values="ours")
+        ran = t.dropna(subset=["ours"])[["task", "dataset"]].drop_duplicates()
+        keys = set(zip(ran.task, ran.dataset))
+        paper_ours = paper_all[[k in keys for k in paper_all.index]]
+        for name, (a, b, quoted) in WIN_COMPARISONS.items():
+            w_all, n_all = _wins(paper_all, a, b)
+            w_sub, n_sub = _wins(paper_ours, a, b)
+            w_ours, n_ours = _wins(ours, a, b)
+            rows.append({"comparison": name, "metric": metric, "thesis text": f"{quoted}/27",
+                         "thesis table (all settings)": f"{w_all}/{n_all}",
+                         "thesis table (our settings)": f"{w_sub}/{n_sub}", "ours": f"{w_ours}/{n_ours}"})
+    return pd.DataFrame(rows)
+
+
+# ----------------------------------------------------------------------------------------------
+# Table 5.6: time
+
+
+def _timing_env(task: str) -> Any:
+    import gymnasium as gym
+
+    from thesis_lib.data import make_env
+
+    return gym.vector.SyncVectorEnv([lambda: make_env(task)])
+
+
+def time_methods(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
+    """Table 5.6: ms per training iteration and per inference step of each method, at ``cfg.timing_arch``.
+
+    * train: one gradient step of the :class:`~thesis_lib.seq.trainer.Trainer` (sampling the
+      batch of ``timing_batch_size`` windows included; HDT/HDM: both levels), timed
+      ``timing_train_iters`` times after one untimed step;
+    * inference: an episode of at most ``timing_infer_steps`` steps in one environment through
+      :func:`~thesis_lib.seq.evaluate.evaluate` (building the history, the action, the
+      environment's transition), as ms per step, ``timing_infer_episodes`` episodes after one
+      untimed. DT/HDT re-run the window (``window``); DM/HDM are timed re-running the window, as
+      the authors' code, and with the recurrent step (``recurrent``, not in the thesis).
+
+    The models are untrained (time does not depend on the weights, only on episode lengths).
+
+    Used in: Decision Mamba chapter (Table 5.6).
+
+    Returns:
+        One row per data set x method x phase x mode: ``task, tier, method, phase, mode,
+        time_ms_mean, time_ms_std, n``.
+    """
+    arch = parse_arch(cfg.timing_arch)
+    data = _load(cfg.timing_datasets, cfg, data)
+    rows = []
+    for name in cfg.timing_datasets:
+        task, tier = _split(name)
+        max_action = _max_action(task)
+        for method in tqdm(cfg.methods, desc=f"timing {name}", disable=not cfg.progress):
+            seq = _sequence_dataset(data[(task, tier)], method, arch.K, cfg.seed, cfg.paper_compat)
+            torch.manual_seed(cfg.seed)
+            model = build_dm_model(method, seq, arch, cfg, max_action)
+            trainer = Trainer(model, seq, TrainConfig(iterations=10**9, batch_size=cfg.timing_batch_size, lr=cfg.lr,
+                                                      warmup_steps=cfg.warmup_steps, progress=False, device=cfg.device))
+            times = []
+            for i in range(cfg.timing_train_iters + 1):
+                t0 = time.perf_counter()
+                trainer.step()
+                if i:
+                    times.append((time.perf_counter() - t0) * 1e3)
+            rows.append({"task": task, "tier": tier, "method": method, "phase": "train", "mode": "",
+                         "time_ms_mean": float(np.mean(times)), "time_ms_std": float(np.std(times)), "n": len(times)})
+            target = target_returns(data[(task, tier)])["max"] if method in RTG_METHODS else None
+            modes = ("window", "recurrent") if method in MAMBA_METHODS else ("window",)
+            venv = _timing_env(task)
+            try:
+                for mode in modes:
+                    if method in MAMBA_METHODS:
+                        model.config.eval_mode = mode
+                    per_step = []
+                    for i in range(cfg.timing_infer_episodes + 1):
+                        t0 = time.perf_counter()
+                        res = evaluate(model, venv, 1, target_return=target, dataset=seq, seed=cfg.seed + i,
+                                       max_steps=cfg.timing_infer_steps)
+                        if i:
+                            per_step.append((time.perf_counter() - t0) * 1e3 / max(int(res.lengths[0]), 1))
+                    rows.append({"task": task, "tier": tier, "method": method, "phase": "inference", "mode": mode,
+                                 "time_ms_mean": float(np.mean(per_step)), "time_ms_std": float(np.std(per_step)),
+                                 "n": len(per_step)})
+            finally:
+                venv.close()
+    return pd.DataFrame(rows)
+
+
+def thesis_table_5_6(timing: pd.DataFrame, differs: Any = None) -> pd.DataFrame:
+    """Table 5.6 beside the thesis's GPU numbers.
+
+    The thesis's inference times re-ran the window, so they sit beside our ``window`` rows;
+    our ``recurrent`` rows are added as ``<method> (recurrent step)``, not in the thesis.
+
+    Used in: Decision Mamba chapter (Table 5.6).
+    """
+    from thesis_lib.book import compare_with_paper
+
+    t = timing.copy()
+    t["env"] = [_TASKS_5_6.get(task.split("-")[0], task) for task in t.task]
+    t["method"] = [THESIS_METHOD[m] + (" (recurrent step)" if mode == "recurrent" else "")
+                   for m, mode in zip(t.method, t["mode"])]
+    out = compare_with_paper("5.6", t, on=["env", "phase", "method"], value="time_ms_mean", differs=differs)
+    std = t[["env", "phase", "method", "time_ms_std"]].rename(columns={"time_ms_std": "ours_std"})
+    return out.merge(std, on=["env", "phase", "method"], how="left")
+
+
+# ----------------------------------------------------------------------------------------------
+# Figures
+
+
+def _max_returns(data: Mapping[tuple[str, str], Any]) -> dict[tuple[str, str], float]:
+    return {k: target_returns(v)["max"] for k, v in data.items()}
+
+
+def _normalised(summary: pd.DataFrame, data: Mapping[tuple[str, str], Any], col: str) -> pd.Series:
+    best = _max_returns(data)
+    scale = [best.get((t, r), np.nan) for t, r in zip(summary.task, summary.tier)]
+    return summary[col] / np.where(np.asarray(scale) > 0, scale, np.nan)
+
+
+def _one_mode(summary: pd.DataFrame, eval_mode: str) -> pd.DataFrame:
+    return summary[(summary.eval_mode == eval_mode) | ~summary.method.isin(MAMBA_METHODS)]
+
+
+def plot_sweep(summary: pd.DataFrame, method: str, data: Mapping[tuple[str, str], Any], metric: str = "best",
+               ax: Any = None, eval_mode: str = "recurrent") -> Any:
+    """Figs 5.3 (HDM), 5.5 (DM), 5.6 (DM with RTG, at the max target): one bar per architecture.
+
+    Bars are the metric (``best`` or ``final`` mean over seeds) divided by the data set's
+    maximum return, as the thesis scales its bars; error bars are the std over seeds. DM/HDM
+    rows are those evaluated in ``eval_mode``.
+
+    Used in: Decision Mamba chapter (Figs 5.3, 5.5, 5.6).
+    """
+    import matplotlib.pyplot as plt
+
+    summary = _one_mode(summary, eval_mode)
+    s = summary[(summary.method == method) & summary.target.isin(["none", "max"])].copy()
+    s["value"] = _normalised(s, data, f"{metric}_mean")
+    s["err"] = _normalised(s, data, f"{metric}_std")
+    sets = list(dict.fromkeys(zip(s.task, s.tier)))
+    archs = sorted(s.arch.unique(), key=lambda a: tuple(int(x[1:]) for x in a.split()))
+    if ax is None:
+        _, ax = plt.subplots(figsize=(max(5, 1.6 * len(sets) * len(archs) / 2), 3.5))
+    width = 0.8 / max(len(archs), 1)
+    for i, a in enumerate(archs):
+        g = s[s.arch == a].set_index(["task", "tier"]).reindex(sets)
+        ax.bar(np.arange(len(sets)) + i * width, g["value"], width, yerr=g["err"].fillna(0), label=a, capsize=2)
+    ax.set_xticks(np.arange(len(sets)) + width * (len(archs) - 1) / 2, [f"{t}\n{r}" for t, r in sets])
+    ax.set_ylabel("return / data set max")
+    ax.set_title(f"{method}: architectures ({'best during training' if metric == 'best' else 'final checkpoint'})")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def plot_methods(summary: pd.DataFrame, data: Mapping[tuple[str, str], Any], metric: str = "best",
+                 ax: Any = None, eval_mode: str = "recurrent") -> Any:
+    """Fig 5.4: the five methods side by side per data set (DT and DM with RTG at the max target).
+
+    Used in: Decision Mamba chapter (Fig 5.4).
+    """
+    import matplotlib.pyplot as plt
+
+    summary = _one_mode(summary, eval_mode)
+    s = summary[summary.target.isin(["none", "max"])].copy()
+    s["value"] = _normalised(s, data, f"{metric}_mean")
+    s["err"] = _normalised(s, data, f"{metric}_std")
+    sets = list(dict.fromkeys(zip(s.task, s.tier)))
+    methods = [m for m in DM_METHODS if m in set(s.method)]
+    if ax is None:
+        _, ax = plt.subplots(figsize=(max(5, 2.2 * len(sets)), 3.5))
+    width = 0.8 / max(len(methods), 1)
+    for i, m in enumerate(methods):
+        g = s[s.method == m].set_index(["task", "tier"]).reindex(sets)
+        ax.bar(np.arange(len(sets)) + i * width, g["value"], width, yerr=g["err"].fillna(0),
+               label=THESIS_METHOD[m].replace("_", " "), capsize=2)
+    ax.set_xticks(np.arange(len(sets)) + width * (len(methods) - 1) / 2, [f"{t}\n{r}" for t, r in sets])
+    ax.set_ylabel("return / data set max")
+    ax.set_title(f"Five methods ({'best during training' if metric == 'best' else 'final checkpoint'})")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def eval_mode_effect(summary: pd.DataFrame) -> pd.DataFrame:
+    """Final-checkpoint return of each DM/HDM under both evaluation modes, side by side.
+
+    Used in: Decision Mamba chapter (recurrent vs windowed acting).
+    """
+    s = summary[summary.method.isin(MAMBA_METHODS)]
+    wide = s.pivot_table(index=["method", "task", "tier", "target", "arch"], columns="eval_mode", values="final_mean",
+                         aggfunc="first")
+    wide = wide.reset_index()
+    if {"recurrent", "window"} <= set(wide.columns):
+        wide["recurrent - window"] = wide["recurrent"] - wide["window"]
+    return wide
+
+
+__all__ += ["METRICS", "WIN_COMPARISONS", "eval_mode_effect"]
+
+
+def format_table_5_5(table: pd.DataFrame, metric: str = "best during training (thesis)") -> pd.DataFrame:
+    """Table 5.5 laid out as the thesis prints it: one row per setting, one column per method/target,
+    each cell ``"ours ± std  (thesis ± std)"``; settings we did not run are left out.
+
+    Used in: Decision Mamba chapter (Table 5.5).
+    """
+    t = table[(table.metric == metric)].dropna(subset=["ours"]).copy()
+    order = [("DT", "half"), ("DT", "max"), ("DT", "10k"), ("HDT", "none"), ("DM_with_R", "half"),
+             ("DM_with_R", "max"), ("DM_with_R", "10k"), ("DM_without_R", "none"), ("HDM", "none")]
+
+    def cell(r: pd.Series) -> str:
+        paper = "" if pd.isna(r.paper) else f"  ({r.paper:.1f} ± {r.paper_std:.1f})"
+        return f"{r.ours:.1f} ± {0.0 if pd.isna(r.ours_std) else r.ours_std:.1f}{paper}"
+
+    t["cell"] = t.apply(cell, axis=1)
+    t["column"] = [f"{m} {d}" if d != "none" else m for m, d in zip(t.method, t.desired_return)]
+    wide = t.pivot_table(index=["task", "dataset"], columns="column", values="cell", aggfunc="first")
+    cols = [f"{m} {d}" if d != "none" else m for m, d in order]
+    return wide[[c for c in cols if c in wide.columns]]
+
+
+__all__ += ["format_table_5_5"]
