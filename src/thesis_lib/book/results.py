@@ -148,6 +148,13 @@ class ChapterResults:
         self._record(path.name)
         return path
 
+    def path(self, filename: str) -> Path:
+        """The path of a file the caller writes itself (a GIF, a CSV from a CLI), listed in ``run.json``."""
+        if Path(filename).name != filename:
+            raise ValueError(f"give a file name, not a path: {filename!r}")
+        self._record(filename)
+        return self.dir / filename
+
     def finish(self, **extra: Any) -> dict[str, Any]:
         """Write ``run.json`` (config, seed, commit, versions, wall time, artifacts) and return it."""
         meta = run_metadata(
