@@ -8,6 +8,8 @@ import pytest
 import torch
 
 from thesis_lib.defender import (
+    DYNAMICS_TRAIN_EVERY,
+    EPISODE_LOG_COLUMNS,
     METHODS,
     STRATEGIES,
     DefenderWrapper,
@@ -16,6 +18,7 @@ from thesis_lib.defender import (
     DynamicsModel,
     GroupCost,
     cost_curves,
+    expert_demonstrations,
     load_demonstrations,
     method_cost,
     parse_method,
@@ -262,7 +265,36 @@ def test_wrapper_trains_with_sb3(walk_demos, algo):
     res = train(cfg, env=env, progress=False, info_keys=["filtered", "filter_step"])
     assert len(res.episodes) > 0 and "filtered" in res.episodes.columns
     assert env.n_real_steps == env.unwrapped.n_steps
-    assert env.dynamics.n_updates == env.n_real_steps
+    assert env.dynamics.n_updates == env.n_real_steps // DYNAMICS_TRAIN_EVERY  # real transitions only
+
+
+@pytest.mark.parametrize("algo", ["SAC", "TD3"])
+def test_wrapper_with_sb3_directly_and_its_episode_log(walk_demos, algo):
+    """The issue's usage: ``SAC("MlpPolicy", DefenderWrapper(...)).learn(...)``, then read the log."""
+    import stable_baselines3 as sb3
+
+    env = make_walk(walk_demos, safe_method="MeanDemoW5", unsafe_method="MeanDemoW10")
+    model = getattr(sb3, algo)("MlpPolicy", env, learning_starts=50, batch_size=32, seed=0,
+                               policy_kwargs={"net_arch": [16, 16]}, device="cpu")
+    model.learn(300)
+    log = env.episodes
+    assert list(log.columns) == list(EPISODE_LOG_COLUMNS) and len(log) > 0
+    steps = env.n_real_steps + env.n_filtered_steps
+    assert steps == 300 and 0 <= steps - log.length.sum() < 12  # all but the unfinished last episode
+    assert env.unwrapped.n_steps == env.n_real_steps
+    assert log.filtered.sum() == env.n_filtered_steps  # a filtered step ends its episode
+    fired = log[log.filtered]
+    assert (fired.filter_step == fired.length - 1).all() and log[~log.filtered].filter_step.isna().all()
+    assert not (log.crashed & log.filtered).any()
+    assert (log.crashed == (log.terminated & ~log.filtered & (log.length < 12))).all()
+
+
+def test_dynamics_update_rate_default_and_paper_compat(walk_demos):
+    assert make_walk(walk_demos).dynamics.train_every == DYNAMICS_TRAIN_EVERY == 4
+    assert make_walk(walk_demos, paper_compat=True).dynamics.train_every == 1  # Algorithm 2: every step
+    assert make_walk(walk_demos, dynamics_train_every=1).dynamics.train_every == 1
+    with pytest.raises(ValueError, match="once"):
+        make_walk(walk_demos, dynamics_train_every=2, dynamics_kwargs={"train_every": 3})
 
 
 def test_paper_compat_settings(walk_demos):
@@ -309,6 +341,43 @@ def test_demonstrations_round_trip_and_diverse_subset(tmp_path, walk_demos):
     pts = [_demo(np.full(4, v), False) for v in (0.0, 0.1, 5.0, 5.1)]
     picked = select_diverse(pts, 2)
     assert sorted(float(d.observations[0, 0]) for d in picked) == [0.0, 5.1]
+
+
+def test_expert_demonstrations_make_both_groups(tmp_path):
+    from thesis_lib.defender import load_demonstrations_minari, save_demonstrations_minari
+
+    demos = expert_demonstrations("InvertedDoublePendulum-v5", n_safe=2, n_unsafe=2, max_episode_steps=30)
+    ids = save_demonstrations_minari(demos, root=tmp_path)  # the data-set issue's Minari storage
+    assert ids["unsafe"] == "thesis/defender-inverteddoublependulum/unsafe-v0"
+    back = load_demonstrations_minari("InvertedDoublePendulum-v5", root=tmp_path)
+    for a, b in zip(demos.safe + demos.unsafe, back.safe + back.unsafe):
+        np.testing.assert_allclose(a.observations, b.observations)
+        assert (a.terminated, a.truncated, a.length) == (b.terminated, b.truncated, b.length)
+    assert [(d.length, d.truncated, d.terminated) for d in demos.safe] == [(30, True, False)] * 2
+    assert all(d.terminated and d.length < 30 for d in demos.unsafe)
+    assert demos.safe[0].observations.shape == (31, 9) and demos.safe[0].actions.shape == (30, 1)
+    assert not np.array_equal(demos.safe[0].observations, demos.safe[1].observations)
+    with pytest.raises(ValueError, match="No shipped expert policy for 'Pendulum-v1'; experts ship for: .*Hopper-v5"):
+        expert_demonstrations("Pendulum-v1", n_safe=1, n_unsafe=1)
+
+
+def test_make_demonstrations_tops_up_a_missing_group():
+    """200 SAC steps on InvertedDoublePendulum: no roll-out balances 20 steps, so "auto" takes the safe
+    group from the expert and the thesis's recipe alone ("sac") fails with a clear message."""
+    from thesis_lib.defender import experiments as ex
+
+    kw = dict(tasks=["InvertedDoublePendulum-v5"], max_episode_steps=20, demo_timesteps=200, n_demos=3,
+              n_demos_list=[2, 3], net_arch=[16, 16], batch_size=32)
+    runs = ex.make_demonstrations(ex.DefenderConfig(**kw))
+    run = runs["InvertedDoublePendulum-v5"]
+    assert run.n_sac["safe"] == 0 and run.n_sac["unsafe"] > 3
+    assert run.sources() == {"safe": (0, 3), "unsafe": (3, 0)}
+    table = ex.demo_table(runs, ex.DefenderConfig(**kw))
+    assert table.recipe.tolist() == ["ARS expert + noise", "SAC roll-outs (thesis)"]
+    assert "came from the shipped ARS expert" in ex.describe_demonstrations(runs, ex.DefenderConfig(**kw))[0]
+    assert len(run.episodes) > 0 and all(len(d.actions) <= 20 for d in run.episodes)  # the ablation's log
+    with pytest.raises(RuntimeError, match="0 safe .* expert_demonstrations"):
+        ex.make_demonstrations(ex.DefenderConfig(**kw, demo_source="sac"))
 
 
 def test_strategy_ablation_scores(walk_demos):
@@ -382,6 +451,10 @@ def test_defender_config_errors():
         DefenderConfig(algos=["PPO"])
     with pytest.raises(ValueError, match="train_timesteps must be a positive int"):
         DefenderConfig(train_timesteps=0)
+    with pytest.raises(ValueError, match="Unknown demo_source 'ars'. Valid: sac, expert, auto"):
+        DefenderConfig(demo_source="ars")
+    with pytest.raises(ValueError, match="paper_compat_tasks lists 'Walker2d-v5'"):
+        DefenderConfig(tasks=["Hopper-v5"], paper_compat_tasks=["Walker2d-v5"])
 
 
 @pytest.mark.slow
@@ -389,13 +462,15 @@ def test_chapter_pipeline_at_tiny_scale():
     """make_demonstrations -> ablation -> Tables 4.3-4.5 on Hopper with a 20-step horizon."""
     from thesis_lib.defender import experiments as ex
 
-    cfg = ex.DefenderConfig(max_episode_steps=20, demo_timesteps=600, n_demos=3, n_demos_list=[2, 3],
-                            algos=["SAC"], train_timesteps=200, net_arch=[16, 16], paper_compat_check=False)
+    cfg = ex.DefenderConfig(tasks=["Hopper-v5"], max_episode_steps=20, demo_timesteps=600, n_demos=3,
+                            n_demos_list=[2, 3], algos=["SAC", "TD3"], train_timesteps=200, net_arch=[16, 16],
+                            paper_compat_check=False)
     runs = ex.make_demonstrations(cfg)
     scores = ex.run_ablation(cfg, runs)
     assert len(scores) == 2 * 576
     tables = ex.run_tables_4_3_4_4(cfg, runs, progress=False)
-    assert len(tables.runs) == 3 and set(tables.runs.trajectory) == {"none", "state", "state_action"}
+    assert len(tables.runs) == 6 and set(tables.runs.trajectory) == {"none", "state", "state_action"}
     t45 = ex.run_table_4_5(cfg, runs, reuse=tables, progress=False)
-    assert sorted(t45.runs.n_demos) == [2, 3]
+    assert sorted(t45.runs.n_demos) == [2, 3] and set(t45.runs.algo) == {"SAC"}
+    assert set(t45.episodes.algo) == {"SAC"} and len(t45.episodes) == t45.runs.n_episodes.sum()  # reused run only
     assert (tables.episodes.crashed & tables.episodes.filtered).sum() == 0

@@ -12,17 +12,24 @@
 
 Choices (each documented where it is made): exact DTW with L1 local cost over the whole episode
 so far, and a tie fires the filter (Algorithm 2 steps only if Safe < Unsafe); ``paper_compat=True``
-gives the authors' code (FastDTW radius 1, the last 20 steps, fire only on ">"). The dynamics
-model is trained on every real step (Algorithm 2, line 11). Demonstrations are stored as one
-``.npz`` with Minari's field names (:func:`save_demonstrations`).
+gives the authors' code (FastDTW radius 1, the last 20 steps, fire only on ">", dynamics model
+updated every step). By default the dynamics model is updated every 4th real step
+(:data:`DYNAMICS_TRAIN_EVERY`; ``dynamics_train_every=1`` is Algorithm 2's line 11 to the letter):
+a filtered step is terminal, so SB3's agents never bootstrap from its predicted next state.
+Demonstrations: SAC roll-outs as the authors made them (:func:`collect_demonstrations`), or from
+the shipped ARS experts (:func:`expert_demonstrations`) where a short run gives too few of a group;
+stored as one ``.npz`` with Minari's field names (:func:`save_demonstrations`) or as Minari data
+sets (:func:`save_demonstrations_minari`).
 
-Speed (``benchmarks/bench_defender.py``, Hopper-v5, 50 + 50 demonstrations, 2-core CPU): one
-filter decision costs 17-35 µs with the thesis's top state strategies (Full/DemoW are incremental;
-BothW10 about 75 µs), against 20-100 ms with FastDTW. Per SB3 SAC training step (256-256,
-batch 256, one SAC model taking turns on each env, 1,600 steps each; plain SAC 15 ms) the DTW
-filter alone added 2.5%, the whole wrapper 18% with the dynamics model trained every real step
-(one more 256-256 network, 2.5 ms a step) and 6.6% with ``dynamics_kwargs={"train_every": 4}``;
-FastDTW made a step 5.1 times as long. The thesis reports +19% to +3,245%.
+Speed (``benchmarks/bench_defender.py``, Hopper-v5, 50 + 50 demonstrations, SB3 SAC 256-256,
+batch 256, one model taking turns on each env variant). One filter decision costs 17-35 µs with
+the thesis's top state strategies on an idle core (Full/DemoW are incremental; BothW10 about
+75 µs), against 20-100 ms with FastDTW. Per SAC training step (plain: 15 ms), lightly loaded,
+wall time: the DTW filter alone +2.5%, the default wrapper (dynamics every 4th step) +6.6%,
+Algorithm 2 to the letter (dynamics every step) +18%, FastDTW x5.1. Re-measured on a 2-core
+machine under load average 7-9 (CPU-time ratios, wall unusable): the default wrapper +4.4% to
++7.0% for each of the 5 top state strategies, Algorithm 2 +15%, FastDTW x3.2. Target: at most
++10%; the thesis reports +19% to +3,245%.
 
 Used in: DEFENDER chapter (thesis 4.3), ``notebooks/03_defender.ipynb``.
 
@@ -41,9 +48,13 @@ from thesis_lib.defender.demos import (
     Demonstration,
     as_demonstration,
     collect_demonstrations,
+    expert_demonstrations,
     load_demonstrations,
+    load_demonstrations_minari,
+    policy_demonstrations,
     rollout,
     save_demonstrations,
+    save_demonstrations_minari,
     select_diverse,
     trajectory_features,
 )
@@ -60,12 +71,18 @@ from thesis_lib.defender.methods import (
     parse_method,
     parse_strategy,
 )
-from thesis_lib.defender.wrapper import EPISODE_LOG_COLUMNS, PAPER_MAX_TRAJECTORY, DefenderWrapper
+from thesis_lib.defender.wrapper import (
+    DYNAMICS_TRAIN_EVERY,
+    EPISODE_LOG_COLUMNS,
+    PAPER_MAX_TRAJECTORY,
+    DefenderWrapper,
+)
 
 __all__ = [
     "AGGREGATIONS",
     "ALIASES",
     "BACKENDS",
+    "DYNAMICS_TRAIN_EVERY",
     "EPISODE_LOG_COLUMNS",
     "METHODS",
     "PAPER_MAX_TRAJECTORY",
@@ -85,12 +102,16 @@ __all__ = [
     "as_demonstration",
     "collect_demonstrations",
     "cost_curves",
+    "expert_demonstrations",
     "load_demonstrations",
+    "load_demonstrations_minari",
     "method_cost",
     "parse_method",
     "parse_strategy",
+    "policy_demonstrations",
     "rollout",
     "save_demonstrations",
+    "save_demonstrations_minari",
     "select_diverse",
     "trajectory_features",
 ]

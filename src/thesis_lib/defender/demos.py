@@ -7,9 +7,14 @@ than ``actions`` and ``rewards``). Anything with those three attributes is accep
 :func:`collect_demonstrations` makes them as the authors did: train SAC and, every
 ``every`` training episodes, roll out the current policy once; an episode that reaches the
 horizon is *safe*, one that terminates earlier is *unsafe*. :func:`select_diverse` then keeps
-a subset that is spread out under DTW (greedy farthest-point selection), and
-:func:`save_demonstrations` / :func:`load_demonstrations` store them in one ``.npz``
-(a documented, dependency-free layout; see :func:`save_demonstrations`).
+a subset that is spread out under DTW (greedy farthest-point selection).
+:func:`policy_demonstrations` / :func:`expert_demonstrations` make both groups from a fixed
+policy instead (the ARS experts shipped in :mod:`thesis_lib.data`), for a group a short SAC run
+does not give. :func:`save_demonstrations` /
+:func:`load_demonstrations` store them in one ``.npz``
+(a documented, dependency-free layout; see :func:`save_demonstrations`);
+:func:`save_demonstrations_minari` / :func:`load_demonstrations_minari` as two Minari data sets
+(``thesis/defender-<task>/safe-v0`` and ``unsafe-v0``) with the data-set issue's storage.
 
 Used in: DEFENDER (thesis 4.3).
 """
@@ -33,9 +38,13 @@ __all__ = [
     "EpisodeRecorder",
     "as_demonstration",
     "collect_demonstrations",
+    "expert_demonstrations",
     "load_demonstrations",
+    "load_demonstrations_minari",
+    "policy_demonstrations",
     "rollout",
     "save_demonstrations",
+    "save_demonstrations_minari",
     "select_diverse",
     "trajectory_features",
 ]
@@ -87,6 +96,21 @@ class DemoRun(NamedTuple):
     """The SAC run's own training episodes (for the strategy ablation, thesis 4.3.2)."""
     result: Any
     """The SAC run's :class:`~thesis_lib.rl.TrainResult` (model, episode log, wall time)."""
+    n_sac: dict[str, int] = {}
+    """Per group ("safe", "unsafe"): how many of ``pool``'s demonstrations (its first ones) are SAC
+    roll-outs; the rest came from a policy (:func:`policy_demonstrations`). Empty = all SAC."""
+
+    def sources(self, demos: DemoSet | None = None) -> dict[str, tuple[int, int]]:
+        """Per group: (from SAC roll-outs, from the policy) among ``demos`` (default: :attr:`demos`)."""
+        demos = self.demos if demos is None else demos
+        out = {}
+        for group in ("safe", "unsafe"):
+            pool = getattr(self.pool, group)
+            policy_ids = {id(d) for d in pool[self.n_sac.get(group, len(pool)):]}
+            kept = getattr(demos, group)
+            n_policy = sum(id(d) in policy_ids for d in kept)
+            out[group] = (len(kept) - n_policy, n_policy)
+        return out
 
 
 def as_demonstration(item: Any, name: str = "demonstration") -> Demonstration:
@@ -219,6 +243,7 @@ def collect_demonstrations(
     rl_overrides: Mapping[str, Any] | None = None,
     deterministic: bool = False,
     progress: bool = False,
+    allow_missing: bool = False,
 ) -> DemoRun:
     """Make safe and unsafe demonstrations as the authors did: SAC roll-outs during training.
 
@@ -236,6 +261,8 @@ def collect_demonstrations(
         max_episode_steps: horizon (None = the task's, 1000 for MuJoCo).
         rl_overrides: further :class:`~thesis_lib.rl.RLConfig` fields (e.g. ``net_arch``).
         deterministic: roll out the policy's mean action (False: sample, as in training).
+        allow_missing: return a group with no roll-outs empty instead of raising (the caller
+            fills it, e.g. with :func:`expert_demonstrations`).
 
     Returns:
         :class:`DemoRun`: the selected demonstrations, every roll-out, the SAC run's training
@@ -277,14 +304,135 @@ def collect_demonstrations(
     result = train(config, env=recorder, callbacks=[_Roll()], progress=progress)
     safe = [d for d in found if d.truncated]
     unsafe = [d for d in found if d.terminated]
-    if not safe or not unsafe:
+    if (not safe or not unsafe) and not allow_missing:
         raise RuntimeError(
             f"collect_demonstrations saw {len(safe)} safe and {len(unsafe)} unsafe roll-outs of "
             f"{env_id} in {total_timesteps} steps ({len(found)} roll-outs); DEFENDER needs both. "
-            "Train longer (total_timesteps), roll out more often (every), or lower max_episode_steps."
+            "Train longer (total_timesteps), roll out more often (every), lower max_episode_steps, "
+            "or fill the missing group with expert_demonstrations(...)."
         )
-    demoset = DemoSet(select_diverse(safe, n_safe), select_diverse(unsafe, n_unsafe), env_id)
-    return DemoRun(demoset, DemoSet(safe, unsafe, env_id), recorder.episodes, result)
+    demoset = DemoSet(select_diverse(safe, n_safe) if safe else [],
+                      select_diverse(unsafe, n_unsafe) if unsafe else [], env_id)
+    return DemoRun(demoset, DemoSet(safe, unsafe, env_id), recorder.episodes, result,
+                   {"safe": len(safe), "unsafe": len(unsafe)})
+
+
+def _policy_rollout(
+    policy: Any, env: gym.Env, rng: np.random.Generator, *, seed: int, noise: float, switch_at: int | None,
+    switch_noise: float,
+) -> Demonstration:
+    """One episode of ``policy(obs)`` with Gaussian action noise (std as a fraction of the half-range).
+
+    From step ``switch_at`` on (if given) the noise std becomes ``switch_noise``.
+    """
+    low, high = env.action_space.low.astype(np.float64), env.action_space.high.astype(np.float64)
+    half = (high - low) / 2
+    obs, _ = env.reset(seed=seed)
+    observations, actions, rewards = [np.asarray(obs, dtype=np.float64)], [], []
+    terminated = truncated = False
+    t = 0
+    while not (terminated or truncated):
+        std = switch_noise if switch_at is not None and t >= switch_at else noise
+        action = np.asarray(policy(np.asarray(obs, dtype=np.float64)), dtype=np.float64).reshape(-1)
+        if std > 0:
+            action = action + std * half * rng.standard_normal(action.shape)
+        action = np.clip(action, low, high)
+        obs, reward, terminated, truncated, _ = env.step(action.astype(env.action_space.dtype))
+        observations.append(np.asarray(obs, dtype=np.float64))
+        actions.append(action)
+        rewards.append(float(reward))
+        t += 1
+    return Demonstration(np.stack(observations), np.stack(actions), np.asarray(rewards), bool(terminated),
+                         bool(truncated and not terminated))
+
+
+def policy_demonstrations(
+    env_id: str,
+    policy: Any,
+    *,
+    n_safe: int,
+    n_unsafe: int,
+    seed: int = 0,
+    max_episode_steps: int | None = None,
+    safe_noise: float = 0.05,
+    unsafe_noise: float = 1.0,
+    max_tries: int = 20,
+) -> DemoSet:
+    """Safe and unsafe demonstrations from a fixed policy (an alternative to the authors' SAC roll-outs).
+
+    *Safe*: the policy with small Gaussian action noise (``safe_noise`` x the action half-range,
+    so the episodes differ); kept if it reaches the horizon. *Unsafe*: the same policy for a random
+    number of steps (uniform in [0, horizon / 2)), then with heavy noise (``unsafe_noise``) until it
+    falls; kept if it terminates before the horizon. So an unsafe demonstration starts like a safe
+    one and then goes wrong, as a failing SAC roll-out does.
+
+    Used where the thesis's recipe gives no roll-outs of a group in a short run, e.g. no SAC
+    roll-out of InvertedDoublePendulum balances for the whole horizon after a few thousand steps
+    (see :func:`expert_demonstrations` for the shipped ARS experts).
+
+    Args:
+        env_id: gymnasium task.
+        policy: callable ``obs (obs_dim,) -> action (act_dim,)``.
+        n_safe, n_unsafe: how many of each to make (0 is allowed).
+        seed: seeds the episodes' resets and the noise.
+        max_episode_steps: horizon (None = the task's).
+        safe_noise, unsafe_noise: action-noise std as a fraction of the action half-range.
+        max_tries: attempts per wanted demonstration before giving up.
+
+    Raises:
+        RuntimeError: if the policy did not give enough episodes of a group in
+            ``max_tries x n`` attempts (e.g. a policy too weak to reach the horizon).
+
+    Used in: DEFENDER (thesis 4.3).
+    """
+    if n_safe < 0 or n_unsafe < 0:
+        raise ValueError(f"policy_demonstrations needs n_safe, n_unsafe >= 0, got {n_safe}, {n_unsafe}.")
+    env = gym.make(env_id, max_episode_steps=max_episode_steps) if max_episode_steps else gym.make(env_id)
+    horizon = env.spec.max_episode_steps if env.spec is not None and env.spec.max_episode_steps else 1000
+    rng = np.random.default_rng(seed)
+    out: dict[str, list[Demonstration]] = {"safe": [], "unsafe": []}
+    for group, n in (("safe", n_safe), ("unsafe", n_unsafe)):
+        tries = 0
+        while len(out[group]) < n:
+            if tries >= max_tries * n:
+                raise RuntimeError(
+                    f"policy_demonstrations made only {len(out[group])} of {n} {group} demonstrations of "
+                    f"{env_id} in {tries} attempts (horizon {horizon}); "
+                    + ("the policy does not reach the horizon: lower safe_noise or use a better policy."
+                       if group == "safe" else "the policy does not fall: raise unsafe_noise.")
+                )
+            ep_seed = seed + 20_000 + 1_000 * (group == "unsafe") * max_tries + tries
+            switch = None if group == "safe" else int(rng.integers(0, max(1, horizon // 2)))
+            d = _policy_rollout(policy, env, rng, seed=ep_seed, noise=safe_noise, switch_at=switch,
+                                switch_noise=unsafe_noise)
+            tries += 1
+            if (group == "safe" and d.truncated) or (group == "unsafe" and d.terminated):
+                out[group].append(d)
+    env.close()
+    return DemoSet(out["safe"], out["unsafe"], env_id)
+
+
+def expert_demonstrations(env_id: str, *, n_safe: int, n_unsafe: int, seed: int = 0,
+                          max_episode_steps: int | None = None, **kwargs: Any) -> DemoSet:
+    """:func:`policy_demonstrations` with the ARS expert shipped in :mod:`thesis_lib.data`.
+
+    Experts ship for Hopper, Walker2d, HalfCheetah, Ant and InvertedDoublePendulum (v5); their
+    training records are in ``thesis_lib/data/policies/<task>.json``.
+
+    Raises:
+        ValueError: no shipped expert for ``env_id`` (the message lists the tasks that have one).
+
+    Used in: DEFENDER (thesis 4.3).
+    """
+    from thesis_lib.data.experts import has_policies, load_policy
+    from thesis_lib.data.tasks import TASKS
+
+    names = [name for name, spec in TASKS.items() if spec.env_id == env_id and has_policies(name)]
+    if not names:
+        have = sorted(spec.env_id for name, spec in TASKS.items() if has_policies(name))
+        raise ValueError(f"No shipped expert policy for {env_id!r}; experts ship for: {', '.join(have)}.")
+    return policy_demonstrations(env_id, load_policy(names[0], "expert"), n_safe=n_safe, n_unsafe=n_unsafe,
+                                 seed=seed, max_episode_steps=max_episode_steps, **kwargs)
 
 
 def save_demonstrations(demoset: DemoSet, path: str | Path) -> Path:
@@ -334,6 +482,86 @@ def load_demonstrations(path: str | Path) -> DemoSet:
                 for i in range(n)
             ]
     return DemoSet(groups["safe"], groups["unsafe"], meta["env_id"])
+
+
+def _minari_ids(env_id: str, name: str | None) -> dict[str, str]:
+    name = name or "defender-" + env_id.split("-v")[0].lower()
+    return {g: f"thesis/{name}/{g}-v0" for g in ("safe", "unsafe")}
+
+
+class _DataDir:
+    """Temporarily point ``thesis_lib.data`` at ``root`` (``THESIS_DATA_DIR``); no-op for None."""
+
+    def __init__(self, root: str | Path | None) -> None:
+        self.root, self.old = root, None
+
+    def __enter__(self) -> None:
+        import os
+
+        if self.root is not None:
+            self.old = os.environ.get("THESIS_DATA_DIR")
+            os.environ["THESIS_DATA_DIR"] = str(self.root)
+
+    def __exit__(self, *exc: Any) -> None:
+        import os
+
+        if self.root is not None:
+            if self.old is None:
+                os.environ.pop("THESIS_DATA_DIR", None)
+            else:
+                os.environ["THESIS_DATA_DIR"] = self.old
+
+
+def save_demonstrations_minari(
+    demoset: DemoSet, *, name: str | None = None, root: str | Path | None = None,
+    info: Mapping[str, Any] | None = None,
+) -> dict[str, str]:
+    """Write a :class:`DemoSet` as two Minari data sets, one per group.
+
+    Ids: ``thesis/<name>/safe-v0`` and ``thesis/<name>/unsafe-v0``, ``name`` defaulting to
+    ``defender-<task>`` (e.g. ``defender-hopper``); written with
+    :func:`thesis_lib.data.storage.write_dataset` under ``root`` (default: the data-set
+    directory, ``$THESIS_DATA_DIR`` or ``~/.minari/datasets``), replacing older ones.
+
+    Returns:
+        ``{"safe": id, "unsafe": id}``.
+
+    Used in: DEFENDER (thesis 4.3).
+    """
+    from thesis_lib.data.storage import Episode, write_dataset
+
+    ids = _minari_ids(demoset.env_id, name)
+    for group, dataset_id in ids.items():
+        demos = getattr(demoset, group)
+        if not demos:
+            raise ValueError(f"The {group} group is empty; a Minari data set needs at least one episode.")
+        episodes = []
+        for i, d in enumerate(demos):
+            terminations, truncations = np.zeros(d.length, dtype=bool), np.zeros(d.length, dtype=bool)
+            terminations[-1], truncations[-1] = d.terminated, d.truncated  # the flags of the last step
+            episodes.append(Episode(i, d.observations, d.actions, d.rewards, terminations, truncations))
+        write_dataset(dataset_id, episodes, demoset.env_id, description=f"DEFENDER {group} demonstrations",
+                      info={"group": group, **dict(info or {})},
+                      root=Path(root) if root is not None else None)
+    return ids
+
+
+def load_demonstrations_minari(env_id: str, *, name: str | None = None, root: str | Path | None = None) -> DemoSet:
+    """Read what :func:`save_demonstrations_minari` wrote for ``env_id``.
+
+    Raises:
+        FileNotFoundError: no such data set (the message says how to make it).
+
+    Used in: DEFENDER (thesis 4.3).
+    """
+    from thesis_lib.data.storage import load
+
+    groups = {}
+    with _DataDir(root):
+        for group, dataset_id in _minari_ids(env_id, name).items():
+            data = load(dataset_id)
+            groups[group] = [as_demonstration(e, f"{group} episode {e.id} of {dataset_id}") for e in data.episodes]
+    return DemoSet(groups["safe"], groups["unsafe"], env_id)
 
 
 def _features_list(demos: Sequence[Any], trajectory: Trajectory, group: str) -> list[np.ndarray]:

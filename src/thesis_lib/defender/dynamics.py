@@ -2,8 +2,9 @@
 
 When the filter skips ``env.step``, the agent still needs a next state for temporal-difference
 learning. DEFENDER predicts it with p_theta(s_{t+1} | s_t, a_t): an MLP s||a -> 256 -> 256 -> s
-trained with an L2 loss (Adam, 3e-4) on the real transitions seen so far, one minibatch per
-real step. Filtered (predicted) transitions never enter its training data.
+trained with an L2 loss (Adam, 3e-4) on the real transitions seen so far, one minibatch every
+``train_every`` real steps (Algorithm 2: 1; :class:`~thesis_lib.defender.DefenderWrapper`'s
+default: 4, for speed). Filtered (predicted) transitions never enter its training data.
 
 Used in: DEFENDER (thesis 4.3).
 """

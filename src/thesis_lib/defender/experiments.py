@@ -3,7 +3,9 @@
 ``notebooks/03_defender.ipynb`` calls these in order:
 
 1. :func:`make_demonstrations` one SAC run per task; its roll-outs become the demonstrations and
-   its training episodes the ablation's log.
+   its training episodes the ablation's log. A group the short run gives too few roll-outs of is
+   topped up from the shipped ARS expert (``demo_source="auto"``); :func:`describe_demonstrations`
+   says which recipe each task used.
 2. :func:`run_ablation` the 576-strategy ablation for state and state-action trajectories.
 3. :func:`run_tables_4_3_4_4` SAC and TD3 with and without DEFENDER; :func:`run_table_4_5`
    SAC with MeanDemoW5/MeanDemoW10 and 10/20/50 demonstrations.
@@ -22,7 +24,13 @@ import numpy as np
 import pandas as pd
 
 from thesis_lib.defender.ablation import rank_strategies, strategy_ablation
-from thesis_lib.defender.demos import DemoRun, DemoSet, collect_demonstrations, select_diverse
+from thesis_lib.defender.demos import (
+    DemoRun,
+    DemoSet,
+    collect_demonstrations,
+    expert_demonstrations,
+    select_diverse,
+)
 from thesis_lib.defender.methods import parse_strategy
 from thesis_lib.defender.wrapper import DefenderWrapper
 
@@ -30,12 +38,15 @@ __all__ = [
     "RUN_COLUMNS",
     "THESIS_STATE_ACTION_STRATEGIES",
     "THESIS_STATE_STRATEGIES",
+    "DEMO_SOURCES",
     "DefenderConfig",
     "TableRuns",
     "compare_table_4_5",
     "compare_tables",
     "crash_curves",
+    "demo_table",
     "demos_subset",
+    "describe_demonstrations",
     "describe_effects",
     "make_demonstrations",
     "plot_curves",
@@ -61,6 +72,12 @@ THESIS_STATE_ACTION_STRATEGIES: tuple[str, ...] = (
 )  # fmt: skip
 """The thesis's top 5 for state-action trajectories, as printed in Table 4.4."""
 
+DEMO_SOURCES: tuple[str, ...] = ("sac", "expert", "auto")
+"""Where :func:`make_demonstrations` takes demonstrations from: ``"sac"`` the thesis's recipe only
+(SAC roll-outs during training; fails when a group gets none), ``"expert"`` the shipped ARS expert
+with action noise (:func:`~thesis_lib.defender.expert_demonstrations`) only, ``"auto"`` SAC
+roll-outs, and a group with fewer than needed topped up from the expert."""
+
 RUN_COLUMNS: tuple[str, ...] = (
     "task", "algo", "trajectory", "strategy", "safe_strategy", "unsafe_strategy", "n_demos", "paper_compat",
     "seed", "acc_reward", "crash_pct", "filtered_pct", "mean_last_100", "n_episodes", "wall_time_s",
@@ -72,15 +89,16 @@ RUN_COLUMNS: tuple[str, ...] = (
 class DefenderConfig:
     """Parameters of ``notebooks/03_defender.ipynb`` (one field per notebook parameter).
 
-    Defaults are the smoke scale (a few minutes on 2 CPU cores); ``params/03_defender.full.yml``
-    holds the thesis's (5,000 episodes x 3 seeds, 50 demonstrations, horizon 1000, 256-256 nets).
+    Defaults are the smoke scale (a few minutes on 2 CPU cores; ``params/03_defender.smoke.yml``
+    also limits the ``paper_compat`` check to Hopper); ``params/03_defender.full.yml`` holds the
+    thesis's (5,000 episodes x 3 seeds, 50 demonstrations, horizon 1000, 256-256 nets).
     """
 
     seed: int = 0
     """Seed of the demonstration run (and the chapter's other draws)."""
     seeds: list[int] = field(default_factory=lambda: [0])
     """Seeds of every training run in Tables 4.3-4.5 (the thesis: 3)."""
-    tasks: list[str] = field(default_factory=lambda: ["Hopper-v5"])
+    tasks: list[str] = field(default_factory=lambda: ["Hopper-v5", "InvertedDoublePendulum-v5", "Walker2d-v5"])
     """Gymnasium tasks (the thesis: Hopper, InvertedDoublePendulum, Walker2d)."""
     max_episode_steps: int | None = 100
     """Episode horizon; None = the task's own (1000, the thesis's)."""
@@ -90,13 +108,16 @@ class DefenderConfig:
     """Training episodes between two demonstration roll-outs."""
     demo_deterministic: bool = True
     """Roll out the policy's mean action (True) or sample it."""
+    demo_source: str = "auto"
+    """Where demonstrations come from, one of :data:`DEMO_SOURCES` ("sac" = the thesis's recipe
+    only; "auto" = SAC roll-outs, a short group topped up from the shipped ARS expert)."""
     n_demos: int = 10
     """Demonstrations per group in Tables 4.3-4.4 (the thesis: 50)."""
     n_demos_list: list[int] = field(default_factory=lambda: [3, 6, 10])
     """Demonstrations per group in Table 4.5 (the thesis: 10, 20, 50)."""
     algos: list[str] = field(default_factory=lambda: ["SAC", "TD3"])
     """Agents of Tables 4.3-4.4."""
-    train_timesteps: int = 1000
+    train_timesteps: int = 500
     """Environment steps per training run (used when ``train_episodes`` is None)."""
     train_episodes: int | None = None
     """Episodes per training run (the thesis: 5000); None = use ``train_timesteps``."""
@@ -113,18 +134,25 @@ class DefenderConfig:
     text), 20 = the authors' code."""
     paper_compat_check: bool = True
     """Also run the first state strategy with SAC and ``paper_compat=True`` (FastDTW radius 1,
-    20-step cap, strict >) to measure what the authors' code changes."""
+    20-step cap, strict >, dynamics trained every step) to measure what the authors' code changes."""
+    paper_compat_tasks: list[str] | None = None
+    """Tasks of that check; None = every task (FastDTW is slow: the smoke profile runs one)."""
+    batch_size: int = 256
+    """Minibatch of the agents' updates (the thesis: 256)."""
+    dynamics_train_every: int | None = None
+    """One dynamics-model update every this many real steps; None = the wrapper's default (4,
+    measured in ``benchmarks/bench_defender.py``; 1 = Algorithm 2 to the letter)."""
     n_jobs: int = 1
     """Processes for the ablation replay (training runs stay sequential so % Time is fair)."""
 
     def __post_init__(self) -> None:
         from thesis_lib.rl import ALGOS
 
-        for name in ("demo_timesteps", "demo_every", "n_demos", "train_timesteps"):
+        for name in ("demo_timesteps", "demo_every", "n_demos", "train_timesteps", "batch_size"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"DefenderConfig.{name} must be a positive int, got {value!r}.")
-        for name in ("max_episode_steps", "train_episodes", "max_trajectory"):
+        for name in ("max_episode_steps", "train_episodes", "max_trajectory", "dynamics_train_every"):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
                 raise ValueError(f"DefenderConfig.{name} must be a positive int or None, got {value!r}.")
@@ -137,6 +165,12 @@ class DefenderConfig:
             raise ValueError(f"n_demos_list must list positive counts, got {self.n_demos_list!r}.")
         for s in [*self.state_strategies, *self.state_action_strategies]:
             parse_strategy(s)  # raises with the valid names
+        if self.demo_source not in DEMO_SOURCES:
+            raise ValueError(f"Unknown demo_source {self.demo_source!r}. Valid: {', '.join(DEMO_SOURCES)}.")
+        if self.paper_compat_tasks is not None:
+            bad = [t for t in self.paper_compat_tasks if t not in self.tasks]
+            if bad:
+                raise ValueError(f"paper_compat_tasks lists {bad[0]!r}, which is not in tasks {self.tasks}.")
 
 
 # --------------------------------------------------------------------------- demonstrations
@@ -156,20 +190,95 @@ def _make_env(task: str, horizon: int | None) -> gym.Env:
 def make_demonstrations(cfg: DefenderConfig, progress: bool = False) -> dict[str, DemoRun]:
     """One SAC run per task, rolled out every ``demo_every`` episodes (thesis 4.3.3).
 
-    Keeps ``max(n_demos, max(n_demos_list))`` diverse demonstrations per group in ``pool``-order
-    (fewer if fewer were seen).
+    Keeps ``n = max(n_demos, max(n_demos_list))`` diverse demonstrations per group. The SAC run
+    always happens (its training episodes are the ablation's log); where the demonstrations come
+    from is ``cfg.demo_source``: with ``"auto"`` a group that got fewer than ``n`` SAC roll-outs is
+    topped up to ``n`` with :func:`~thesis_lib.defender.expert_demonstrations` (the shipped ARS
+    expert with action noise); ``DemoRun.n_sac`` / ``DemoRun.sources()`` say how many of each.
 
     Used in: DEFENDER chapter (thesis 4.3).
     """
     n = max(cfg.n_demos, *cfg.n_demos_list)
-    return {
-        task: collect_demonstrations(
+    out = {}
+    for task in cfg.tasks:
+        run = collect_demonstrations(
             task, n_safe=n, n_unsafe=n, total_timesteps=cfg.demo_timesteps, every=cfg.demo_every,
             seed=cfg.seed, max_episode_steps=cfg.max_episode_steps, deterministic=cfg.demo_deterministic,
-            rl_overrides={"net_arch": list(cfg.net_arch), "learning_rate": cfg.learning_rate}, progress=progress,
+            rl_overrides=_rl_overrides(cfg), progress=progress, allow_missing=cfg.demo_source != "sac",
         )
-        for task in cfg.tasks
-    }
+        if cfg.demo_source == "sac":
+            out[task] = run
+            continue
+        sac = {"safe": run.pool.safe, "unsafe": run.pool.unsafe} if cfg.demo_source == "auto" else {
+            "safe": [], "unsafe": []}
+        need = {g: max(0, n - len(sac[g])) for g in sac}
+        extra = expert_demonstrations(task, n_safe=need["safe"], n_unsafe=need["unsafe"], seed=cfg.seed,
+                                      max_episode_steps=cfg.max_episode_steps)
+        pool = DemoSet([*sac["safe"], *extra.safe], [*sac["unsafe"], *extra.unsafe], task)
+        demos = DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), task)
+        out[task] = DemoRun(demos, pool, run.episodes, run.result,
+                            {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])})
+    return out
+
+
+def _rl_overrides(cfg: DefenderConfig) -> dict[str, Any]:
+    return {"net_arch": list(cfg.net_arch), "learning_rate": cfg.learning_rate, "batch_size": cfg.batch_size}
+
+
+def demo_table(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) -> pd.DataFrame:
+    """Per task and group: SAC roll-outs seen, demonstrations kept and where they came from.
+
+    Used in: DEFENDER chapter (thesis 4.3).
+    """
+    rows = []
+    for task, run in demo_runs.items():
+        src = run.sources()
+        for group in ("safe", "unsafe"):
+            kept = getattr(run.demos, group)
+            n_seen = run.n_sac.get(group, len(getattr(run.pool, group)))
+            rows.append({
+                "task": task, "group": group, "SAC roll-outs seen": n_seen, "kept": len(kept),
+                "kept from SAC roll-outs": src[group][0], "kept from ARS expert": src[group][1],
+                "recipe": _recipe(src[group]),
+                "mean length": float(np.mean([d.length for d in kept])) if kept else np.nan,
+                "lowest step reward": min(float(d.rewards.min()) for d in kept) if kept else np.nan,
+            })
+    return pd.DataFrame(rows)
+
+
+def _recipe(counts: tuple[int, int]) -> str:
+    n_sac, n_expert = counts
+    if n_expert == 0:
+        return "SAC roll-outs (thesis)"
+    if n_sac == 0:
+        return "ARS expert + noise"
+    return "SAC roll-outs, topped up from ARS expert"
+
+
+def describe_demonstrations(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) -> list[str]:
+    """One sentence per task: which recipe each group used and why.
+
+    Used in: DEFENDER chapter (thesis 4.3), so the narration follows the run.
+    """
+    n = max(cfg.n_demos, *cfg.n_demos_list)
+    lines = []
+    for task, run in demo_runs.items():
+        src = run.sources()
+        parts = []
+        for group, what in (("safe", "reached the horizon"), ("unsafe", "fell before it")):
+            seen = run.n_sac.get(group, len(getattr(run.pool, group)))
+            n_sac, n_exp = src[group]
+            if n_exp == 0:
+                parts.append(f"{group}: {n_sac} SAC roll-outs (the thesis's recipe; {seen} of them {what})")
+            elif cfg.demo_source == "expert":
+                parts.append(f"{group}: {n_exp} from the ARS expert with noise (demo_source='expert')")
+            else:
+                got = f"only {seen} SAC roll-out(s) {what}" if seen else f"no SAC roll-out {what}"
+                parts.append(f"{group}: {got} in {cfg.demo_timesteps} training steps, "
+                             f"fewer than the {n} needed, so {n_exp} came from the shipped ARS expert "
+                             f"({'small' if group == 'safe' else 'heavy'} action noise)")
+        lines.append(f"{thesis_env_name(task)}: " + "; ".join(parts) + ".")
+    return lines
 
 
 def demos_subset(run: DemoRun, n: int) -> DemoSet:
@@ -259,8 +368,10 @@ def train_run(
         safe_s, unsafe_s = strategy.split("/")
         env = DefenderWrapper(env, demos.safe, demos.unsafe, safe_method=safe_s, unsafe_method=unsafe_s,
                               trajectory=trajectory, max_trajectory=cfg.max_trajectory, paper_compat=paper_compat,
-                              seed=seed,  # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
-                              dynamics_kwargs={"hidden": list(cfg.net_arch), "learning_rate": cfg.learning_rate})
+                              seed=seed, dynamics_train_every=cfg.dynamics_train_every,
+                              # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
+                              dynamics_kwargs={"hidden": list(cfg.net_arch), "learning_rate": cfg.learning_rate,
+                                               "batch_size": cfg.batch_size})
     callbacks = []
     steps = cfg.train_timesteps
     if cfg.train_episodes:
@@ -268,7 +379,7 @@ def train_run(
         steps = cfg.train_episodes * horizon  # an upper bound; the callback stops at the episode count
         callbacks.append(StopTrainingOnMaxEpisodes(cfg.train_episodes))
     rl = config_from_params({"algo": algo, "env_id": None, "total_timesteps": int(steps), "seed": int(seed),
-                             "net_arch": list(cfg.net_arch), "learning_rate": cfg.learning_rate})
+                             **_rl_overrides(cfg)})
     res = train(rl, env=env, callbacks=callbacks, progress=False, info_keys=["filtered", "filter_step"])
     ep = res.episodes
     ep["filtered"] = ep["filtered"].astype("boolean").fillna(False).astype(bool)
@@ -327,7 +438,8 @@ def run_tables_4_3_4_4(cfg: DefenderConfig, demo_runs: dict[str, DemoRun], progr
                           for s in cfg.state_strategies]
                 specs += [{"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state_action"}
                           for s in cfg.state_action_strategies]
-            if cfg.paper_compat_check and cfg.state_strategies and "SAC" in cfg.algos:
+            if cfg.paper_compat_check and cfg.state_strategies and "SAC" in cfg.algos and (
+                    cfg.paper_compat_tasks is None or task in cfg.paper_compat_tasks):
                 specs.append({"task": task, "algo": "SAC", "seed": seed, "strategy": cfg.state_strategies[0],
                               "trajectory": "state", "paper_compat": True})
     subsets = {task: demos_subset(run, cfg.n_demos) for task, run in demo_runs.items()}
@@ -366,9 +478,8 @@ def run_table_4_5(
     runs = pd.concat([*kept, new.runs], ignore_index=True) if kept else new.runs
     eps = new.episodes
     if reuse is not None and kept:
-        keys = pd.concat(kept)[["task", "seed", "strategy", "n_demos"]]
-        eps = pd.concat([eps, reuse.episodes.merge(keys, on=["task", "seed", "strategy", "n_demos"])],
-                        ignore_index=True)
+        on = ["task", "algo", "trajectory", "seed", "strategy", "n_demos", "paper_compat"]  # the reused runs only
+        eps = pd.concat([eps, reuse.episodes.merge(pd.concat(kept)[on], on=on)], ignore_index=True)
     return TableRuns(runs.sort_values(["task", "n_demos", "seed"]).reset_index(drop=True), eps)
 
 
@@ -469,6 +580,8 @@ def describe_effects(summary: pd.DataFrame) -> list[str]:
             f"{b.crash_pct_mean:.0f}% -> {r.crash_pct_mean:.0f}%, {r.filtered_pct:.0f}% of episodes ended by "
             f"the filter, best return {b.acc_reward_mean:.0f} -> {r.acc_reward_mean:.0f}, "
             f"time {r.time_pct:.0f}% of the plain run."
+            + (" The filter never fired, so the agent saw exactly the plain run's episodes (same seed); "
+               "only the time differs." if r.filtered_pct == 0 else "")
         )
     return lines
 
@@ -486,7 +599,8 @@ def crash_curves(episodes: pd.DataFrame, keys: Sequence[str] = ("task", "algo", 
 def plot_curves(episodes: pd.DataFrame, window: int = 10) -> Any:
     """Learning curves (return vs step, rolling mean) and cumulative crash rate, with and without the filter.
 
-    One column per (task, algo); one line per strategy (seed-averaged on a common step grid).
+    Two rows per task (return; crashed episodes so far), one column per algorithm; one line per
+    strategy and seed (black: no filter).
 
     Used in: DEFENDER chapter (thesis 4.3.3).
     """
@@ -494,21 +608,24 @@ def plot_curves(episodes: pd.DataFrame, window: int = 10) -> Any:
 
     e = crash_curves(episodes)
     e = e[~e.paper_compat.astype(bool)] if "paper_compat" in e else e
-    panels = list(e.groupby(["task", "algo"], sort=False).groups)
-    fig, axes = plt.subplots(2, len(panels), figsize=(5 * len(panels), 6.5), squeeze=False)
-    for col, (task, algo) in enumerate(panels):
-        sub = e[(e.task == task) & (e.algo == algo)]
-        for (traj, strat), run in sub.groupby(["trajectory", "strategy"], sort=False):
-            label = "no filter" if strat == "none" else f"{strat} ({traj})"
-            style = {"color": "black", "lw": 2} if strat == "none" else {}
-            for seed, one in run.groupby("seed"):
-                lab = label if seed == run.seed.min() else None
-                axes[0, col].plot(one.timestep, one["return"].rolling(window, min_periods=1).mean(), label=lab, **style)
-                axes[1, col].plot(one.timestep, one.crash_rate_pct, label=lab, **style)
-        axes[0, col].set_title(f"{thesis_env_name(task)}, {algo}")
-        axes[0, col].set_ylabel(f"return (rolling mean of {window})")
-        axes[1, col].set_ylabel("crashed episodes so far (%)")
-        axes[1, col].set_xlabel("environment step")
-        axes[0, col].legend(fontsize=7)
+    tasks, algos = list(dict.fromkeys(e.task)), list(dict.fromkeys(e.algo))
+    fig, axes = plt.subplots(2 * len(tasks), len(algos), figsize=(5.5 * len(algos), 3.2 * 2 * len(tasks)),
+                             squeeze=False)
+    for i, task in enumerate(tasks):
+        for col, algo in enumerate(algos):
+            ax_r, ax_c = axes[2 * i, col], axes[2 * i + 1, col]
+            sub = e[(e.task == task) & (e.algo == algo)]
+            for (traj, strat), run in sub.groupby(["trajectory", "strategy"], sort=False):
+                label = "no filter" if strat == "none" else f"{strat} ({traj})"
+                style = {"color": "black", "lw": 2} if strat == "none" else {}
+                for seed, one in run.groupby("seed"):
+                    lab = label if seed == run.seed.min() else None
+                    ax_r.plot(one.timestep, one["return"].rolling(window, min_periods=1).mean(), label=lab, **style)
+                    ax_c.plot(one.timestep, one.crash_rate_pct, label=lab, **style)
+            ax_r.set_title(f"{thesis_env_name(task)}, {algo}")
+            ax_r.set_ylabel(f"return (rolling {window})")
+            ax_c.set_ylabel("crashed episodes so far (%)")
+            ax_c.set_xlabel("environment step")
+            ax_r.legend(fontsize=7)
     fig.tight_layout()
     return fig

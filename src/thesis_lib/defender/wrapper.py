@@ -5,7 +5,8 @@ trajectory and compares it with both demonstration groups. If the cost to the sa
 lower, the real environment steps. Otherwise it is **not** stepped: the wrapper returns the
 next state predicted by a dynamics model, the lowest single-step reward found in the
 demonstrations, ``terminated=True`` and ``info["filtered"] = True``. The dynamics model trains
-online on real transitions only.
+online on real transitions only (one update every :data:`DYNAMICS_TRAIN_EVERY` real steps by
+default, every step with ``paper_compat=True`` or ``dynamics_train_every=1``).
 
 Used in: DEFENDER (thesis 4.3).
 """
@@ -25,10 +26,17 @@ from thesis_lib.defender.dynamics import DynamicsModel
 from thesis_lib.defender.methods import parse_method
 from thesis_lib.rl.callbacks import find_horizon, is_crash
 
-__all__ = ["EPISODE_LOG_COLUMNS", "PAPER_MAX_TRAJECTORY", "DefenderWrapper"]
+__all__ = ["DYNAMICS_TRAIN_EVERY", "EPISODE_LOG_COLUMNS", "PAPER_MAX_TRAJECTORY", "DefenderWrapper"]
 
 PAPER_MAX_TRAJECTORY = 20
 """The authors' code cut the agent's trajectory to its last 20 steps before every comparison."""
+
+DYNAMICS_TRAIN_EVERY = 4
+"""Default: one dynamics-model update every 4 real steps. Algorithm 2 updates it every step (1,
+the ``paper_compat`` setting); with it the whole filter added 15-18% to a SAC training step, with
+every 4th step 4-7% (``benchmarks/bench_defender.py``, target <= 10%). A filtered step is terminal, so
+SB3's SAC/TD3 never bootstrap from the predicted next state; its accuracy does not enter the
+agent's targets."""
 
 EPISODE_LOG_COLUMNS: tuple[str, ...] = (
     "episode", "return", "length", "terminated", "truncated", "crashed", "filtered", "filter_step",
@@ -58,7 +66,9 @@ class DefenderWrapper(gym.Wrapper):
             demonstrations (the thesis: "the lowest reward from the reward function").
         dynamics: a :class:`DynamicsModel` to use (e.g. pre-trained); None builds one.
         dynamics_kwargs: keyword arguments for the :class:`DynamicsModel` built when ``dynamics``
-            is None (e.g. ``{"train_every": 2}``).
+            is None (e.g. ``{"hidden": [64, 64]}``).
+        dynamics_train_every: one update of that model every this many real steps; None =
+            :data:`DYNAMICS_TRAIN_EVERY` (4), or 1 (every step, Algorithm 2) with ``paper_compat``.
         seed: seed of the dynamics model.
 
     Each step's ``info`` has ``"filtered"`` (bool); a filtered step also has ``"filter_step"``
@@ -95,6 +105,7 @@ class DefenderWrapper(gym.Wrapper):
         filter_reward: float | None = None,
         dynamics: DynamicsModel | None = None,
         dynamics_kwargs: Mapping[str, Any] | None = None,
+        dynamics_train_every: int | None = None,
         seed: int = 0,
     ) -> None:
         super().__init__(env)
@@ -127,7 +138,7 @@ class DefenderWrapper(gym.Wrapper):
                 raise ValueError(
                     f"DefenderWrapper needs at least one {group} demonstration, got none. DEFENDER compares "
                     "the trajectory with both groups; make them with "
-                    "thesis_lib.defender.collect_demonstrations."
+                    "thesis_lib.defender.collect_demonstrations or expert_demonstrations."
                 )
             parsed = [as_demonstration(d, f"{group} demonstration {i}") for i, d in enumerate(demos)]
             for i, d in enumerate(parsed):
@@ -147,8 +158,15 @@ class DefenderWrapper(gym.Wrapper):
         kw = dict(metric=self.metric, max_trajectory=self.max_trajectory, backend=backend)
         self._safe = GroupCost(groups["safe"], self.safe_method, **kw)
         self._unsafe = GroupCost(groups["unsafe"], self.unsafe_method, **kw)
-        self.dynamics = dynamics if dynamics is not None else DynamicsModel(
-            self.obs_dim, self.act_dim, seed=seed, **dict(dynamics_kwargs or {}))
+        if dynamics is None:
+            kwargs = dict(dynamics_kwargs or {})
+            if dynamics_train_every is not None and "train_every" in kwargs:
+                raise ValueError("Give the dynamics update rate once: dynamics_train_every or "
+                                 "dynamics_kwargs['train_every'], not both.")
+            if "train_every" not in kwargs:
+                kwargs["train_every"] = dynamics_train_every or (1 if self.paper_compat else DYNAMICS_TRAIN_EVERY)
+            dynamics = DynamicsModel(self.obs_dim, self.act_dim, seed=seed, **kwargs)
+        self.dynamics = dynamics
         self.horizon = find_horizon(env)
         self._step = np.empty(n_features)
         self._obs: np.ndarray | None = None
