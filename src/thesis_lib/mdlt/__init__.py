@@ -1,0 +1,59 @@
+"""Music-to-dance translation (thesis chapter 6): audio features, poses -> UR3 joint angles,
+AIST++/PhantomDance readers, the default offline data set, MDLT-T and MDLT-M."""
+from __future__ import annotations
+
+# --- data side (audio, angles, readers, sync, default data set) ---
+from .angles import (
+    JOINT_NAMES,
+    PARENTS,
+    REST_JOINTS,
+    align_skeleton,
+    forward_kinematics,
+    plot_angle_extraction,
+    pose_to_ur3_angles,
+)
+from .audio import (
+    N_FEATURES,
+    FEATURE_SLICES,
+    AudioError,
+    FeatureScaler,
+    audio_features,
+    cached_audio_features,
+    fit_feature_scaler,
+    load_audio,
+)
+from .readers import (
+    AIST_GENRES,
+    DanceSequence,
+    DatasetLayoutError,
+    load_aist,
+    load_dance_dataset,
+    load_phantomdance,
+)
+from .sync import nearest_pose_indices, synchronize
+from .synth import GENRES, default_dataset
+
+# --- model side (models, metrics, training, dance command) ---
+from .dance import DanceResult, animate_arm, dance, plot_angles, ur3_joint_positions
+from .experiments import (
+    MDLTChapterConfig,
+    MDLTExperimentConfig,
+    aist_folds,
+    phantomdance_folds,
+    run_fold,
+    run_table_6_2,
+    run_table_6_3,
+    summarize,
+    table_6_1,
+    train_model,
+)
+from .metrics import (
+    BASELINES,
+    aje,
+    beat_alignment,
+    evaluate_songs,
+    frechet_distance,
+    mae_degrees,
+)
+from .models import MDLTConfig, MDLTMamba, MDLTTransformer, build_model
+from .train import DanceWindows, MDLTTrainer, load_checkpoint, save_checkpoint

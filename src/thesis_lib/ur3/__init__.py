@@ -1,0 +1,62 @@
+"""The UR3 deployment chapter (thesis 5.2.5.4 and chapter 6's application), on a simulated UR3.
+
+* :mod:`thesis_lib.ur3.model` - DH parameters, limits, forward kinematics, the MJCF model
+  (``assets/ur3.xml``);
+* :mod:`thesis_lib.ur3.reach` - the reaching task (a gymnasium env, ``thesis/UR3Reach-v0``),
+  scripted teleoperation-like demonstrations, their Minari data set;
+* :mod:`thesis_lib.ur3.experiments` - Table 5.4 (HDT and DT with 10..80 demonstrations);
+* :mod:`thesis_lib.ur3.safety` - joint, speed and workspace limits: check or clip;
+* :mod:`thesis_lib.ur3.dance` - MDLT's four angles on the arm, with the limit checks;
+* :mod:`thesis_lib.ur3.render`, :mod:`thesis_lib.ur3.viewer` - frames, GIF, meshcat 3-D viewer;
+* :mod:`thesis_lib.ur3.driver` - one driver for the simulation and a real UR3 (URScript or
+  ``ur_rtde``), dry-run by default, refusing unsafe motion, with an emergency stop.
+
+Used in: UR3 deployment chapter (notebook ``07_ur3_deployment``).
+"""
+from __future__ import annotations
+
+from .dance import DanceMapping, DancePlayback, demo_angles, map_dance, prepare_dance
+from .driver import PlayResult, RobotStopped, RTDEBackend, SimBackend, UR3Driver, URScriptBackend
+from .experiments import ReachConfig, run_reach_method, run_table_5_4, success_curves, table_5_4
+from .model import (
+    DH,
+    JOINT_NAMES,
+    MAX_SPEED,
+    POSITION_LIMITS,
+    UR3Kinematics,
+    build_mjcf,
+    dh_transform,
+    fk_dh,
+    load_model,
+    tcp_position,
+)
+from .reach import (
+    DATASET_ID,
+    ENV_ID,
+    GOALS,
+    HOME,
+    TeleopController,
+    UR3ReachEnv,
+    get_reach_dataset,
+    make_demonstrations,
+    split_demonstrations,
+)
+from .safety import SafetyLimits, SafetyReport, UnsafeTrajectoryError, check_trajectory, clip_trajectory
+
+
+def trajectory_html(*args, **kwargs):
+    """:func:`thesis_lib.ur3.viewer.trajectory_html` (meshcat imported only when used)."""
+    from .viewer import trajectory_html as _f
+
+    return _f(*args, **kwargs)
+
+
+__all__ = [
+    "DATASET_ID", "DH", "ENV_ID", "GOALS", "HOME", "JOINT_NAMES", "MAX_SPEED", "POSITION_LIMITS",
+    "DanceMapping", "DancePlayback", "PlayResult", "RTDEBackend", "ReachConfig", "RobotStopped",
+    "SafetyLimits", "SafetyReport", "SimBackend", "TeleopController", "UR3Driver", "UR3Kinematics",
+    "UR3ReachEnv", "URScriptBackend", "UnsafeTrajectoryError", "build_mjcf", "check_trajectory",
+    "clip_trajectory", "demo_angles", "dh_transform", "fk_dh", "get_reach_dataset", "load_model",
+    "make_demonstrations", "map_dance", "prepare_dance", "run_reach_method", "run_table_5_4",
+    "split_demonstrations", "success_curves", "table_5_4", "tcp_position", "trajectory_html",
+]

@@ -1,0 +1,158 @@
+"""``thesis ur3 play | check | demos | model``: the UR3 from the command line.
+
+``thesis ur3 play angles.csv --fps 60`` maps a dance (4 columns: MDLT's angles) or a joint
+trajectory (6 columns) onto the UR3, clips it to the limits (``--mode reject`` to refuse
+instead) and plays it through the driver, **dry-run unless** ``--execute`` is given;
+``--gif``/``--html`` write a picture sequence or the 3-D viewer.
+
+Used in: UR3 deployment chapter.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def read_angles(path: str | Path) -> np.ndarray:
+    """A ``(T, 4)`` or ``(T, 6)`` array from a CSV (an optional header line) or ``.npy`` file."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"No angles file {path}: expected a CSV (T rows, 4 or 6 columns, radians) or .npy.")
+    if path.suffix == ".npy":
+        a = np.load(path)
+    else:
+        first = path.read_text().splitlines()[:1]
+        skip = 1 if first and any(c.isalpha() for c in first[0].replace("e-", "").replace("e+", "")) else 0
+        a = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] not in (4, 6):
+        raise ValueError(f"{path}: expected T rows of 4 (MDLT angles) or 6 (UR3 joint angles) columns, got {a.shape}.")
+    return a
+
+
+def _trajectory(args: argparse.Namespace):
+    from .dance import prepare_dance
+    from .safety import SafetyLimits, UnsafeTrajectoryError, check_trajectory, clip_trajectory
+
+    a = read_angles(args.angles)
+    limits = SafetyLimits(speed_scale=args.speed_scale)
+    if a.shape[1] == 4:
+        return prepare_dance(a, args.fps, mode=args.mode, limits=limits).q, limits
+    dt = 1.0 / args.fps
+    if args.mode == "clip":
+        return clip_trajectory(a, dt, limits), limits
+    rep = check_trajectory(a, dt, limits)
+    if not rep.ok:
+        raise UnsafeTrajectoryError(rep)
+    return a, limits
+
+
+def _backend(args: argparse.Namespace):
+    from .driver import RTDEBackend, SimBackend, URScriptBackend
+
+    if args.backend == "sim":
+        return SimBackend()
+    if not args.host:
+        raise ValueError(f"--backend {args.backend} needs --host (the robot controller's address).")
+    return URScriptBackend(args.host) if args.backend == "urscript" else RTDEBackend(args.host)
+
+
+def _play(args: argparse.Namespace) -> int:
+    from .driver import UR3Driver
+    from .safety import UnsafeTrajectoryError
+
+    try:
+        q, limits = _trajectory(args)
+    except UnsafeTrajectoryError as err:
+        print(f"thesis ur3 play: {err}", file=sys.stderr)
+        return 2
+    drv = UR3Driver(_backend(args), limits=limits, dry_run=not args.execute)
+    try:
+        with drv:
+            res = drv.play(q, fps=args.fps, allow_unchecked_approach=args.allow_unchecked_approach)
+    except UnsafeTrajectoryError as err:
+        print(f"thesis ur3 play: {err}", file=sys.stderr)
+        return 2
+    print(res.report.summary())
+    print("\n".join(drv.log))
+    if args.gif:
+        from .render import render_frames, save_gif
+
+        step = max(1, int(round(args.fps / 15)))
+        print("wrote", save_gif(render_frames(q[::step]), args.gif, fps=args.fps / step))
+    if args.html:
+        from .viewer import save_html, trajectory_html
+
+        print("wrote", save_html(trajectory_html(q, fps=args.fps), args.html))
+    return 0
+
+
+def _check(args: argparse.Namespace) -> int:
+    from .dance import map_dance
+    from .safety import SafetyLimits, check_trajectory
+
+    a = read_angles(args.angles)
+    q = map_dance(a) if a.shape[1] == 4 else a
+    rep = check_trajectory(q, 1.0 / args.fps, SafetyLimits(speed_scale=args.speed_scale))
+    print(rep.summary())
+    return 0 if rep.ok else 2
+
+
+def _demos(args: argparse.Namespace) -> int:
+    from .reach import get_reach_dataset
+
+    ds = get_reach_dataset(args.n, args.seed, overwrite=True)
+    print(f"{ds.id}: {len(ds)} demonstrations, {ds.n_transitions} steps, at {ds.path}")
+    return 0
+
+
+def _model(args: argparse.Namespace) -> int:
+    from .model import asset_path, build_mjcf
+
+    if args.print:
+        print(build_mjcf())
+    else:
+        print(asset_path())
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``thesis ur3 ...`` to the main CLI."""
+    p = subparsers.add_parser("ur3", help="the UR3: play or check a dance, make reaching demonstrations")
+    sub = p.add_subparsers(dest="ur3_command", required=True)
+
+    def common(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument("angles", help="CSV or .npy: T x 4 MDLT angles or T x 6 UR3 joint angles (radians)")
+        sp.add_argument("--fps", type=float, default=60.0, help="frames per second of the file (MDLT: 60)")
+        sp.add_argument("--speed-scale", type=float, default=1.0, help="allowed fraction of the UR3's joint speeds")
+
+    play = sub.add_parser("play", help="play a dance/trajectory through the driver (dry-run unless --execute)")
+    common(play)
+    play.add_argument("--mode", choices=("clip", "reject"), default="clip", help="clip to the limits or refuse")
+    play.add_argument("--backend", choices=("sim", "urscript", "rtde"), default="sim")
+    play.add_argument("--host", help="robot controller address (urscript, rtde)")
+    dry = play.add_mutually_exclusive_group()
+    dry.add_argument("--dry-run", dest="execute", action="store_false", help="check and log only (default)")
+    dry.add_argument("--execute", dest="execute", action="store_true", help="really send the motion")
+    play.set_defaults(execute=False)
+    play.add_argument("--allow-unchecked-approach", action="store_true",
+                      help="urscript: move to the first frame without knowing the current angles")
+    play.add_argument("--gif", help="write rendered frames to this GIF")
+    play.add_argument("--html", help="write the 3-D viewer (meshcat static HTML) here")
+    play.set_defaults(func=_play)
+
+    check = sub.add_parser("check", help="check a dance/trajectory against the joint, speed and workspace limits")
+    common(check)
+    check.set_defaults(func=_check)
+
+    demos = sub.add_parser("demos", help="(re)make the reaching demonstrations data set (thesis/ur3-reach/teleop-v0)")
+    demos.add_argument("-n", type=int, default=100)
+    demos.add_argument("--seed", type=int, default=0)
+    demos.set_defaults(func=_demos)
+
+    mdl = sub.add_parser("model", help="path of the UR3 MJCF model (--print: its text)")
+    mdl.add_argument("--print", action="store_true")
+    mdl.set_defaults(func=_model)

@@ -1,0 +1,153 @@
+"""The robot driver: dry-run, refusal of unsafe motion, emergency stop, a fake UR endpoint on localhost."""
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from thesis_lib.ur3.driver import RobotStopped, SimBackend, UR3Driver, URScriptBackend
+from thesis_lib.ur3.reach import HOME
+from thesis_lib.ur3.safety import SafetyLimits, UnsafeTrajectoryError
+
+
+class FakeUR:
+    """A TCP server on localhost that records every byte a client sends (the UR's secondary interface)."""
+
+    def __init__(self) -> None:
+        self.server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.server.bind(("127.0.0.1", 0))
+        self.server.listen(1)
+        self.port = self.server.getsockname()[1]
+        self.received = b""
+        self.connections = 0
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        self.server.settimeout(10)
+        try:
+            conn, _ = self.server.accept()
+        except OSError:
+            return
+        self.connections += 1
+        with conn:
+            conn.settimeout(10)
+            while True:
+                try:
+                    chunk = conn.recv(65536)
+                except OSError:
+                    return
+                if not chunk:
+                    return
+                self.received += chunk
+
+    def text(self, wait: float = 2.0) -> str:
+        deadline = time.time() + wait
+        while time.time() < deadline and not self.received:
+            time.sleep(0.01)
+        time.sleep(0.05)
+        return self.received.decode()
+
+    def close(self) -> None:
+        self.server.close()
+
+
+@pytest.fixture
+def fake_ur():
+    srv = FakeUR()
+    yield srv
+    srv.close()
+
+
+def _wave(n: int = 20, amp: float = 0.2, fps: float = 50.0) -> np.ndarray:
+    t = np.arange(n) / fps
+    q = np.tile(HOME, (n, 1))
+    q[:, 0] += amp * np.sin(2 * np.pi * t)
+    return q
+
+
+def test_sim_driver_is_dry_run_by_default():
+    backend = SimBackend()
+    drv = UR3Driver(backend)
+    res = drv.play(_wave(), fps=50)
+    assert res.dry_run and res.frames_sent == 0 and not backend.history
+    assert drv.log[0].startswith("dry-run: movej")
+    res = UR3Driver(backend, dry_run=False).play(_wave(), fps=50)
+    assert res.frames_sent == 20 and len(backend.history) > 20
+    np.testing.assert_allclose(backend.q, _wave()[-1])
+
+
+def test_unsafe_trajectories_are_refused_and_nothing_moves():
+    backend = SimBackend()
+    drv = UR3Driver(backend, dry_run=False)
+    fast = _wave(amp=2.0)  # 2 rad x 2 pi rad/s on the base: 4 times its limit
+    with pytest.raises(UnsafeTrajectoryError, match="speed limits broken"):
+        drv.play(fast, fps=50)
+    beyond = _wave()
+    beyond[5, 2] = 7.0
+    with pytest.raises(UnsafeTrajectoryError, match="joint limits broken in 1 of 20 frames"):
+        drv.play(beyond, dt=10.0)
+    floor = np.tile(np.array([0.0, 0.3, 0.0, 0.0, 0.0, 0.0]), (3, 1))  # flange below the table
+    with pytest.raises(UnsafeTrajectoryError, match="workspace"):
+        drv.play(floor, fps=50)
+    assert not backend.history and "refused" in drv.log[-1]
+    # a slower speed scale refuses what full speed allows
+    slow = UR3Driver(SimBackend(), limits=SafetyLimits(speed_scale=0.25), dry_run=False, approach_speed=0.5)
+    with pytest.raises(UnsafeTrajectoryError):
+        slow.play(_wave(amp=0.2, fps=50), fps=50)  # 1.26 rad/s > 0.785
+
+
+def test_emergency_stop_halts_streaming_and_blocks_motion():
+    backend = SimBackend(realtime=True)
+    drv = UR3Driver(backend, dry_run=False)
+    q = _wave(n=200, amp=0.1, fps=50)  # 4 s in real time
+    timer = threading.Timer(0.3, drv.emergency_stop)
+    timer.start()
+    res = drv.play(q, fps=50)
+    timer.join()
+    assert res.stopped and 0 < res.frames_sent < 200 and backend.stopped
+    with pytest.raises(RobotStopped):
+        drv.play(q, fps=50)
+    drv.clear_stop()
+    assert not drv.stopped
+
+
+def test_urscript_backend_against_fake_robot(fake_ur):
+    backend = URScriptBackend("127.0.0.1", fake_ur.port)
+    q = _wave(n=5)
+    # dry-run: no connection at all
+    UR3Driver(backend).play(q, fps=50)
+    assert fake_ur.connections == 0
+    # the current angles are unknown over URScript: the approach must be allowed explicitly
+    drv = UR3Driver(backend, dry_run=False)
+    with pytest.raises(ValueError, match="cannot read the robot's joint angles"):
+        drv.play(q, fps=50)
+    res = drv.play(q, fps=50, current=HOME)
+    drv.emergency_stop()
+    text = fake_ur.text()
+    lines = text.splitlines()
+    assert lines[0].startswith("movej([") and "v=0.5000" in lines[0]
+    assert lines[1] == "def thesis_play():" and sum(line.strip().startswith("servoj(") for line in lines) == 5
+    first = [float(x) for x in lines[2].split("[")[1].split("]")[0].split(",")]
+    np.testing.assert_allclose(first, q[0], atol=1e-6)
+    assert "t=0.020000" in lines[2] and lines[-1] == "stopj(4.0)"
+    assert res.frames_sent == 5
+    drv.close()
+
+
+def test_urscript_unsafe_sends_nothing(fake_ur):
+    drv = UR3Driver(URScriptBackend("127.0.0.1", fake_ur.port), dry_run=False)
+    with pytest.raises(UnsafeTrajectoryError):
+        drv.play(_wave(amp=3.0), fps=50, current=HOME)
+    assert fake_ur.connections == 0 and fake_ur.received == b""
+
+
+def test_driver_argument_errors():
+    with pytest.raises(ValueError, match="approach_speed"):
+        UR3Driver(approach_speed=10.0)
+    drv = UR3Driver()
+    with pytest.raises(ValueError, match="exactly one of dt"):
+        drv.play(_wave(), dt=0.1, fps=10)
