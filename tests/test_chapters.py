@@ -124,3 +124,18 @@ def test_thesis_cli_reports_bad_input_in_one_line():
     assert proc.returncode == 1
     assert proc.stderr.startswith("thesis data: Unknown task 'hoper'. Did you mean: 'hopper'?")
     assert "Traceback" not in proc.stderr
+
+
+def test_library_progress_bars_are_off_inside_executed_chapters(tmp_path, monkeypatch):
+    """tqdm output would land in the book as lines of cursor codes; the kernel gets TQDM_DISABLE=1."""
+    from thesis_lib.book import run_chapter
+
+    monkeypatch.delenv("TQDM_DISABLE", raising=False)
+    _write_project(tmp_path, "import os\nprint('TQDM_DISABLE=' + os.environ.get('TQDM_DISABLE', 'unset'))")
+    run_chapter("demo", root=tmp_path, progress=False)
+    executed = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
+    printed = "".join(o.get("text", "") for c in executed.cells for o in c.get("outputs", []))
+    assert "TQDM_DISABLE=1" in printed
+    import os
+
+    assert "TQDM_DISABLE" not in os.environ, "the runner restores the caller's environment"

@@ -9,11 +9,12 @@ minutes on a laptop CPU) and ``params/<name>.full.yml`` (the thesis's scale).
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -157,16 +158,32 @@ def run_chapter(
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
-        pm.execute_notebook(
-            str(notebook_path(chapter, root)), str(out), parameters=params, kernel_name=kernel,
-            cwd=str(root), progress_bar=progress, log_output=False,
-        )
+        with _library_progress_bars_off():
+            pm.execute_notebook(
+                str(notebook_path(chapter, root)), str(out), parameters=params, kernel_name=kernel,
+                cwd=str(root), progress_bar=progress, log_output=False,
+            )
     except pm.PapermillExecutionError as err:
         raise ChapterFailed(
             f"Chapter '{chapter}' failed in cell {err.cell_index} (execution count {err.exec_count}): "
             f"{err.ename}: {err.evalue}\nOpen {out} — papermill marked the failing cell at its top."
         ) from None
     return ChapterRun(chapter, out, params, round(time.perf_counter() - t0, 2))
+
+
+@contextlib.contextmanager
+def _library_progress_bars_off() -> Iterator[None]:
+    """tqdm bars inside an executed chapter would be printed into the book as hundreds of lines
+    of cursor codes, so the kernel gets ``TQDM_DISABLE=1`` (unless the caller set it); papermill's
+    own bar over the cells still shows progress."""
+    if "TQDM_DISABLE" in os.environ:
+        yield
+        return
+    os.environ["TQDM_DISABLE"] = "1"
+    try:
+        yield
+    finally:
+        os.environ.pop("TQDM_DISABLE", None)
 
 
 def _run_one(args: tuple) -> ChapterRun:

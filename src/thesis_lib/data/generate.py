@@ -23,6 +23,7 @@ Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3 (InvertedDoublePendulum).
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Callable, Literal
 
 import numpy as np
@@ -55,15 +56,35 @@ def make_env(task: str, **kwargs: object):  # -> gym.Env
 
     spec = get_task(task)
     if spec.kind in ("maze", "robotics"):
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import gymnasium_robotics
-
-            gym.register_envs(gymnasium_robotics)
+        _register_robotics()
+        if spec.env_id.startswith("AdroitHand") and _ROBOTICS_NOTICE:
+            warnings.warn(_ROBOTICS_NOTICE, stacklevel=2)
     kw = {**spec.env_kwargs, **kwargs}
     return gym.make(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw)
+
+
+_ROBOTICS_NOTICE = ""
+
+
+def _register_robotics() -> None:
+    """Register gymnasium-robotics' environments once.
+
+    Its import prints a notice about the Adroit-v1 reward change to stderr; it would appear in
+    every chapter that makes a maze, so it is kept and raised as a warning for Adroit tasks only.
+    """
+    global _ROBOTICS_NOTICE
+    import contextlib
+    import io
+
+    import gymnasium as gym
+
+    buf = io.StringIO()
+    with warnings.catch_warnings(), contextlib.redirect_stderr(buf):
+        warnings.simplefilter("ignore")
+        import gymnasium_robotics
+
+        gym.register_envs(gymnasium_robotics)
+    _ROBOTICS_NOTICE = _ROBOTICS_NOTICE or buf.getvalue().strip()
 
 
 Policy = Callable[[object, np.random.Generator], np.ndarray]
