@@ -69,6 +69,7 @@ def _mujoco_frames(q: np.ndarray, width: int, height: int, camera: str) -> np.nd
         for x in q:
             data.qpos[:] = x
             mujoco.mj_kinematics(model, data)
+            mujoco.mj_camlight(model, data)  # cameras and lights: mj_kinematics leaves them at zero
             renderer.update_scene(data, camera=camera)
             frames.append(renderer.render().copy())
     finally:
