@@ -151,3 +151,22 @@ def test_driver_argument_errors():
     drv = UR3Driver()
     with pytest.raises(ValueError, match="exactly one of dt"):
         drv.play(_wave(), dt=0.1, fps=10)
+
+
+def test_ur3_play_reads_the_csv_that_mdlt_dance_writes(tmp_path):
+    """`thesis mdlt dance --out` writes time_s + four angles; `thesis ur3 play` takes that file as is."""
+    import pandas as pd
+
+    from thesis_lib.mdlt.dance import JOINT_COLUMNS
+    from thesis_lib.ur3.cli import read_angles
+
+    t = np.arange(30) / 60
+    angles = np.stack([0.1 * np.sin(t + k) for k in range(4)], axis=1)
+    path = tmp_path / "angles.csv"
+    pd.DataFrame({"time_s": t, **{c: angles[:, j] for j, c in enumerate(JOINT_COLUMNS)}}).to_csv(path, index=False)
+    np.testing.assert_allclose(read_angles(path), angles)
+    np.savetxt(tmp_path / "plain.csv", angles, delimiter=",")
+    np.testing.assert_allclose(read_angles(tmp_path / "plain.csv"), angles)
+    pd.DataFrame(angles[:, :3]).to_csv(tmp_path / "bad.csv", index=False)
+    with pytest.raises(ValueError, match="4 \\(MDLT angles\\) or 6"):
+        read_angles(tmp_path / "bad.csv")

@@ -25,8 +25,14 @@ def read_angles(path: str | Path) -> np.ndarray:
         a = np.load(path)
     else:
         first = path.read_text().splitlines()[:1]
-        skip = 1 if first and any(c.isalpha() for c in first[0].replace("e-", "").replace("e+", "")) else 0
-        a = np.loadtxt(path, delimiter=",", skiprows=skip, ndmin=2)
+        header = bool(first) and any(c.isalpha() for c in first[0].replace("e-", "").replace("e+", ""))
+        if header:  # e.g. `thesis mdlt dance --out`: time_s, then the four angles
+            import pandas as pd
+
+            frame = pd.read_csv(path)
+            a = frame.drop(columns=[c for c in frame.columns if str(c).lower().startswith("time")]).to_numpy()
+        else:
+            a = np.loadtxt(path, delimiter=",", ndmin=2)
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] not in (4, 6):
         raise ValueError(f"{path}: expected T rows of 4 (MDLT angles) or 6 (UR3 joint angles) columns, got {a.shape}.")
