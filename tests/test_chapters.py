@@ -141,3 +141,18 @@ def test_library_progress_bars_are_off_inside_executed_chapters(tmp_path, monkey
     import os
 
     assert "TQDM_DISABLE" not in os.environ, "the runner restores the caller's environment"
+
+
+def test_executed_chapter_shows_its_parameters_once(tmp_path):
+    """The defaults cell is hidden in the book when papermill injected the parameters that ran."""
+    from thesis_lib.book import run_chapter
+
+    _write_project(tmp_path, "print(n)")
+    run_chapter("demo", {"n": 3}, root=tmp_path, progress=False)
+    nb = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
+    tags = [c.metadata.get("tags", []) for c in nb.cells]
+    defaults = [t for t in tags if "parameters" in t]
+    injected = [i for i, t in enumerate(tags) if "injected-parameters" in t]
+    assert defaults == [["parameters", "remove-cell"]]
+    assert len(injected) == 1 and "n = 3" in nb.cells[injected[0]].source
+    assert "remove-cell" not in tags[injected[0]]

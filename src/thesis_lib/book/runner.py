@@ -168,7 +168,23 @@ def run_chapter(
             f"Chapter '{chapter}' failed in cell {err.cell_index} (execution count {err.exec_count}): "
             f"{err.ename}: {err.evalue}\nOpen {out} — papermill marked the failing cell at its top."
         ) from None
+    _show_parameters_once(out)
     return ChapterRun(chapter, out, params, round(time.perf_counter() - t0, 2))
+
+
+def _show_parameters_once(path: Path) -> None:
+    """The book shows the parameters a chapter ran with once: papermill's injected cell (what ran),
+    not also the notebook's defaults cell above it (tagged ``remove-cell`` for jupyter-book)."""
+    import nbformat
+
+    nb = nbformat.read(path, as_version=4)
+    tags = [c.get("metadata", {}).get("tags", []) for c in nb.cells]
+    if not any("injected-parameters" in t for t in tags):
+        return
+    for cell, t in zip(nb.cells, tags):
+        if "parameters" in t and "remove-cell" not in t:
+            cell.metadata["tags"] = [*t, "remove-cell"]
+    nbformat.write(nb, path)
 
 
 @contextlib.contextmanager
