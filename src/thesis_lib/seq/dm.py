@@ -41,7 +41,16 @@ import torch
 import torch.nn as nn
 
 from thesis_lib.seq.mamba import Mamba, MambaConfig, MambaState
-from thesis_lib.seq.models import SeqOutput, _action_head, _check_inputs, _ModelConfig, masked_mse
+from thesis_lib.seq.models import (
+    SeqOutput,
+    _action_head,
+    _action_key,
+    _action_output,
+    _check_inputs,
+    _ModelConfig,
+    _rsa_tokens,
+    masked_mse,
+)
 from thesis_lib.seq.tokens import deinterleave_embeddings, interleave_embeddings
 
 __all__ = [
@@ -173,10 +182,6 @@ class TokenMamba(nn.Module):
         return y[:, -1], state
 
 
-def _action_tokens(batch: Tensors, paper_compat: bool) -> torch.Tensor:
-    return batch["prev_actions"] if paper_compat else batch["actions"]  # (B, T, act_dim)
-
-
 # ----------------------------------------------------------------------------------------------
 # Models
 
@@ -207,24 +212,15 @@ class DecisionMamba(nn.Module):
         self.predict_action = _action_head(d, config.act_dim)
 
     def _keys(self) -> tuple[str, ...]:
-        action_key = "prev_actions" if self.config.paper_compat else "actions"
+        action_key = _action_key(self.config.paper_compat)
         return ("states", action_key) + (("returns_to_go",) if self.config.use_rtg else ())
-
-    def _tokens(self, batch: Tensors) -> list[torch.Tensor]:
-        tokens = [self.embed_state(batch["states"]), self.embed_action(_action_tokens(batch, self.config.paper_compat))]
-        if self.embed_rtg is not None:
-            tokens.insert(0, self.embed_rtg(batch["returns_to_go"]))  # (rtg_t, s_t, a_t)
-        return tokens
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the masked MSE."""
         _check_inputs(self, batch, self._keys())
-        h = self.trunk(self._tokens(batch))
+        h = self.trunk(_rsa_tokens(self, batch))
         actions = self.predict_action(h[-2]) * self.config.max_action  # read at s_t
-        if targets is None:
-            return SeqOutput(actions)
-        loss = masked_mse(actions, targets["actions"], batch.get("mask"))
-        return SeqOutput(actions, loss=loss, losses={"action": loss.item()})
+        return _action_output(actions, batch, targets)
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -274,7 +270,7 @@ class HDM(nn.Module):
         return [high, [p for p in self.parameters() if id(p) not in ids]]
 
     def _keys(self) -> tuple[str, ...]:
-        action_key = "prev_actions" if self.config.paper_compat else "actions"
+        action_key = _action_key(self.config.paper_compat)
         return ("states", action_key, "subgoals", "prev_subgoals")
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
@@ -285,7 +281,7 @@ class HDM(nn.Module):
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
         """Actions ``a_t`` ``(B, T, act_dim)`` from ``(g_t, s_t, a_t)`` tokens."""
-        a_tok = _action_tokens(batch, self.config.paper_compat)
+        a_tok = batch[_action_key(self.config.paper_compat)]
         tokens = [self.low_embed_subgoal(subgoals), self.low_embed_state(batch["states"]), self.low_embed_action(a_tok)]
         h = self.low(tokens)
         return self.predict_action(h[1]) * self.config.max_action  # read at s_t

@@ -256,6 +256,27 @@ def _action_head(d_in: int, act_dim: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(d_in, act_dim), nn.Tanh())
 
 
+def _action_key(paper_compat: bool) -> str:
+    """The batch entry in the action slot: ``a_t`` (correct), or ``a_{t-1}`` as the authors' code."""
+    return "prev_actions" if paper_compat else "actions"
+
+
+def _rsa_tokens(model: nn.Module, batch: Tensors) -> list[torch.Tensor]:
+    """``[rtg_t,] s_t, a_t`` embeddings of a DT-style model (``embed_rtg``/``embed_state``/``embed_action``)."""
+    tokens = [model.embed_state(batch["states"]), model.embed_action(batch[_action_key(model.config.paper_compat)])]
+    if model.embed_rtg is not None:
+        tokens.insert(0, model.embed_rtg(batch["returns_to_go"]))  # (rtg_t, s_t, a_t)
+    return tokens
+
+
+def _action_output(actions: torch.Tensor, batch: Tensors, targets: Tensors | None) -> SeqOutput:
+    """``SeqOutput`` of a model that predicts actions only; with ``targets`` the masked MSE."""
+    if targets is None:
+        return SeqOutput(actions)
+    loss = masked_mse(actions, targets["actions"], batch.get("mask"))
+    return SeqOutput(actions, loss=loss, losses={"action": loss.item()})
+
+
 # ----------------------------------------------------------------------------------------------
 # The shared transformer trunk
 
@@ -331,10 +352,7 @@ class BC(nn.Module):
         """Predict ``a_t`` from ``s_t``; with ``targets`` (``targets["actions"]``) also the loss."""
         _check_inputs(self, batch, ("states",))
         actions = self.net(batch["states"]) * self.config.max_action  # (B, T, act_dim)
-        if targets is None:
-            return SeqOutput(actions)
-        loss = masked_mse(actions, targets["actions"], batch.get("mask"))
-        return SeqOutput(actions, loss=loss, losses={"action": loss.item()})
+        return _action_output(actions, batch, targets)
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -364,23 +382,16 @@ class DecisionTransformer(nn.Module):
         self.predict_action = _action_head(d, config.act_dim)
 
     def _keys(self) -> tuple[str, ...]:
-        action_key = "prev_actions" if self.config.paper_compat else "actions"
+        action_key = _action_key(self.config.paper_compat)
         return ("states", action_key, "timesteps") + (("returns_to_go",) if self.config.use_rtg else ())
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the loss."""
         _check_inputs(self, batch, self._keys())
-        a_tok = batch["prev_actions"] if self.config.paper_compat else batch["actions"]  # (B, T, act_dim)
-        tokens = [self.embed_state(batch["states"]), self.embed_action(a_tok)]
-        if self.embed_rtg is not None:
-            tokens.insert(0, self.embed_rtg(batch["returns_to_go"]))  # (rtg_t, s_t, a_t)
-        h = self.transformer(tokens, batch["timesteps"], batch.get("mask"))
+        h = self.transformer(_rsa_tokens(self, batch), batch["timesteps"], batch.get("mask"))
         h_state = h[-2]  # (B, T, d): output at the s_t tokens
         actions = self.predict_action(h_state) * self.config.max_action
-        if targets is None:
-            return SeqOutput(actions)
-        loss = masked_mse(actions, targets["actions"], batch.get("mask"))
-        return SeqOutput(actions, loss=loss, losses={"action": loss.item()})
+        return _action_output(actions, batch, targets)
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -439,7 +450,7 @@ class HDT(nn.Module):
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
         """Actions ``a_t`` ``(B, T, act_dim)`` from ``([rtg_t,] g_t, s_t, a_t)`` tokens."""
-        a_tok = batch["prev_actions"] if self.config.paper_compat else batch["actions"]
+        a_tok = batch[_action_key(self.config.paper_compat)]
         tokens = [self.low_embed_subgoal(subgoals), self.low_embed_state(batch["states"]), self.low_embed_action(a_tok)]
         if self.low_embed_rtg is not None:
             tokens.insert(0, self.low_embed_rtg(batch["returns_to_go"]))
@@ -447,7 +458,7 @@ class HDT(nn.Module):
         return self.predict_action(h[-2]) * self.config.max_action  # read at s_t
 
     def _keys(self) -> tuple[str, ...]:
-        action_key = "prev_actions" if self.config.paper_compat else "actions"
+        action_key = _action_key(self.config.paper_compat)
         keys = ("states", action_key, "timesteps", "subgoals", "prev_subgoals")
         return keys + (("returns_to_go",) if self.config.low_use_rtg else ())
 
