@@ -146,7 +146,7 @@ def test_feature_scaler_train_only_and_paper_compat():
     train = [rng.uniform(0, 1, (50, 3)), rng.uniform(-1, 2, (40, 3))]
     val = [rng.uniform(-5, 5, (30, 3))]
     train[0][:, 2] = train[1][:, 2] = 7.0  # a constant dimension
-    sc = AU.fit_feature_scaler(train, held_out=val)
+    sc = AU.fit_feature_scaler(train, held_out=val, clip=False)
     z = np.concatenate([sc.transform(t) for t in train])
     np.testing.assert_allclose(z[:, :2].min(0), 0.1, atol=1e-6)
     np.testing.assert_allclose(z[:, :2].max(0), 0.9, atol=1e-6)
@@ -159,6 +159,13 @@ def test_feature_scaler_train_only_and_paper_compat():
     assert vz.min() >= 0.1 - 1e-6 and vz.max() <= 0.9 + 1e-6  # fitted on validation too
     back = AU.FeatureScaler.from_state_dict(json.loads(json.dumps(sc.state_dict())))
     np.testing.assert_array_equal(back.transform(val[0]), v)
+    clipped = AU.fit_feature_scaler(train, held_out=val)  # the default: unseen music stays in range
+    c = clipped.transform(val[0])
+    assert c.min() >= 0.1 - 1e-6 and c.max() <= 0.9 + 1e-6
+    inside = (v >= 0.1) & (v <= 0.9)
+    np.testing.assert_allclose(c[inside], v[inside], atol=1e-6)  # only the outliers change
+    assert AU.FeatureScaler.from_state_dict(clipped.state_dict()).clip
+    assert not leak.clip  # the authors' pipeline did not clip
     with pytest.raises(ValueError, match="fitted on 3"):
         sc.transform(np.zeros((2, 4)))
     with pytest.raises(RuntimeError, match="before fit"):

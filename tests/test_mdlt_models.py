@@ -339,3 +339,23 @@ def test_dance_command_end_to_end_on_foreign_audio(tmp_path):
     # bad input: one-line errors, exit code 1
     assert main(["mdlt", "dance", "--audio", str(tmp_path / "nope.wav"), "--checkpoint", str(ckpt), "--out", str(out)]) == 1
     assert main(["mdlt", "dance", "--audio", str(wav), "--checkpoint", str(tmp_path / "nope.pt"), "--out", str(out)]) == 1
+
+
+@pytest.mark.parametrize("variant", ["transformer", "mamba"])
+def test_init_output_at_starts_at_the_given_pose(variant):
+    from thesis_lib.mdlt.models import init_output_at
+
+    torch.manual_seed(0)
+    m = build_model(MDLTConfig(variant=variant, K=6, d_model=16, n_layers=1, n_heads=2, d_ff=32)).eval()
+    pose = np.array([1.2, -0.5, 0.8, 3.5])  # the last one beyond pi: the head saturates near pi, no inf
+    f = np.random.default_rng(0).uniform(0.1, 0.9, (40, 438)).astype(np.float32)
+    before = m.generate(f)
+    init_output_at(m, pose)
+    out = m.generate(f)
+    assert np.abs(out[:, :3] - pose[:3]).max() < 0.25 < np.abs(before[:, :3] - pose[:3]).max()
+    assert np.isfinite(out).all() and (out[:, 3] > 2.9).all() and (np.abs(out) <= np.pi).all()
+    assert out.std(0).max() > 0  # still depends on the input (weights scaled, not zeroed)
+    with pytest.raises(ValueError, match="finite pose of shape"):
+        init_output_at(m, np.array([0.0, np.nan, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="finite pose of shape"):
+        init_output_at(m, np.zeros(3))

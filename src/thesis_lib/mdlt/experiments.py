@@ -29,7 +29,7 @@ import torch
 from tqdm.auto import tqdm
 
 from thesis_lib.mdlt.metrics import BASELINES, aje, evaluate_songs, mean_pose_baseline
-from thesis_lib.mdlt.models import MDLTConfig, build_model
+from thesis_lib.mdlt.models import MDLTConfig, build_model, init_output_at
 from thesis_lib.mdlt.train import DanceWindows, MDLTTrainer
 from thesis_lib.seq.trainer import TrainConfig
 
@@ -141,6 +141,10 @@ class MDLTExperimentConfig:
     pose_noise: float = 0.0
     """Std (rad) of noise on the input poses in training (not in the thesis; against exposure
     bias, see :class:`~thesis_lib.mdlt.train.DanceWindows`)."""
+    init_mean_pose: bool = True
+    """Start each model's output at the training songs' mean pose
+    (:func:`~thesis_lib.mdlt.models.init_output_at`); ``False``: PyTorch's default
+    initialisation (the thesis's; output near the zero pose at first)."""
     paper_compat: bool = False
     """The authors' code: scaler fitted on all songs (validation too), MDLT-M trained on single
     frames without poses. The reported value stays the final model's."""
@@ -296,6 +300,8 @@ def train_model(variant: str, train: Sequence, val: Sequence, cfg: MDLTExperimen
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         model = build_model(mcfg)
+        if cfg.init_mean_pose:
+            init_output_at(model, np.concatenate(angles).mean(0))
     windows = DanceWindows(feats, angles, K=mcfg.K, variant=mcfg.variant, seed=seed,
                            single_frame=cfg.paper_compat and mcfg.variant == "mamba", pose_noise=cfg.pose_noise)
 

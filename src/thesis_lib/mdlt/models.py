@@ -43,6 +43,7 @@ __all__ = [
     "MDLTMamba",
     "MDLTTransformer",
     "build_model",
+    "init_output_at",
     "MODEL_VARIANTS",
 ]
 
@@ -129,6 +130,22 @@ def _check_batch(model: nn.Module, batch: Tensors) -> tuple[int, int]:
 
 def _head(d_model: int, act_dim: int) -> nn.Linear:
     return nn.Linear(d_model, act_dim)
+
+
+def init_output_at(model: nn.Module, pose: np.ndarray) -> None:
+    """Start the output head at ``pose`` (4,): weights scaled by 0.1, bias ``atanh(pose / pi)``.
+
+    The output is ``tanh(head(h)) * pi``; from the default initialisation it starts near the
+    zero pose, far from where dancers' arms are, and a short run spends its updates getting to
+    the mean pose before it learns anything about the music. Starting there (the usual
+    initialisation of a regression head at the target mean) leaves the updates for the music.
+    """
+    pose = np.asarray(pose, dtype=np.float64).reshape(-1)
+    if pose.shape != (model.config.act_dim,) or not np.isfinite(pose).all():
+        raise ValueError(f"Expect a finite pose of shape ({model.config.act_dim},), got {pose.shape}.")
+    with torch.no_grad():
+        model.head.weight.mul_(0.1)  # small, not zero: the output still depends on the input
+        model.head.bias.copy_(torch.as_tensor(np.arctanh(np.clip(pose / math.pi, -0.99, 0.99))))
 
 
 def _loss(pred: torch.Tensor, targets: Tensors | None, mask: torch.Tensor) -> tuple[torch.Tensor | None, dict | None]:
