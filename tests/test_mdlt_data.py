@@ -530,3 +530,17 @@ def test_default_dataset_caches_and_validates(tmp_path, monkeypatch):
         SY.default_dataset("phantomdance", "smoke", seed=6, root=root)
     with pytest.raises(ValueError, match="Valid layouts"):
         SY.default_dataset("aistpp")
+
+
+def test_feature_scaler_mutes_groups_and_keeps_the_rest():
+    rng = np.random.default_rng(1)
+    train, val = [rng.uniform(0, 1, (30, 438))], rng.uniform(0, 1, (20, 438))
+    full = AU.fit_feature_scaler(train)
+    muted = AU.fit_feature_scaler(train, mute=["tempogram", "beat"])
+    a, b = full.transform(val), muted.transform(val)
+    assert (b[:, 53:] == np.float32(0.1)).all()  # beat and tempogram: constant
+    np.testing.assert_array_equal(a[:, :53], b[:, :53])
+    back = AU.FeatureScaler.from_state_dict(json.loads(json.dumps(muted.state_dict())))
+    np.testing.assert_array_equal(back.transform(val), b)
+    with pytest.raises(ValueError, match="Unknown feature group"):
+        AU.fit_feature_scaler(train, mute=["tempo"])

@@ -359,3 +359,14 @@ def test_init_output_at_starts_at_the_given_pose(variant):
         init_output_at(m, np.array([0.0, np.nan, 0.0, 0.0]))
     with pytest.raises(ValueError, match="finite pose of shape"):
         init_output_at(m, np.zeros(3))
+
+
+def test_mute_features_reach_the_models_and_bad_names_fail():
+    from thesis_lib.mdlt.experiments import MDLTExperimentConfig
+
+    with pytest.raises(ValueError, match="mute_features"):
+        MDLTExperimentConfig(mute_features=["tempo"])
+    seqs = _sequences(1, 3, T=60)
+    cfg = _tiny_cfg(iterations=2, mute_features=["tempogram"])
+    _, _, scaler = train_model("mamba", seqs[:2], seqs[2:], cfg)
+    assert scaler.mute == ("tempogram",) and (scaler.transform(seqs[2].features)[:, 54:] == np.float32(0.1)).all()

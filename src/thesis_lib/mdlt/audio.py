@@ -303,10 +303,16 @@ class FeatureScaler:
     [[0.5, 0.1]]
     """
 
-    def __init__(self, low: float = 0.1, high: float = 0.9, clip: bool = False):
+    def __init__(self, low: float = 0.1, high: float = 0.9, clip: bool = False, mute: Sequence[str] = ()):
         if not low < high:
             raise ValueError(f"FeatureScaler needs low < high, got low={low}, high={high}.")
+        unknown = [g for g in mute if g not in FEATURE_SLICES]
+        if unknown:
+            raise ValueError(f"Unknown feature group(s) {unknown} to mute. Valid: {', '.join(FEATURE_SLICES)}.")
         self.low, self.high, self.clip = float(low), float(high), bool(clip)
+        self.mute = tuple(mute)
+        """Feature groups (:data:`FEATURE_SLICES` names) that ``transform`` holds at ``low``: a
+        model then gets no information from them (the input size stays 438)."""
         self.min_: np.ndarray | None = None
         self.max_: np.ndarray | None = None
 
@@ -338,6 +344,8 @@ class FeatureScaler:
         y = self.low + (self.high - self.low) * (x - self.min_) / rng
         if self.clip:
             y = np.clip(y, self.low, self.high)
+        for group in self.mute:
+            y[..., FEATURE_SLICES[group]] = self.low
         return y.astype(np.float32)
 
     def fit_transform(self, features: Sequence[np.ndarray]) -> list[np.ndarray]:
@@ -352,13 +360,14 @@ class FeatureScaler:
             "low": self.low,
             "high": self.high,
             "clip": self.clip,
+            "mute": list(self.mute),
             "min": self.min_.tolist(),
             "max": self.max_.tolist(),
         }
 
     @classmethod
     def from_state_dict(cls, state: dict) -> "FeatureScaler":
-        s = cls(low=state["low"], high=state["high"], clip=state.get("clip", False))
+        s = cls(low=state["low"], high=state["high"], clip=state.get("clip", False), mute=state.get("mute", ()))
         s.min_ = np.asarray(state["min"], dtype=np.float64)
         s.max_ = np.asarray(state["max"], dtype=np.float64)
         if s.min_.shape != s.max_.shape or s.min_.ndim != 1:
@@ -373,6 +382,7 @@ def fit_feature_scaler(
     low: float = 0.1,
     high: float = 0.9,
     clip: bool | None = None,
+    mute: Sequence[str] = (),
 ) -> FeatureScaler:
     """The thesis's min-max scaler, fitted on the training features only.
 
@@ -390,6 +400,9 @@ def fit_feature_scaler(
             was trained on. The authors' fit on every song hid this (nothing is out
             of range then); clipping is what keeps the honest split usable (sklearn's
             ``MinMaxScaler(clip=True)`` does the same).
+        mute: feature groups held constant (:attr:`FeatureScaler.mute`); not in the thesis, for
+            experiments such as the MDLT chapter's tempogram probe.
     """
     arrays = list(train) + (list(held_out) if paper_compat else [])
-    return FeatureScaler(low=low, high=high, clip=(not paper_compat) if clip is None else bool(clip)).fit(arrays)
+    clip = (not paper_compat) if clip is None else bool(clip)
+    return FeatureScaler(low=low, high=high, clip=clip, mute=mute).fit(arrays)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import io
 import time
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, NamedTuple, Sequence
@@ -141,6 +142,9 @@ class MDLTExperimentConfig:
     pose_noise: float = 0.0
     """Std (rad) of noise on the input poses in training (not in the thesis; against exposure
     bias, see :class:`~thesis_lib.mdlt.train.DanceWindows`)."""
+    mute_features: list[str] = field(default_factory=list)
+    """Feature groups the models get as a constant (``"tempogram"``, ``"mfcc"``, ... see
+    :data:`~thesis_lib.mdlt.audio.FEATURE_SLICES`); empty: all 438 dimensions (the thesis)."""
     init_mean_pose: bool = True
     """Start each model's output at the training songs' mean pose
     (:func:`~thesis_lib.mdlt.models.init_output_at`); ``False``: PyTorch's default
@@ -163,6 +167,11 @@ class MDLTExperimentConfig:
         unknown = [v for v in self.variants if v not in ("transformer", "mamba", "mamba_audio")]
         if unknown or not self.variants:
             raise ValueError(f"Unknown variant(s) {unknown or self.variants!r}. Valid: transformer, mamba, mamba_audio.")
+        from thesis_lib.mdlt.audio import FEATURE_SLICES
+
+        bad = [g for g in self.mute_features if g not in FEATURE_SLICES]
+        if bad:
+            raise ValueError(f"Unknown feature group(s) {bad} in mute_features. Valid: {', '.join(FEATURE_SLICES)}.")
         if not 1 <= self.n_folds <= 6:
             raise ValueError(f"Expect 1 <= n_folds <= 6 (leave one of 6 pieces out), actually: {self.n_folds!r}.")
         if not 1 <= self.pd_folds <= 10:
@@ -271,10 +280,11 @@ def phantomdance_folds(sequences: Sequence, n_folds: int = 10, run: int | None =
     return folds
 
 
-def _fit_scaler(train: Sequence, val: Sequence, paper_compat: bool):
+def _fit_scaler(train: Sequence, val: Sequence, paper_compat: bool, mute: Sequence[str] = ()):
     from thesis_lib.mdlt.audio import fit_feature_scaler
 
-    return fit_feature_scaler([s.features for s in train], [s.features for s in val], paper_compat=paper_compat)
+    return fit_feature_scaler([s.features for s in train], [s.features for s in val], paper_compat=paper_compat,
+                              mute=tuple(mute))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -289,7 +299,7 @@ def train_model(variant: str, train: Sequence, val: Sequence, cfg: MDLTExperimen
 
     Used in: MDLT chapter (thesis 6.5).
     """
-    scaler = scaler if scaler is not None else _fit_scaler(train, val, cfg.paper_compat)
+    scaler = scaler if scaler is not None else _fit_scaler(train, val, cfg.paper_compat, cfg.mute_features)
     feats = [scaler.transform(s.features).astype(np.float32) for s in train]
     angles = [np.asarray(s.angles, np.float32) for s in train]
     val_feats = [scaler.transform(s.features).astype(np.float32) for s in val]
@@ -338,7 +348,7 @@ def run_fold(train: Sequence, val: Sequence, cfg: MDLTExperimentConfig, experime
 
     Used in: MDLT chapter (thesis 6.5).
     """
-    scaler = _fit_scaler(train, val, cfg.paper_compat)
+    scaler = _fit_scaler(train, val, cfg.paper_compat, cfg.mute_features)
     true = [np.asarray(s.angles, np.float32) for s in val]
     names = [str(s.name) for s in val]
     beats = [np.asarray(s.features)[:, BEAT_COLUMN] for s in val]
@@ -470,6 +480,15 @@ class MDLTChapterConfig(MDLTExperimentConfig):
     (0: skip)."""
     animation_seconds: float = 8.0
     """Seconds of the arm animation."""
+    probe_mute: list[str] = field(default_factory=list)
+    """The chapter's probe: "All Genres" re-run with MDLT-M (audio only) and these feature groups
+    muted (e.g. ``["tempogram"]``); empty: no probe."""
+    probe_batch_size: int = 64
+    """Batch size of the probe's training."""
+    probe_iterations: int = 400
+    """Updates of the probe's training."""
+    probe_grad_clip: float = 1.0
+    """Gradient clipping of the probe's training."""
     profile: str = "full"
     """Name of the parameter profile (recorded only)."""
 
@@ -477,3 +496,16 @@ class MDLTChapterConfig(MDLTExperimentConfig):
         super().__post_init__()
         if not 0 <= self.compat_folds <= 6:
             raise ValueError(f"Expect 0 <= compat_folds <= 6, actually: {self.compat_folds!r}.")
+        self.probe_config()  # checks the probe's groups and sizes
+
+    def probe_config(self) -> "MDLTExperimentConfig":
+        """The probe's experiment: "All Genres" only, MDLT-M (audio only), ``probe_mute`` muted,
+        the probe's batch size, updates and clipping, checkpoints under ``checkpoint_dir/probe``;
+        everything else as this config."""
+        return MDLTExperimentConfig(**{
+            **{f.name: getattr(self, f.name) for f in dataclasses.fields(MDLTExperimentConfig)},
+            "variants": ["mamba_audio"], "mute_features": list(self.probe_mute), "genres": [], "all_genres": True,
+            "batch_size": self.probe_batch_size, "iterations": self.probe_iterations,
+            "grad_clip": self.probe_grad_clip,
+            # its own folder: the main run's checkpoints of the same name must not be resumed
+            "checkpoint_dir": str(Path(self.checkpoint_dir) / "probe") if self.checkpoint_dir else None})
