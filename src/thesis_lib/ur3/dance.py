@@ -20,7 +20,8 @@ from typing import Literal
 
 import numpy as np
 
-from .safety import SafetyLimits, SafetyReport, UnsafeTrajectoryError, check_trajectory, clip_trajectory
+from .safety import (SafetyLimits, SafetyReport, UnsafeTrajectoryError, as_angle_frames, check_trajectory,
+                     clip_trajectory)
 
 __all__ = ["DanceMapping", "DancePlayback", "demo_angles", "map_dance", "prepare_dance"]
 
@@ -42,14 +43,7 @@ class DanceMapping:
 
 
 def _check_angles(angles: np.ndarray) -> np.ndarray:
-    a = np.asarray(angles, dtype=np.float64)
-    if a.ndim != 2 or a.shape[1] != 4:
-        raise ValueError(f"Expect dance angles of shape (T, 4) in radians (MDLT's output), got {a.shape}.")
-    if len(a) == 0:
-        raise ValueError("Expect at least one frame of dance angles, got 0.")
-    if not np.all(np.isfinite(a)):
-        raise ValueError("Dance angles contain NaN or inf.")
-    return a
+    return as_angle_frames(angles, 4, "dance angles (MDLT's output)")
 
 
 def map_dance(angles: np.ndarray, mapping: DanceMapping | None = None) -> np.ndarray:

@@ -117,16 +117,23 @@ class SafetyReport:
         return "; ".join(parts) + extra + "."
 
 
-def _as_traj(q: np.ndarray) -> np.ndarray:
+def as_angle_frames(q: np.ndarray, n_joints: int = 6, what: str = "a trajectory") -> np.ndarray:
+    """``q`` as a float ``(T, n_joints)`` array of radians with ``T >= 1`` and no NaN/inf, or a
+    ``ValueError`` that names ``what`` and the first bad frame. The one input check of the UR3
+    code (trajectories, dance angles)."""
     q = np.asarray(q, dtype=np.float64)
-    if q.ndim != 2 or q.shape[1] != 6:
-        raise ValueError(f"Expect a trajectory of shape (T, 6) in radians, got {q.shape}.")
+    if q.ndim != 2 or q.shape[1] != n_joints:
+        raise ValueError(f"Expect {what} of shape (T, {n_joints}) in radians, got {q.shape}.")
     if len(q) == 0:
-        raise ValueError("Expect a trajectory with at least one frame, got 0.")
+        raise ValueError(f"Expect {what} with at least one frame, got 0.")
     if not np.all(np.isfinite(q)):
         bad = int(np.flatnonzero(~np.isfinite(q).all(axis=1))[0])
-        raise ValueError(f"Trajectory contains NaN or inf (first at frame {bad}).")
+        raise ValueError(f"Found NaN or inf in {what}, first at frame {bad}.")
     return q
+
+
+def _as_traj(q: np.ndarray) -> np.ndarray:
+    return as_angle_frames(q, 6, "a trajectory")
 
 
 def _check_dt(dt: float) -> float:
