@@ -17,9 +17,9 @@ Used in: MDLT chapter (thesis 6.5).
 """
 from __future__ import annotations
 
+import dataclasses
 import io
 import time
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, NamedTuple, Sequence

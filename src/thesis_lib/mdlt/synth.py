@@ -16,8 +16,8 @@ solo: a key pose every beat or half-beat) drawn from a genre-specific style (whe
 tends to be, how far it swings, smooth or sharp transitions, :class:`GenreStyle`). The music
 decides *what* (the section picks the move), *where* (each chord root shifts the pose,
 :func:`chord_offsets`) and *when* (key poses land on the beats). Three rules hold in every
-genre, so that songs of one genre teach the others (generator v6; v5 made them genre-specific
-and no model could learn them from 50 pieces): the chorus move is bigger (the arm higher and
+genre, so that songs of one genre teach the others (generator v6; in v5 they were genre-specific
+and a small MLP barely beat the mean pose on unseen music): the chorus move is bigger (the arm higher and
 more extended, :data:`ENERGY_SHIFT`), the first beat of each two-beat move is accented
 (:data:`BEAT_ACCENT`), and a chord root moves the arm the same way in every genre. Dancers vary
 (:class:`Dancer`): timing lag, amplitude, pose bias, a slow wander, and an improvised move in
