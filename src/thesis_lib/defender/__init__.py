@@ -26,10 +26,10 @@ batch 256, one model taking turns on each env variant). One filter decision cost
 the thesis's top state strategies on an idle core (Full/DemoW are incremental; BothW10 about
 75 µs), against 20-100 ms with FastDTW. Per SAC training step (plain: 15 ms), lightly loaded,
 wall time: the DTW filter alone +2.5%, the default wrapper (dynamics every 4th step) +6.6%,
-Algorithm 2 to the letter (dynamics every step) +18%, FastDTW x5.1. Re-measured on a 2-core
-machine under load average 7-9 (CPU-time ratios, wall unusable): the default wrapper +4.4% to
-+7.0% for each of the 5 top state strategies, Algorithm 2 +15%, FastDTW x3.2. Target: at most
-+10%; the thesis reports +19% to +3,245%.
+Algorithm 2 to the letter (dynamics every step) +18%, FastDTW x5.1. Re-measured with
+``make bench`` on an idle 2-core machine (load 0.4; plain SAC step 14 ms): the default wrapper
++3.9% to +5.6% for each of the 5 top state strategies, the DTW filter alone -0.5% (noise),
+Algorithm 2 +17%, FastDTW x5.0. Target: at most +10%; the thesis reports +19% to +3,245%.
 
 Used in: DEFENDER chapter (thesis 4.3), ``notebooks/03_defender.ipynb``.
 
