@@ -406,7 +406,8 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     curves = run_hdt_experiments(cfg)
     # 2 seeds x (DT: 3 targets, HDT: 1) x 2 evaluations
     assert len(curves) == 2 * (3 + 1) * 2 and set(curves.seed) == {0, 1} and not curves.paper_compat.any()
-    assert (curves.length_mean == 3).all()  # cut at max_eval_steps
+    # max_eval_steps caps locomotion only: Maze2D's sparse-reward scores need whole episodes
+    assert (curves.length_mean > 3).all() and curves.length_mean.nunique() == 1
     again = run_hdt_experiments(cfg)
     pd.testing.assert_frame_equal(curves, again)  # same seeds, same numbers
     compat = run_paper_compat(cfg)

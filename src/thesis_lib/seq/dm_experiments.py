@@ -30,7 +30,7 @@ import torch
 from tqdm.auto import tqdm
 
 from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig
-from thesis_lib.seq.evaluate import EvalResult, evaluate, target_returns
+from thesis_lib.seq.evaluate import EvalResult, eval_step_cap, evaluate, target_returns
 from thesis_lib.seq.models import HDT, DecisionTransformer, DTConfig, HDTConfig
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
@@ -143,7 +143,8 @@ class DMChapterConfig:
     eval_episodes: int = 4
     """Episodes per evaluation (100 in the thesis)."""
     max_eval_steps: int | None = 100
-    """Cap on evaluation episode length (``None``: the task's time limit)."""
+    """Cap on evaluation episode length (``None``: the task's time limit). Maze2D always runs
+    whole episodes (:func:`~thesis_lib.seq.evaluate.eval_step_cap`)."""
     eval_mode: str = "recurrent"
     """How the DM/HDM act: ``recurrent`` (one O(1) step per action) or ``window`` (re-run the
     last K steps, as the authors' code: ``paper_compat``)."""
@@ -294,7 +295,7 @@ def run_dm_method(method: str, task: str, tier: str, seed: int, cfg: DMChapterCo
         per_episode = None if values[0] is None else np.repeat(np.asarray(values, dtype=np.float64), E)
         ep_seed = 10_000 * (seed + 1) + trainer.iteration
         res_all = evaluate(m, task, E * len(values), target_return=per_episode, dataset=seq, seed=ep_seed,
-                           max_steps=cfg.max_eval_steps, n_envs=E * len(values))
+                           max_steps=eval_step_cap(task, cfg.max_eval_steps), n_envs=E * len(values))
         for i, (name, target) in enumerate(targets.items()):
             part = slice(i * E, (i + 1) * E)
             res = EvalResult(res_all.returns[part], res_all.lengths[part],

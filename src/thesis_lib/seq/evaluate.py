@@ -77,6 +77,26 @@ def target_returns(data: Any) -> dict[str, float]:
     return {"max": best, "half": best / 2, "10k": 10000.0}
 
 
+def eval_step_cap(task: str, cap: int | None) -> int | None:
+    """The evaluation step cap a task gets: ``cap`` for locomotion, ``None`` (the task's own time
+    limit) for Maze2D.
+
+    Maze2D's reward is sparse (1 per step near the goal) and D4RL's reference returns assume
+    whole episodes (300-800 steps): cut at 100 steps every method scores at or below the random
+    reference, and a table of zeros says nothing. Locomotion returns accrue every step, so a cap
+    only shortens them.
+
+    Used in: HDT chapter, Decision Mamba chapter (smoke profiles).
+
+    Example:
+        >>> eval_step_cap("hopper", 100), eval_step_cap("maze2d-umaze", 100)
+        (100, None)
+    """
+    from thesis_lib.data.tasks import get_task
+
+    return None if get_task(task).kind == "maze" else cap
+
+
 def _env_factory(env: Any) -> tuple[Callable[[], Any] | None, Any, str | None]:
     """(factory, vector env given as is, task name) from what the user passed."""
     import gymnasium as gym

@@ -35,7 +35,7 @@ import pandas as pd
 import torch
 from tqdm.auto import tqdm
 
-from thesis_lib.seq.evaluate import evaluate, target_returns
+from thesis_lib.seq.evaluate import eval_step_cap, evaluate, target_returns
 from thesis_lib.seq.models import BC, HDT, BCConfig, DecisionTransformer, DTConfig, HDTConfig
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
@@ -120,7 +120,8 @@ class HDTExperimentConfig:
     eval_episodes: int = 100
     """Episodes per evaluation (per target for RTG methods)."""
     max_eval_steps: int | None = None
-    """Cap on evaluation episode length (default: the task's time limit)."""
+    """Cap on evaluation episode length (default: the task's time limit). Maze2D always runs
+    whole episodes (:func:`~thesis_lib.seq.evaluate.eval_step_cap`)."""
     profile: Literal["smoke", "full"] = "smoke"
     """Data-set size profile of ``thesis_lib.data.get_dataset``."""
     n_transitions: int | None = None
@@ -265,7 +266,7 @@ def run_method(
 
     def eval_fn(m: torch.nn.Module) -> float:
         res = evaluate(m, venv, n * len(targets), target_return=per_episode, dataset=seq, task=task,
-                       seed=10_000 * (seed + 1) + trainer.iteration, max_steps=cfg.max_eval_steps)
+                       seed=10_000 * (seed + 1) + trainer.iteration, max_steps=eval_step_cap(task, cfg.max_eval_steps))
         for k, (name, target) in enumerate(targets.items()):
             part = slice(k * n, (k + 1) * n)
             rows.append({
