@@ -427,10 +427,16 @@ def phantom_fixture(tmp_path_factory):
     n = 60  # 2 s at 30 fps
     bones = list(R.PHANTOM_BONES) + ["R_Hand_end"]
     order = np.random.default_rng(0).permutation(len(bones))  # the reader matches bones by name
+    mirror = np.diag([-1.0, 1.0, 1.0])  # Unity is left-handed: x right, y up, z forward
     for k, name in enumerate(["001", "002"]):
-        poses = _arm_down_poses(n, np.linspace(0, np.pi / 2, n) if k == 0 else None)
-        rot = np.concatenate([poses, np.zeros((n, 1, 3))], axis=1)  # the extra bone
-        q = Rotation.from_rotvec(rot.reshape(-1, 3)).as_quat().reshape(n, len(bones), 4)[..., [3, 0, 1, 2]]
+        poses = _arm_down_poses(n, np.linspace(0, np.pi / 2, n) if k == 0 else None).reshape(n, 24, 3)
+        local = Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(n, 24, 3, 3)
+        world = local.copy()  # the official format stores world rotations
+        for j in range(1, 24):
+            world[:, j] = world[:, A.PARENTS[j]] @ local[:, j]
+        unity = mirror @ world @ mirror
+        rot = np.concatenate([unity, np.repeat(np.eye(3)[None, None], n, 0)], axis=1)  # + an extra bone
+        q = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat().reshape(n, len(bones), 4)  # (x, y, z, w)
         obj = {"bone_name": [bones[i] for i in order], "root_positions": np.zeros((n, 3)).tolist(),
                "rotations": q[:, order].tolist()}  # fmt: skip
         (root / "motion" / f"{name}.json").write_text(json.dumps(obj))
@@ -447,6 +453,46 @@ def test_load_phantomdance(phantom_fixture):
     np.testing.assert_allclose(s.angles[:, 2], -np.linspace(0, np.pi / 2, 60)[s.pose_index], atol=1e-5)
     np.testing.assert_array_equal(s.pose_index, np.arange(len(s)))  # same rate: frame i = pose i
     assert len(R.load_dance_dataset(phantom_fixture, skip=["002"], progress=False)) == 1
+
+
+def test_phantom_world_rotations_and_unity_frame(tmp_path):
+    """The official format: world rotations (a child of an unrotated bone carries its parent's
+    rotation), (x, y, z, w), Unity's left-handed frame (a yaw turns the other way)."""
+    n = 2
+    raise_arm = Rotation.from_euler("z", [[0.0], [np.pi / 2]]).as_matrix()  # frame 1: right arm up sideways
+    world = np.repeat(np.eye(3)[None, None], n, 0).repeat(24, 1)
+    for j in (A.JOINT_NAMES.index(b) for b in ("right_shoulder", "right_elbow", "right_wrist", "right_hand")):
+        world[:, j] = raise_arm  # rigid arm: every bone below the shoulder has the same world rotation
+    local = np.zeros((n, 24, 3))
+    local[:, A.JOINT_NAMES.index("right_shoulder")] = Rotation.from_matrix(raise_arm).as_rotvec()
+    expect = A.forward_kinematics(local)
+    q = Rotation.from_matrix(world.reshape(-1, 3, 3)).as_quat().reshape(n, 24, 4)
+    p = tmp_path / "m.json"
+    p.write_text(json.dumps({"bone_name": list(R.PHANTOM_BONES), "root_positions": np.zeros((n, 3)).tolist(),
+                             "rotations": q.tolist()}))
+    got, _ = R.read_phantom_motion(p, frame="smpl")
+    np.testing.assert_allclose(got, expect, atol=1e-9)
+    as_local, _ = R.read_phantom_motion(p, frame="smpl", rotations="local")  # the old misreading
+    assert np.abs(as_local[1] - expect[1]).max() > 0.05
+    # Unity's frame: +x is the body's right; a yaw of +a there is a yaw of -a in ours
+    yaw = Rotation.from_euler("y", 0.4).as_matrix()
+    world_u = np.repeat(yaw[None, None], 1, 0).repeat(24, 1)  # the whole body turned
+    pu = tmp_path / "u.json"
+    pu.write_text(json.dumps({"bone_name": list(R.PHANTOM_BONES), "root_positions": [[0.3, 0.9, 0.1]],
+                              "rotations": Rotation.from_matrix(world_u.reshape(-1, 3, 3)).as_quat().reshape(1, 24, 4).tolist()}))
+    got_u, _ = R.read_phantom_motion(pu)
+    exp_local = np.zeros((1, 24, 3))
+    exp_local[:, 0] = [0.0, -0.4, 0.0]
+    np.testing.assert_allclose(got_u, A.forward_kinematics(exp_local, np.array([[-0.3, 0.9, 0.1]])), atol=1e-9)
+    # the writer of the default set is the reader's inverse
+    poses = np.random.default_rng(0).normal(0, 0.4, (3, 24, 3))
+    root = np.random.default_rng(1).normal(0, 1, (3, 3))
+    qw, rp = R.smpl_to_phantom(poses, root)
+    pw = tmp_path / "w.json"
+    pw.write_text(json.dumps({"bone_name": list(R.PHANTOM_BONES), "root_positions": rp.tolist(), "rotations": qw.tolist()}))
+    np.testing.assert_allclose(R.read_phantom_motion(pw)[0], A.forward_kinematics(poses, root), atol=1e-9)
+    with pytest.raises(ValueError, match="rotations must be"):
+        R.read_phantom_motion(pw, rotations="global")
 
 
 def test_phantomdance_bad_input(phantom_fixture, tmp_path):

@@ -23,11 +23,16 @@ ignore list); ``all_sequences=True`` keeps every one.
     root/motion/<name>.json   bone_name [B], root_positions (N, 3), rotations (N, B, 4)
     root/music/<name>.wav
 
-30 pose frames per second. Rotations are read as local (relative to the parent bone, SMPL's
-convention) unit quaternions in (w, x, y, z) order, as the authors' code read them, and turned
-into joint positions with the project's skeleton (:func:`angles.forward_kinematics`). The
-authors placed each bone's end at ``root + R_j (0, 0, j + 1)``, which is not forward
-kinematics (``paper_compat`` does not reproduce that).
+30 pose frames per second; music at 16 kHz (resampled by the feature extractor). Rotations are
+read as the data set's README (v1.2) defines them: **world** rotations, quaternions in
+**(x, y, z, w)** order, positions and rotations in Unity3D's left-handed frame (x right, y up,
+z forward). The reader mirrors them into the project's right-handed frame, turns them into
+local rotations and computes joint positions with the project's skeleton
+(:func:`angles.forward_kinematics`); ``quaternion_order``, ``rotations`` and ``frame`` read other
+conventions (e.g. local rotations from the toolkit's conversion script; the project's previous
+reader assumed local (w, x, y, z) quaternions, which on a real download gives wrong poses
+without an error). The authors' code placed each bone's end at ``root + R_j (0, 0, j + 1)``,
+which is not forward kinematics (``paper_compat`` does not reproduce that).
 
 Bad input: a folder without the layout raises :class:`DatasetLayoutError` saying what was
 expected; a sequence without its music raises (``skip_missing_audio=True`` skips it with a
@@ -381,14 +386,82 @@ PHANTOM_BONES = ("Pelvis", "L_Hip", "R_Hip", "Spine1", "L_Knee", "R_Knee", "Spin
 """SMPL bone names as PhantomDance spells them, in :data:`angles.JOINT_NAMES` order."""
 
 
-def read_phantom_motion(path: str | Path, quaternion_order: str = "wxyz") -> tuple[np.ndarray, dict]:
-    """Joint positions (N, 24, 3) of one PhantomDance motion JSON, plus its other fields.
+_UNITY_MIRROR = np.diag([-1.0, 1.0, 1.0])
+"""Unity's left-handed frame (x right, y up, z forward) to the project's right-handed SMPL frame
+(x to the body's left, y up, z forward): mirror x. A rotation matrix R becomes M R M."""
 
-    Bones are matched by name (case-insensitive; :data:`PHANTOM_BONES`); the 24 SMPL bones must
-    all be present, other bones are ignored.
+
+def _chain_world(local: np.ndarray) -> np.ndarray:
+    """(T, 24, 3, 3) local rotations (each relative to its parent) -> world rotations."""
+    from .angles import PARENTS
+
+    world = np.empty_like(local)
+    world[:, 0] = local[:, 0]
+    for j in range(1, 24):
+        world[:, j] = world[:, PARENTS[j]] @ local[:, j]
+    return world
+
+
+def _unchain_world(world: np.ndarray) -> np.ndarray:
+    """(T, 24, 3, 3) world rotations -> local ones: ``R_local[j] = R_world[parent]^T R_world[j]``."""
+    from .angles import PARENTS
+
+    local = np.empty_like(world)
+    local[:, 0] = world[:, 0]
+    for j in range(1, 24):
+        local[:, j] = np.swapaxes(world[:, PARENTS[j]], -1, -2) @ world[:, j]
+    return local
+
+
+def smpl_to_phantom(poses: np.ndarray, root_positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SMPL parameters -> PhantomDance's motion arrays, the inverse of :func:`read_phantom_motion`.
+
+    Args:
+        poses: (T, 72) or (T, 24, 3) local axis-angle rotations (SMPL's layout, our frame).
+        root_positions: (T, 3) root positions in metres (our frame).
+
+    Returns:
+        ``rotations (T, 24, 4)``: world rotations as (x, y, z, w) quaternions in Unity's frame, in
+        :data:`PHANTOM_BONES` order; ``root_positions (T, 3)`` in Unity's frame.
     """
     from scipy.spatial.transform import Rotation
 
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 24, 3)
+    T = len(poses)
+    world = _chain_world(Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3))
+    unity = _UNITY_MIRROR @ world @ _UNITY_MIRROR
+    q = Rotation.from_matrix(unity.reshape(-1, 3, 3)).as_quat().reshape(T, 24, 4)
+    return q, np.asarray(root_positions, dtype=np.float64) @ _UNITY_MIRROR
+
+
+def read_phantom_motion(path: str | Path, quaternion_order: str = "xyzw", rotations: str = "world",
+                        frame: str = "unity") -> tuple[np.ndarray, dict]:  # fmt: skip
+    """Joint positions (N, 24, 3) of one PhantomDance motion JSON, plus its other fields.
+
+    The official format (PhantomDance README, v1.2): ``bone_name`` (N bones), ``root_positions``
+    (T, 3) in metres, ``rotations`` (T, N, 4) quaternions **(x, y, z, w)**, positions and
+    rotations in **world coordinates of Unity3D** (x right, y up, z forward: left-handed), 30 fps.
+    The defaults read exactly that: the rotations are mirrored into the project's right-handed
+    frame (:data:`_UNITY_MIRROR`), turned into local rotations (``R_parent^T R_bone``) and run
+    through :func:`angles.forward_kinematics` with the project's rest skeleton.
+
+    Bones are matched by name (case-insensitive; :data:`PHANTOM_BONES`); the 24 SMPL bones must
+    all be present, other bones are ignored.
+
+    Args:
+        quaternion_order: ``"xyzw"`` (official) or ``"wxyz"``.
+        rotations: ``"world"`` (official) or ``"local"`` (each bone relative to its parent, as
+            the toolkit's conversion script writes them).
+        frame: ``"unity"`` (official: left-handed) or ``"smpl"`` (already right-handed, ours).
+    """
+    from scipy.spatial.transform import Rotation
+
+    if quaternion_order not in ("wxyz", "xyzw"):
+        raise ValueError(f"quaternion_order must be 'wxyz' or 'xyzw', got '{quaternion_order}'.")
+    if rotations not in ("world", "local"):
+        raise ValueError(f"rotations must be 'world' or 'local', got '{rotations}'.")
+    if frame not in ("unity", "smpl"):
+        raise ValueError(f"frame must be 'unity' or 'smpl', got '{frame}'.")
     path = Path(path)
     try:
         d = json.loads(path.read_text())
@@ -412,15 +485,19 @@ def read_phantom_motion(path: str | Path, quaternion_order: str = "wxyz") -> tup
     q = rot[:, [index[b.lower()] for b in PHANTOM_BONES]]  # (N, 24, 4)
     if quaternion_order == "wxyz":
         q = q[..., [1, 2, 3, 0]]  # scipy wants (x, y, z, w)
-    elif quaternion_order != "xyzw":
-        raise ValueError(f"quaternion_order must be 'wxyz' or 'xyzw', got '{quaternion_order}'.")
     n = q.shape[0]
     bad = ~np.all(np.isfinite(q.reshape(n, -1)), axis=1) | ~np.all(np.isfinite(root_pos), axis=1)
     bad |= np.any(np.linalg.norm(q, axis=-1) < 1e-8, axis=1)
     joints = np.full((n, 24, 3), np.nan)
     if (~bad).any():
-        rotvec = Rotation.from_quat(q[~bad].reshape(-1, 4)).as_rotvec().reshape(-1, 24, 3)
-        joints[~bad] = forward_kinematics(rotvec, root_pos[~bad])
+        m = Rotation.from_quat(q[~bad].reshape(-1, 4)).as_matrix().reshape(-1, 24, 3, 3)
+        pos = root_pos[~bad]
+        if frame == "unity":
+            m, pos = _UNITY_MIRROR @ m @ _UNITY_MIRROR, pos @ _UNITY_MIRROR
+        if rotations == "world":
+            m = _unchain_world(m)
+        rotvec = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_rotvec().reshape(-1, 24, 3)
+        joints[~bad] = forward_kinematics(rotvec, pos)
     return joints, d
 
 
@@ -432,7 +509,9 @@ def load_phantomdance(
     skip: Sequence[str] = (),
     skip_missing_audio: bool = False,
     keep_joints: bool = True,
-    quaternion_order: str = "wxyz",
+    quaternion_order: str = "xyzw",
+    rotations: str = "world",
+    frame: str = "unity",
     progress: bool = True,
 ) -> list[DanceSequence]:
     """Load PhantomDance (or the default set in its layout), sorted by name.
@@ -442,6 +521,8 @@ def load_phantomdance(
         fps: audio feature frames per second; default 30, the data set's pose rate, as the
             authors' code used for PhantomDance (``DanceSequence.fps`` says which).
         skip: names to leave out (the authors skipped ``'000'``, broken in their download).
+        quaternion_order, rotations, frame: how the motion files store rotations; the defaults
+            are the official format (see :func:`read_phantom_motion`).
     """
     root = Path(root)
     if not root.is_dir():
@@ -465,7 +546,8 @@ def load_phantomdance(
         names = [n for n in names if n not in set(missing)]
     out = []
     for name in _progress(names, len(names), "PhantomDance", progress):
-        joints, meta = read_phantom_motion(mdir / f"{name}.json", quaternion_order=quaternion_order)
+        joints, meta = read_phantom_motion(mdir / f"{name}.json", quaternion_order=quaternion_order,
+                                           rotations=rotations, frame=frame)
         pose_fps = float(meta.get("fps", PHANTOM_FPS))
         ts = np.arange(joints.shape[0]) / pose_fps
         out.append(_pair(name, name, str(meta.get("genre", "")), adir / f"{name}.wav", joints, ts, 1.0,

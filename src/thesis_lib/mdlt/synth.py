@@ -51,7 +51,7 @@ import numpy as np
 
 from .angles import forward_kinematics, upper_arm_direction
 
-GENERATOR_VERSION = "mdlt-synth-v6"
+GENERATOR_VERSION = "mdlt-synth-v7"
 """Changes whenever the generated data change; a cached default set of another version is remade."""
 AUDIO_SR = 22050
 """Sample rate of the written music (the feature extractor resamples it, as for real music)."""
@@ -537,11 +537,10 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
     """Write a synthetic data set in the PhantomDance layout (``motion/*.json``, ``music/*.wav``).
 
     Pieces cycle through the genres; each has its own dancer (PhantomDance has 100+ subjects);
-    poses at exactly 30 fps, rotations as local (w, x, y, z) quaternions per SMPL bone.
+    poses at exactly 30 fps, in the official format (:func:`readers.smpl_to_phantom`): world
+    rotations as (x, y, z, w) quaternions and root positions in Unity's left-handed frame.
     """
-    from scipy.spatial.transform import Rotation
-
-    from .readers import PHANTOM_BONES, PHANTOM_FPS
+    from .readers import PHANTOM_BONES, PHANTOM_FPS, smpl_to_phantom
 
     root = Path(root)
     (root / "motion").mkdir(parents=True, exist_ok=True)
@@ -562,10 +561,10 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
         dancer = Dancer.sample(_rng(seed, 21, i))
         times = np.arange(int(piece.duration * PHANTOM_FPS)) / PHANTOM_FPS
         poses, drift = smpl_poses_for(g, piece, dancer, times, seed, rng)
-        q = Rotation.from_rotvec(poses.reshape(-1, 3)).as_quat().reshape(len(times), 24, 4)[..., [3, 0, 1, 2]]
+        q, root_pos = smpl_to_phantom(poses, drift + np.array([0.0, 0.95, 0.0]))
         obj = {
             "bone_name": list(PHANTOM_BONES),
-            "root_positions": np.round(drift + np.array([0.0, 0.95, 0.0]), 5).tolist(),
+            "root_positions": np.round(root_pos, 5).tolist(),
             "rotations": np.round(q, 6).tolist(),
             "fps": PHANTOM_FPS,
             "genre": g,
