@@ -133,14 +133,21 @@ def test_library_progress_bars_are_off_inside_executed_chapters(tmp_path, monkey
     from thesis_lib.book import run_chapter
 
     monkeypatch.delenv("TQDM_DISABLE", raising=False)
-    _write_project(tmp_path, "import os\nprint('TQDM_DISABLE=' + os.environ.get('TQDM_DISABLE', 'unset'))")
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")  # a caller's choice is kept
+    _write_project(tmp_path, "import os\nprint('TQDM_DISABLE=' + os.environ.get('TQDM_DISABLE', 'unset'), "
+                             "'MUJOCO_GL=' + os.environ.get('MUJOCO_GL', 'unset'))")
     run_chapter("demo", root=tmp_path, progress=False)
     executed = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
     printed = "".join(o.get("text", "") for c in executed.cells for o in c.get("outputs", []))
-    assert "TQDM_DISABLE=1" in printed
+    assert "TQDM_DISABLE=1" in printed and "MUJOCO_GL=osmesa" in printed
     import os
 
     assert "TQDM_DISABLE" not in os.environ, "the runner restores the caller's environment"
+    monkeypatch.delenv("MUJOCO_GL")
+    run_chapter("demo", root=tmp_path, progress=False)
+    executed = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
+    printed = "".join(o.get("text", "") for c in executed.cells for o in c.get("outputs", []))
+    assert "MUJOCO_GL=egl" in printed and "MUJOCO_GL" not in os.environ
 
 
 def test_executed_chapter_shows_its_parameters_once(tmp_path):

@@ -158,7 +158,7 @@ def run_chapter(
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
-        with _library_progress_bars_off():
+        with _kernel_environment():
             pm.execute_notebook(
                 str(notebook_path(chapter, root)), str(out), parameters=params, kernel_name=kernel,
                 cwd=str(root), progress_bar=progress, log_output=False,
@@ -187,19 +187,24 @@ def _show_parameters_once(path: Path) -> None:
     nbformat.write(nb, path)
 
 
+KERNEL_ENV_DEFAULTS = {"TQDM_DISABLE": "1", "MUJOCO_GL": "egl"}
+"""What an executed chapter's kernel gets unless the caller set it. ``TQDM_DISABLE``: tqdm bars
+inside a chapter would be printed into the book as hundreds of lines of cursor codes (papermill's
+own bar over the cells still shows progress). ``MUJOCO_GL=egl``: MuJoCo renders off-screen
+(the UR3 and CLfD frames); where EGL is missing the UR3 renderer falls back to matplotlib."""
+
+
 @contextlib.contextmanager
-def _library_progress_bars_off() -> Iterator[None]:
-    """tqdm bars inside an executed chapter would be printed into the book as hundreds of lines
-    of cursor codes, so the kernel gets ``TQDM_DISABLE=1`` (unless the caller set it); papermill's
-    own bar over the cells still shows progress."""
-    if "TQDM_DISABLE" in os.environ:
-        yield
-        return
-    os.environ["TQDM_DISABLE"] = "1"
+def _kernel_environment() -> Iterator[None]:
+    """Set :data:`KERNEL_ENV_DEFAULTS` that the caller did not set, for the duration."""
+    added = [k for k in KERNEL_ENV_DEFAULTS if k not in os.environ]
+    for k in added:
+        os.environ[k] = KERNEL_ENV_DEFAULTS[k]
     try:
         yield
     finally:
-        os.environ.pop("TQDM_DISABLE", None)
+        for k in added:
+            os.environ.pop(k, None)
 
 
 def _run_one(args: tuple) -> ChapterRun:
