@@ -96,6 +96,24 @@ OFFSETS = REST_JOINTS - np.vstack([np.zeros(3), REST_JOINTS[list(PARENTS[1:])]])
 """(24, 3) bone offsets from the parent in the parent's rest frame (root: its rest position)."""
 
 
+def world_rotations(local: np.ndarray) -> np.ndarray:
+    """(T, 24, 3, 3) rotations relative to each joint's parent (SMPL's layout) -> world rotations."""
+    world = np.empty_like(local)
+    world[:, 0] = local[:, 0]
+    for j in range(1, 24):
+        world[:, j] = world[:, PARENTS[j]] @ local[:, j]
+    return world
+
+
+def local_rotations(world: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`world_rotations`: ``R_local[j] = R_world[parent]^T R_world[j]``."""
+    local = np.empty_like(world)
+    local[:, 0] = world[:, 0]
+    for j in range(1, 24):
+        local[:, j] = np.swapaxes(world[:, PARENTS[j]], -1, -2) @ world[:, j]
+    return local
+
+
 def forward_kinematics(
     poses: np.ndarray,
     trans: np.ndarray | None = None,
@@ -125,14 +143,11 @@ def forward_kinematics(
     T = poses.shape[0]
     rest = REST_JOINTS if rest_joints is None else np.asarray(rest_joints, dtype=np.float64)
     offsets = rest - np.vstack([np.zeros(3), rest[list(PARENTS[1:])]])
-    local = Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3)
-    glob = np.empty_like(local)
+    glob = world_rotations(Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3))
     pos = np.empty((T, 24, 3))
-    glob[:, 0] = local[:, 0]
     pos[:, 0] = offsets[0]
     for j in range(1, 24):
         p = PARENTS[j]
-        glob[:, j] = glob[:, p] @ local[:, j]
         pos[:, j] = pos[:, p] + glob[:, p] @ offsets[j]
     # The global orientation turns the body about the root joint (pos[:, 0]), as in SMPL.
     out = np.asarray(scaling, dtype=np.float64).reshape(-1, 1, 1) * pos

@@ -51,7 +51,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .angles import JOINT_NAMES, forward_kinematics, pose_to_ur3_angles
+from .angles import JOINT_NAMES, forward_kinematics, local_rotations, pose_to_ur3_angles, world_rotations
 from .audio import cached_audio_features
 from .sync import synchronize
 
@@ -343,14 +343,8 @@ def load_aist(
             raise ValueError(f"Unknown genre(s) {sorted(unknown)}. Valid: {', '.join(AIST_GENRES)}.")
         names = [n for n in names if parse_aist_name(n)["genre"] in set(genres)]
     adir = _find_audio_dir(root, audio_dir)
-    missing = [n for n in names if not (adir / f"{parse_aist_name(n)['music_id']}.wav").is_file()]
-    if missing:
-        msg = (f"{len(missing)} sequence(s) have no music in {adir}, e.g. "
-               f"{parse_aist_name(missing[0])['music_id']}.wav for {missing[0]}.")  # fmt: skip
-        if not skip_missing_audio:
-            raise FileNotFoundError(msg + " Pass audio_dir= or skip_missing_audio=True.")
-        warnings.warn(msg + " Skipped.")
-        names = [n for n in names if n not in set(missing)]
+    names = _with_audio(names, lambda n: adir / f"{parse_aist_name(n)['music_id']}.wav", skip_missing_audio,
+                        "sequence(s)", " Pass audio_dir= or skip_missing_audio=True.")
     out = []
     for name in _progress(names, len(names), "AIST++", progress):
         info = parse_aist_name(name)
@@ -359,6 +353,21 @@ def load_aist(
         out.append(_pair(name, info["music_id"], info["genre"], audio_path, joints, ts, 1e-6, fps,
                          cache_dir, paper_compat, keep_joints, info["dancer"]))  # fmt: skip
     return out
+
+
+def _with_audio(names: list[str], audio_of, skip_missing_audio: bool, what: str, hint: str) -> list[str]:
+    """``names`` whose music file ``audio_of(name)`` exists; raise for the others (``hint`` says
+    how to go on), or drop them with a warning when ``skip_missing_audio``."""
+    missing = [n for n in names if not audio_of(n).is_file()]
+    if not missing:
+        return names
+    first = audio_of(missing[0])
+    msg = (f"{len(missing)} {what} have no music in {first.parent}, e.g. {first.name}"
+           + (f" for {missing[0]}." if first.stem != missing[0] else "."))
+    if not skip_missing_audio:
+        raise FileNotFoundError(msg + hint)
+    warnings.warn(msg + " Skipped.")
+    return [n for n in names if n not in set(missing)]
 
 
 def _pair(name, music_id, genre, audio_path, joints, ts, unit, fps, cache_dir, paper_compat,
@@ -391,28 +400,6 @@ _UNITY_MIRROR = np.diag([-1.0, 1.0, 1.0])
 (x to the body's left, y up, z forward): mirror x. A rotation matrix R becomes M R M."""
 
 
-def _chain_world(local: np.ndarray) -> np.ndarray:
-    """(T, 24, 3, 3) local rotations (each relative to its parent) -> world rotations."""
-    from .angles import PARENTS
-
-    world = np.empty_like(local)
-    world[:, 0] = local[:, 0]
-    for j in range(1, 24):
-        world[:, j] = world[:, PARENTS[j]] @ local[:, j]
-    return world
-
-
-def _unchain_world(world: np.ndarray) -> np.ndarray:
-    """(T, 24, 3, 3) world rotations -> local ones: ``R_local[j] = R_world[parent]^T R_world[j]``."""
-    from .angles import PARENTS
-
-    local = np.empty_like(world)
-    local[:, 0] = world[:, 0]
-    for j in range(1, 24):
-        local[:, j] = np.swapaxes(world[:, PARENTS[j]], -1, -2) @ world[:, j]
-    return local
-
-
 def smpl_to_phantom(poses: np.ndarray, root_positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """SMPL parameters -> PhantomDance's motion arrays, the inverse of :func:`read_phantom_motion`.
 
@@ -428,7 +415,7 @@ def smpl_to_phantom(poses: np.ndarray, root_positions: np.ndarray) -> tuple[np.n
 
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 24, 3)
     T = len(poses)
-    world = _chain_world(Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3))
+    world = world_rotations(Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3))
     unity = _UNITY_MIRROR @ world @ _UNITY_MIRROR
     q = Rotation.from_matrix(unity.reshape(-1, 3, 3)).as_quat().reshape(T, 24, 4)
     return q, np.asarray(root_positions, dtype=np.float64) @ _UNITY_MIRROR
@@ -495,7 +482,7 @@ def read_phantom_motion(path: str | Path, quaternion_order: str = "xyzw", rotati
         if frame == "unity":
             m, pos = _UNITY_MIRROR @ m @ _UNITY_MIRROR, pos @ _UNITY_MIRROR
         if rotations == "world":
-            m = _unchain_world(m)
+            m = local_rotations(m)
         rotvec = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_rotvec().reshape(-1, 24, 3)
         joints[~bad] = forward_kinematics(rotvec, pos)
     return joints, d
@@ -537,13 +524,8 @@ def load_phantomdance(
     names = [p.stem for p in sorted(mdir.glob("*.json")) if p.stem not in set(skip)]
     if not names:
         raise DatasetLayoutError(f"{mdir} holds no .json motion files.")
-    missing = [n for n in names if not (adir / f"{n}.wav").is_file()]
-    if missing:
-        msg = f"{len(missing)} motion(s) have no music in {adir}, e.g. {missing[0]}.wav."
-        if not skip_missing_audio:
-            raise FileNotFoundError(msg + " Pass skip_missing_audio=True to skip them.")
-        warnings.warn(msg + " Skipped.")
-        names = [n for n in names if n not in set(missing)]
+    names = _with_audio(names, lambda n: adir / f"{n}.wav", skip_missing_audio, "motion(s)",
+                        " Pass skip_missing_audio=True to skip them.")
     out = []
     for name in _progress(names, len(names), "PhantomDance", progress):
         joints, meta = read_phantom_motion(mdir / f"{name}.json", quaternion_order=quaternion_order,
