@@ -289,6 +289,13 @@ def cached_audio_features(
     return x
 
 
+def check_feature_groups(groups: Iterable[str], where: str) -> None:
+    """Raise ``ValueError`` naming ``where`` if a group is not a :data:`FEATURE_SLICES` name."""
+    unknown = [g for g in groups if g not in FEATURE_SLICES]
+    if unknown:
+        raise ValueError(f"Unknown feature group(s) {unknown} {where}. Valid: {', '.join(FEATURE_SLICES)}.")
+
+
 class FeatureScaler:
     """Per-dimension min-max scaling of features to ``[low, high]`` (thesis: [0.1, 0.9]).
 
@@ -306,9 +313,7 @@ class FeatureScaler:
     def __init__(self, low: float = 0.1, high: float = 0.9, clip: bool = False, mute: Sequence[str] = ()):
         if not low < high:
             raise ValueError(f"FeatureScaler needs low < high, got low={low}, high={high}.")
-        unknown = [g for g in mute if g not in FEATURE_SLICES]
-        if unknown:
-            raise ValueError(f"Unknown feature group(s) {unknown} to mute. Valid: {', '.join(FEATURE_SLICES)}.")
+        check_feature_groups(mute, "to mute")
         self.low, self.high, self.clip = float(low), float(high), bool(clip)
         self.mute = tuple(mute)
         """Feature groups (:data:`FEATURE_SLICES` names) that ``transform`` holds at ``low``: a

@@ -167,11 +167,9 @@ class MDLTExperimentConfig:
         unknown = [v for v in self.variants if v not in ("transformer", "mamba", "mamba_audio")]
         if unknown or not self.variants:
             raise ValueError(f"Unknown variant(s) {unknown or self.variants!r}. Valid: transformer, mamba, mamba_audio.")
-        from thesis_lib.mdlt.audio import FEATURE_SLICES
+        from thesis_lib.mdlt.audio import check_feature_groups
 
-        bad = [g for g in self.mute_features if g not in FEATURE_SLICES]
-        if bad:
-            raise ValueError(f"Unknown feature group(s) {bad} in mute_features. Valid: {', '.join(FEATURE_SLICES)}.")
+        check_feature_groups(self.mute_features, "in mute_features")
         if not 1 <= self.n_folds <= 6:
             raise ValueError(f"Expect 1 <= n_folds <= 6 (leave one of 6 pieces out), actually: {self.n_folds!r}.")
         if not 1 <= self.pd_folds <= 10:
