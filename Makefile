@@ -7,13 +7,15 @@ PY     := $(VENV)/bin/python
 JOBS   ?= 2
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv book chapter test test-fast bench clean help
+.PHONY: venv book chapter test test-fast lint format bench clean help
 
 help:
 	@echo "make book      run every chapter (smoke profile) and build the HTML book"
 	@echo "make test      run the whole test suite (what CI runs)"
 	@echo "make chapter CHAPTER=01_background [PROFILE=full]   run one chapter"
 	@echo "make test-fast unit tests only (no notebook runs, no book build)"
+	@echo "make lint      ruff (lint + format check) and the type checker"
+	@echo "make format    ruff format + safe fixes"
 	@echo "make bench     run every benchmark in benchmarks/"
 	@echo "make clean     remove generated notebooks, results and the built book"
 
@@ -36,6 +38,16 @@ test: $(STAMP)
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -m "not slow"
+
+LINT_PATHS := src tests benchmarks notebooks
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check $(LINT_PATHS)
+	$(VENV)/bin/ruff format --check $(LINT_PATHS)
+
+format: $(STAMP)
+	$(VENV)/bin/ruff format $(LINT_PATHS)
+	$(VENV)/bin/ruff check --fix $(LINT_PATHS)
 
 bench: $(STAMP)
 	for f in benchmarks/bench_*.py; do echo "== $$f"; $(PY) $$f || exit 1; done

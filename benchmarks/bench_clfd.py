@@ -12,6 +12,7 @@ Two measurements:
 
     python benchmarks/bench_clfd.py --batches 10
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,10 +21,10 @@ import time
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
+import numpy as np
+import torch
 
-from thesis_lib.clfd import CAMERAS, CLfD, MultiViewPickPlace, MultiViewVideos  # noqa: E402
+from thesis_lib.clfd import CAMERAS, CLfD, MultiViewPickPlace, MultiViewVideos
 
 
 def time_renders(n: int, size: int) -> dict[str, float]:
@@ -66,14 +67,24 @@ def time_fetch(n: int, size: int) -> float | None:
     return float(np.mean(times))
 
 
-def time_training(encoder: str, batches: int, size: int, batch: int, width: int) -> dict[str, float]:
+def time_training(
+    encoder: str, batches: int, size: int, batch: int, width: int
+) -> dict[str, float]:
     """Median wall ms of one training batch per method; the methods take turns, batch by batch,
     so background load hits them alike."""
     rng = np.random.default_rng(0)
     n = 4 * batch
-    data = MultiViewVideos([rng.integers(0, 255, (n, 2, size, size, 3), dtype=np.uint8)], ("a", "b"))
-    models = {m: CLfD(encoder=encoder, method=m, batch_size=batch, width=width, seed=0) for m in ("clfd", "tcn", "cmc")}
-    opts = {m: torch.optim.Adam([*mdl.encoder.parameters(), *mdl.projection.parameters()]) for m, mdl in models.items()}
+    data = MultiViewVideos(
+        [rng.integers(0, 255, (n, 2, size, size, 3), dtype=np.uint8)], ("a", "b")
+    )
+    models = {
+        m: CLfD(encoder=encoder, method=m, batch_size=batch, width=width, seed=0)
+        for m in ("clfd", "tcn", "cmc")
+    }
+    opts = {
+        m: torch.optim.Adam([*mdl.encoder.parameters(), *mdl.projection.parameters()])
+        for m, mdl in models.items()
+    }
     pairs = models["clfd"]._sample_epoch(data, [0, 1], rng)[:batch]
     times: dict[str, list[float]] = {m: [] for m in models}
     for i in range(batches + 1):
@@ -89,9 +100,13 @@ def time_training(encoder: str, batches: int, size: int, batch: int, width: int)
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--frames", type=int, default=50, help="renders per camera")
-    p.add_argument("--batches", type=int, default=10, help="timed training batches per method (median)")
+    p.add_argument(
+        "--batches", type=int, default=10, help="timed training batches per method (median)"
+    )
     p.add_argument("--size", type=int, default=48)
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--width", type=int, default=16)
@@ -102,11 +117,16 @@ def main() -> None:
     print("ms per 64x64 frame:", ", ".join(f"{k} {v:.2f}" for k, v in ours.items()))
     if fetch is not None:
         mean = float(np.mean(list(ours.values())))
-        print(f"Fetch (meshes), mean over its cameras: {fetch:.2f} ms; ratio Fetch / ours = {fetch / mean:.1f}x")
+        print(
+            f"Fetch (meshes), mean over its cameras: {fetch:.2f} ms; ratio Fetch / ours = {fetch / mean:.1f}x"
+        )
     for enc in ("tcn", "resnet18"):
         ms = time_training(enc, args.batches, args.size, args.batch, args.width)
-        print(f"{enc}: ms per batch of {args.batch} pairs: " + ", ".join(f"{m} {v:.0f}" for m, v in ms.items())
-              + f"; ratio TCN-triplet / CLfD = {ms['tcn'] / ms['clfd']:.2f}")
+        print(
+            f"{enc}: ms per batch of {args.batch} pairs: "
+            + ", ".join(f"{m} {v:.0f}" for m, v in ms.items())
+            + f"; ratio TCN-triplet / CLfD = {ms['tcn'] / ms['clfd']:.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -102,8 +102,16 @@ def bench_sequence(n_steps: int = 200_000, K: int = 20, batch: int = 64, reps: i
     eps, total, i = [], 0, 0
     while total < n_steps:
         T = int(rng.integers(50, 1001))
-        eps.append(Episode(i, rng.standard_normal((T + 1, 17)), rng.standard_normal((T, 6)),
-                           rng.standard_normal(T), np.zeros(T, bool), np.zeros(T, bool)))
+        eps.append(
+            Episode(
+                i,
+                rng.standard_normal((T + 1, 17)),
+                rng.standard_normal((T, 6)),
+                rng.standard_normal(T),
+                np.zeros(T, bool),
+                np.zeros(T, bool),
+            )
+        )
         total += T
         i += 1
     ds = SequenceDataset(eps, K=K)

@@ -27,6 +27,7 @@ with like. Taking turns on one model spreads background load over all variants.
     python benchmarks/bench_defender.py --steps 1600 --block 200
     python benchmarks/bench_defender.py --steps 800 --one-strategy   # quicker
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,30 +44,54 @@ from thesis_lib.defender.experiments import THESIS_STATE_STRATEGIES
 
 
 def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--env", default="Hopper-v5")
     p.add_argument("--steps", type=int, default=1600, help="timed SAC steps per variant")
-    p.add_argument("--block", type=int, default=200, help="steps per turn; variants take turns on one SAC model")
+    p.add_argument(
+        "--block",
+        type=int,
+        default=200,
+        help="steps per turn; variants take turns on one SAC model",
+    )
     p.add_argument("--n-demos", type=int, default=50, help="demonstrations per group")
-    p.add_argument("--strategy", default="MeanDemoW5/MeanDemoW10",
-                   help="strategy of the Algorithm-2, filter-only and fastdtw SAC runs")
-    p.add_argument("--one-strategy", action="store_true",
-                   help="time the default wrapper with --strategy only, not each of the thesis's top 5")
-    p.add_argument("--skip-fastdtw-sac", action="store_true", help="skip the (slow) SAC run with fastdtw")
+    p.add_argument(
+        "--strategy",
+        default="MeanDemoW5/MeanDemoW10",
+        help="strategy of the Algorithm-2, filter-only and fastdtw SAC runs",
+    )
+    p.add_argument(
+        "--one-strategy",
+        action="store_true",
+        help="time the default wrapper with --strategy only, not each of the thesis's top 5",
+    )
+    p.add_argument(
+        "--skip-fastdtw-sac", action="store_true", help="skip the (slow) SAC run with fastdtw"
+    )
     p.add_argument("--seed", type=int, default=0)
     return p.parse_args()
 
 
-def make_demos(env: gym.Env, n: int, rng: np.random.Generator) -> tuple[list[Demonstration], list[Demonstration]]:
+def make_demos(
+    env: gym.Env, n: int, rng: np.random.Generator
+) -> tuple[list[Demonstration], list[Demonstration]]:
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
 
     def demo(length: int, offset: float, terminated: bool) -> Demonstration:
         obs = np.cumsum(rng.normal(0, 0.05, (length + 1, obs_dim)), axis=0) + offset
-        return Demonstration(obs, rng.uniform(-1, 1, (length, act_dim)), rng.normal(1, 0.1, length),
-                             terminated, not terminated)
+        return Demonstration(
+            obs,
+            rng.uniform(-1, 1, (length, act_dim)),
+            rng.normal(1, 0.1, length),
+            terminated,
+            not terminated,
+        )
 
     safe = [demo(1000, 0.0, False) for _ in range(n)]
-    unsafe = [demo(int(rng.integers(20, 300)), 1e3, True) for _ in range(n)]  # far away: never fires
+    unsafe = [
+        demo(int(rng.integers(20, 300)), 1e3, True) for _ in range(n)
+    ]  # far away: never fires
     return safe, unsafe
 
 
@@ -77,15 +102,21 @@ def per_step_costs(env_id: str, safe, unsafe, rng) -> list[tuple[str, str, float
     steps = rng.normal(0, 0.5, (300, obs_dim))
     for strategy in THESIS_STATE_STRATEGIES:
         s, u = strategy.split("/")
-        for label, kw in (("exact", {}), ("exact, 20-step cap", {"max_trajectory": 20}),
-                          ("fastdtw (paper_compat)", {"paper_compat": True})):
-            w = DefenderWrapper(gym.make(env_id), safe, unsafe, safe_method=s, unsafe_method=u, **kw)
+        for label, kw in (
+            ("exact", {}),
+            ("exact, 20-step cap", {"max_trajectory": 20}),
+            ("fastdtw (paper_compat)", {"paper_compat": True}),
+        ):
+            w = DefenderWrapper(
+                gym.make(env_id), safe, unsafe, safe_method=s, unsafe_method=u, **kw
+            )
             n = 60 if "fastdtw" in label else 300
-            w._safe.append(steps[0]), w._unsafe.append(steps[0])  # noqa: SLF001 (warm the kernels)
-            w._safe.reset(), w._unsafe.reset()  # noqa: SLF001
+            w._safe.append(steps[0]), w._unsafe.append(steps[0])
+            w._safe.reset(), w._unsafe.reset()
             t = time.perf_counter()
             for x in steps[:n]:
-                w._safe.append(x) < w._unsafe.append(x)  # noqa: SLF001 (the decision, without env and dynamics)
+                w._safe.append(x)
+                w._unsafe.append(x)
             rows.append((strategy, label, 1e6 * (time.perf_counter() - t) / n))
     dyn = DynamicsModel(obs_dim, 3)
     for _ in range(300):
@@ -94,11 +125,19 @@ def per_step_costs(env_id: str, safe, unsafe, rng) -> list[tuple[str, str, float
     t = time.perf_counter()
     for _ in range(100):
         dyn.train_step()
-    rows.append(("dynamics model", "one gradient step (batch 256, 256-256)", 1e6 * (time.perf_counter() - t) / 100))
+    rows.append(
+        (
+            "dynamics model",
+            "one gradient step (batch 256, 256-256)",
+            1e6 * (time.perf_counter() - t) / 100,
+        )
+    )
     return rows
 
 
-def time_variants(variants: dict, steps: int, block: int, seed: int) -> dict[str, tuple[float, float]]:
+def time_variants(
+    variants: dict, steps: int, block: int, seed: int
+) -> dict[str, tuple[float, float]]:
     """(wall ms, CPU ms) per SAC training step for each env variant, measured on one SAC model.
 
     The model switches env every ``block`` steps (``set_env`` forces a reset), cycling through
@@ -108,8 +147,16 @@ def time_variants(variants: dict, steps: int, block: int, seed: int) -> dict[str
     from stable_baselines3 import SAC
 
     envs = {name: make() for name, make in variants.items()}
-    model = SAC("MlpPolicy", envs["plain SAC"], learning_rate=3e-4, batch_size=256, learning_starts=100,
-                policy_kwargs={"net_arch": [256, 256]}, seed=seed, device="cpu")
+    model = SAC(
+        "MlpPolicy",
+        envs["plain SAC"],
+        learning_rate=3e-4,
+        batch_size=256,
+        learning_starts=100,
+        policy_kwargs={"net_arch": [256, 256]},
+        seed=seed,
+        device="cpu",
+    )
     model.learn(300)  # random warm-up and the first gradient steps, untimed
     wall = dict.fromkeys(envs, 0.0)
     cpu = dict.fromkeys(envs, 0.0)
@@ -137,9 +184,11 @@ def main() -> None:
     torch.set_num_threads(1)
     rng = np.random.default_rng(args.seed)
     safe, unsafe = make_demos(gym.make(args.env), args.n_demos, rng)
-    print(f"# DEFENDER overhead: {args.env}, {args.n_demos} + {args.n_demos} demonstrations, "
-          f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, torch threads 1, "
-          f"load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"# DEFENDER overhead: {args.env}, {args.n_demos} + {args.n_demos} demonstrations, "
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, torch threads 1, "
+        f"load average {os.getloadavg()[0]:.1f}"
+    )
 
     print("\n## Per-step filter cost (one decision: both groups), µs")
     decision_us = {}
@@ -150,22 +199,33 @@ def main() -> None:
 
     def wrapped(strategy: str, **kw):
         s, u = strategy.split("/")
-        return lambda: DefenderWrapper(gym.make(args.env), safe, unsafe, safe_method=s, unsafe_method=u, **kw)
+        return lambda: DefenderWrapper(
+            gym.make(args.env), safe, unsafe, safe_method=s, unsafe_method=u, **kw
+        )
 
     variants = {"plain SAC": lambda: gym.make(args.env)}
-    for strategy in ([args.strategy] if args.one_strategy else THESIS_STATE_STRATEGIES):
+    for strategy in [args.strategy] if args.one_strategy else THESIS_STATE_STRATEGIES:
         variants[f"default: {strategy}"] = wrapped(strategy)  # exact DTW, dynamics every 4th step
-    variants[f"Algorithm 2 (dynamics every step): {args.strategy}"] = wrapped(args.strategy, dynamics_train_every=1)
+    variants[f"Algorithm 2 (dynamics every step): {args.strategy}"] = wrapped(
+        args.strategy, dynamics_train_every=1
+    )
     variants[f"DTW filter only (no dynamics update): {args.strategy}"] = wrapped(
-        args.strategy, dynamics_train_every=10**9)
+        args.strategy, dynamics_train_every=10**9
+    )
     if not args.skip_fastdtw_sac:
-        variants[f"paper-faithful fastdtw (paper_compat): {args.strategy}"] = wrapped(args.strategy, paper_compat=True)
+        variants[f"paper-faithful fastdtw (paper_compat): {args.strategy}"] = wrapped(
+            args.strategy, paper_compat=True
+        )
     times = time_variants(variants, args.steps, args.block, args.seed)
     wall0, cpu0 = times["plain SAC"]
-    print(f"\n## SAC training step (256-256, batch 256, {args.steps} steps per variant in blocks of "
-          f"{args.block}, one model; default = exact DTW, dynamics model updated every "
-          f"{DYNAMICS_TRAIN_EVERY}th real step)")
-    print(f"{'variant':62s} {'wall ms':>8s} {'ratio':>7s} {'CPU ms':>8s} {'ratio':>7s}  target <= 1.10 (wall, CPU)")
+    print(
+        f"\n## SAC training step (256-256, batch 256, {args.steps} steps per variant in blocks of "
+        f"{args.block}, one model; default = exact DTW, dynamics model updated every "
+        f"{DYNAMICS_TRAIN_EVERY}th real step)"
+    )
+    print(
+        f"{'variant':62s} {'wall ms':>8s} {'ratio':>7s} {'CPU ms':>8s} {'ratio':>7s}  target <= 1.10 (wall, CPU)"
+    )
 
     def verdict(ratio: float) -> str:
         return "met" if ratio <= 1.10 else "NOT met"
@@ -175,14 +235,18 @@ def main() -> None:
         print(f"{name:62s} {wall:8.2f} {wall / wall0:7.3f} {cpu:8.2f} {cpu / cpu0:7.3f}  {v}")
     load = os.getloadavg()[0]
     if load > (os.cpu_count() or 1):
-        print(f"\nNote: load average {load:.1f} on {os.cpu_count()} cores during the run: other processes took "
-              "turns on the CPU, so wall ratios are unreliable; the CPU ratios (this process's own time) are "
-              "the better measure.")
+        print(
+            f"\nNote: load average {load:.1f} on {os.cpu_count()} cores during the run: other processes took "
+            "turns on the CPU, so wall ratios are unreliable; the CPU ratios (this process's own time) are "
+            "the better measure."
+        )
     main_ratio = times[f"default: {args.strategy}"][0] / wall0
     others = [st for st in THESIS_STATE_STRATEGIES if f"default: {st}" not in times]
     if others and args.strategy in decision_us:
-        print(f"\n## Estimated wall ratio of the default wrapper for the other top-5 state strategies\n"
-              f"(measured ratio of {args.strategy} + the difference in decision cost / plain step)")
+        print(
+            f"\n## Estimated wall ratio of the default wrapper for the other top-5 state strategies\n"
+            f"(measured ratio of {args.strategy} + the difference in decision cost / plain step)"
+        )
         for st in others:
             est = main_ratio + (decision_us[st] - decision_us[args.strategy]) / (1e3 * wall0)
             print(f"{'default: ' + st:62s} {'':8s} {est:7.3f}  {verdict(est)} (estimate)")

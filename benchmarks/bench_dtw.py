@@ -13,6 +13,7 @@ fastdtw (pure Python, 0.1-0.3 s a call) gets at most 3 runs.
 
     python benchmarks/bench_dtw.py --repeats 25
 """
+
 from __future__ import annotations
 
 import argparse
@@ -25,11 +26,21 @@ from typing import NamedTuple
 
 
 def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--repeats", type=int, default=25, help="timed runs per method (best and median reported)")
-    p.add_argument("--min-time", type=float, default=0.002, help="seconds each timed run lasts at least")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--repeats", type=int, default=25, help="timed runs per method (best and median reported)"
+    )
+    p.add_argument(
+        "--min-time", type=float, default=0.002, help="seconds each timed run lasts at least"
+    )
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--use-cache", action="store_true", help="keep numba's disk cache (compile time = load time)")
+    p.add_argument(
+        "--use-cache",
+        action="store_true",
+        help="keep numba's disk cache (compile time = load time)",
+    )
     return p.parse_args()
 
 
@@ -118,8 +129,16 @@ def case_a(rng: np.random.Generator) -> tuple[list[Row], list[str]]:
     packed = tdtw.pack_references(demos)
     n = ARGS.repeats
     methods = [
-        Method("thesis_lib dtw_batch l1 (list in)", lambda: tdtw.dtw_batch(query, demos, metric="l1"), n),
-        Method("thesis_lib dtw_batch l1 (packed)", lambda: tdtw.dtw_batch(query, packed, metric="l1"), n),
+        Method(
+            "thesis_lib dtw_batch l1 (list in)",
+            lambda: tdtw.dtw_batch(query, demos, metric="l1"),
+            n,
+        ),
+        Method(
+            "thesis_lib dtw_batch l1 (packed)",
+            lambda: tdtw.dtw_batch(query, packed, metric="l1"),
+            n,
+        ),
         Method(
             "thesis_lib dtw_batch sqeucl (packed)",
             lambda: tdtw.dtw_batch(query, packed, metric="sqeuclidean"),
@@ -158,7 +177,9 @@ def case_a(rng: np.random.Generator) -> tuple[list[Row], list[str]]:
         ]
         ours = np.sqrt(tdtw.dtw_batch(query, packed, metric="sqeuclidean"))
         theirs = np.array([dtai_ndim.distance_fast(query, d) for d in demos])
-        checks.append(f"(a) max |sqrt(our sqeuclidean) - dtaidistance| = {np.max(np.abs(ours - theirs)):.1e}")
+        checks.append(
+            f"(a) max |sqrt(our sqeuclidean) - dtaidistance| = {np.max(np.abs(ours - theirs)):.1e}"
+        )
     return time_case("(a) 1 x 50 demos, 20x20 steps, F=11", methods), checks
 
 
@@ -171,11 +192,19 @@ def case_b(rng: np.random.Generator) -> tuple[list[Row], list[str]]:
     ]
     checks = []
     if fastdtw is not None:
-        methods.append(Method("fastdtw r=1 L1 (paper)", lambda: fastdtw(x, y, radius=1, dist=1), min(n, FASTDTW_RUNS)))
+        methods.append(
+            Method(
+                "fastdtw r=1 L1 (paper)",
+                lambda: fastdtw(x, y, radius=1, dist=1),
+                min(n, FASTDTW_RUNS),
+            )
+        )
         over = fastdtw(x, y, radius=1, dist=1)[0] / tdtw.dtw(x, y, metric="l1") - 1
         checks.append(f"(b) fastdtw r=1 cost is {over:.1%} above exact L1")
     if dtai_dtw is not None:
-        methods.append(Method("dtaidistance dtw.distance_fast", lambda: dtai_dtw.distance_fast(x, y), n))
+        methods.append(
+            Method("dtaidistance dtw.distance_fast", lambda: dtai_dtw.distance_fast(x, y), n)
+        )
         diff = abs(np.sqrt(tdtw.dtw(x, y, metric="sqeuclidean")) - dtai_dtw.distance_fast(x, y))
         checks.append(f"(b) |sqrt(our sqeuclidean) - dtaidistance| = {diff:.1e}")
     return time_case("(b) 1 pair, 1000x1000, 1-D", methods), checks
@@ -202,7 +231,9 @@ def speedups(rows: list[Row]) -> list[str]:
             if not group:
                 continue
             name, other = min(group.items(), key=lambda kv: kv[1])
-            parts = [f"{other / best[(case, o)]:.1f}x ({o.removeprefix('thesis_lib ')})" for o in ours]
+            parts = [
+                f"{other / best[(case, o)]:.1f}x ({o.removeprefix('thesis_lib ')})" for o in ours
+            ]
             lines.append(f"{case} speed-up over {name}: " + ", ".join(parts))
     return lines
 
@@ -221,8 +252,12 @@ def main() -> None:
         f"{platform.machine()}, {os.cpu_count()} CPUs; thesis_lib kernels are single-threaded"
     )
     what = "cache load" if ARGS.use_cache else "numba compile"
-    print(f"import thesis_lib.dtw: {IMPORT_S:.2f} s; first calls ({what}, excluded below): {compile_s:.2f} s")
-    print(f"repeats={ARGS.repeats}, min-time={ARGS.min_time}s per run; ratio = time / first row of the case\n")
+    print(
+        f"import thesis_lib.dtw: {IMPORT_S:.2f} s; first calls ({what}, excluded below): {compile_s:.2f} s"
+    )
+    print(
+        f"repeats={ARGS.repeats}, min-time={ARGS.min_time}s per run; ratio = time / first row of the case\n"
+    )
     width = max(len(r.name) for r in rows)
     current = None
     for r in rows:

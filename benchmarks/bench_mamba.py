@@ -28,6 +28,7 @@ train ours 184 ms, mambapy 774 ms (4.2x), GPT x6 141 ms (ours 1.3x); per action:
 Whole models, 2026-11-23 (load 8-9, 7 repeats): DT act 17.3 ms, DM w/ RTG window 39.3 ms,
 DM recurrent policy step 6.5 ms (6.0x the DM window, 2.7x faster than the DT).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,8 +40,14 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
-from thesis_lib.seq import Block, GPTBlockConfig
-from thesis_lib.seq import DecisionMamba, DecisionTransformer, DMConfig, DTConfig
+from thesis_lib.seq import (
+    Block,
+    DecisionMamba,
+    DecisionTransformer,
+    DMConfig,
+    DTConfig,
+    GPTBlockConfig,
+)
 from thesis_lib.seq.mamba import Mamba, MambaConfig
 
 try:
@@ -52,17 +59,25 @@ except ImportError:  # pragma: no cover
 
 
 def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--repeats", type=int, default=15, help="timed repeats per method (median reported)")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--repeats", type=int, default=15, help="timed repeats per method (median reported)"
+    )
     p.add_argument("--act-loops", type=int, default=20, help="actions timed per inference repeat")
     p.add_argument("--layers", type=int, default=6)
     p.add_argument("--d-model", type=int, default=128)
     p.add_argument("--K", type=int, default=20, help="context in timesteps; 3 tokens each")
     p.add_argument("--batch", type=int, default=16)
     p.add_argument("--n-head", type=int, default=1, help="heads of the transformer baseline")
-    p.add_argument("--threads", type=int, default=1,
-                   help="torch threads (0: torch's default). 1 by default: on the shared 2-core CI machine "
-                        "2 OpenMP threads made every model 5-10x slower (spinning against other jobs)")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="torch threads (0: torch's default). 1 by default: on the shared 2-core CI machine "
+        "2 OpenMP threads made every model 5-10x slower (spinning against other jobs)",
+    )
     p.add_argument("--seed", type=int, default=0)
     return p.parse_args()
 
@@ -95,7 +110,9 @@ def train_step_fn(model: nn.Module, x: torch.Tensor, target: torch.Tensor) -> Ca
     return step
 
 
-def timed(fns: dict[str, Callable[[], object]], repeats: int, loops: dict[str, int]) -> dict[str, float]:
+def timed(
+    fns: dict[str, Callable[[], object]], repeats: int, loops: dict[str, int]
+) -> dict[str, float]:
     """Median seconds per loop of each fn; the fns take turns within every repeat."""
     for fn in fns.values():  # warm-up (numba compile, allocator)
         fn()
@@ -145,16 +162,24 @@ def main() -> None:
         act[f"{name}: re-run {L}-token window"] = (lambda m: lambda: m(window)[:, -1])(model)
     with torch.no_grad():
         _, state0 = ours(window, return_state=True)
-    act["thesis_lib Mamba: recurrent step, 3 tokens"] = lambda: ours.step_tokens(new_tokens, state0)[0][:, -1]
-    act["  same, unfused torch ops"] = lambda: ours.step_tokens(new_tokens, state0, fused=False)[0][:, -1]
+    act["thesis_lib Mamba: recurrent step, 3 tokens"] = lambda: ours.step_tokens(
+        new_tokens, state0
+    )[0][:, -1]
+    act["  same, unfused torch ops"] = lambda: ours.step_tokens(new_tokens, state0, fused=False)[0][
+        :, -1
+    ]
 
     # Whole models, as thesis_lib.seq.evaluate calls them (Hopper sizes: state 11, action 3).
     sd, ad = 11, 3
     size = dict(state_dim=sd, act_dim=ad, K=args.K, d_model=d, n_layer=n_layers)
     dt = DecisionTransformer(DTConfig(**size)).eval()
     dm = DecisionMamba(DMConfig(use_rtg=True, **size)).eval()
-    history = {"states": torch.randn(1, args.K, sd), "actions": torch.rand(1, args.K, ad) * 2 - 1,
-               "returns_to_go": torch.randn(1, args.K, 1), "timesteps": torch.arange(args.K)[None]}
+    history = {
+        "states": torch.randn(1, args.K, sd),
+        "actions": torch.rand(1, args.K, ad) * 2 - 1,
+        "returns_to_go": torch.randn(1, args.K, 1),
+        "timesteps": torch.arange(args.K)[None],
+    }
     history["prev_actions"] = torch.cat([torch.zeros(1, 1, ad), history["actions"][:, :-1]], 1)
     policy = dm.recurrent_policy(1)
     with torch.no_grad():
@@ -174,10 +199,14 @@ def main() -> None:
         m.train()
     train_t = timed(train, args.repeats, {})
 
-    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, mambapy "
-          f"{getattr(mambapy, '__version__', '1.2.0' if mambapy else 'missing')}, {platform.processor() or platform.machine()}")
-    print(f"{n_layers} layers, d_model {d}, {L} tokens, batch {args.batch} (train) / 1 (act); "
-          f"medians of {args.repeats} interleaved repeats\n")
+    print(
+        f"torch {torch.__version__}, threads {torch.get_num_threads()}, mambapy "
+        f"{getattr(mambapy, '__version__', '1.2.0' if mambapy else 'missing')}, {platform.processor() or platform.machine()}"
+    )
+    print(
+        f"{n_layers} layers, d_model {d}, {L} tokens, batch {args.batch} (train) / 1 (act); "
+        f"medians of {args.repeats} interleaved repeats\n"
+    )
     print(f"{'train step (fwd+bwd+AdamW)':<48}{'ms':>10}")
     for k, v in train_t.items():
         print(f"  {k:<46}{v * 1e3:>10.1f}")
@@ -194,18 +223,30 @@ def main() -> None:
     print("\nratios (target)")
     if MambaPy is not None:
         r = train_t["mambapy 1.2.0 (pscan)"] / ours_train
-        print(f"  train: mambapy / ours                       {r:6.2f}x  (>= 3)  {'met' if r >= 3 else 'NOT met'}")
+        print(
+            f"  train: mambapy / ours                       {r:6.2f}x  (>= 3)  {'met' if r >= 3 else 'NOT met'}"
+        )
     r = ours_train / gpt_train
-    print(f"  train: ours / transformer                   {r:6.2f}x  (<= 2)  {'met' if r <= 2 else 'NOT met'}")
+    print(
+        f"  train: ours / transformer                   {r:6.2f}x  (<= 2)  {'met' if r <= 2 else 'NOT met'}"
+    )
     r = ours_train / train_t["thesis_lib Mamba (torch-loop scan)"]
     print(f"  train: ours numba / ours torch-loop         {r:6.2f}x  (info)")
     r = act_t[f"thesis_lib Mamba: re-run {L}-token window"] / rec
-    print(f"  act: ours window / ours recurrent           {r:6.2f}x  (>= 5)  {'met' if r >= 5 else 'NOT met'}")
+    print(
+        f"  act: ours window / ours recurrent           {r:6.2f}x  (>= 5)  {'met' if r >= 5 else 'NOT met'}"
+    )
     r = act_t[f"GPT Block x{n_layers}: re-run {L}-token window"] / rec
-    print(f"  act: transformer window / ours recurrent    {r:6.2f}x  (> 1)   {'met' if r > 1 else 'NOT met'}")
+    print(
+        f"  act: transformer window / ours recurrent    {r:6.2f}x  (> 1)   {'met' if r > 1 else 'NOT met'}"
+    )
     dt_t, dm_w, dm_r = model_t.values()
-    print(f"  models: DM window / DM recurrent            {dm_w / dm_r:6.2f}x  (>= 5)  {'met' if dm_w / dm_r >= 5 else 'NOT met'}")
-    print(f"  models: DT act / DM recurrent act           {dt_t / dm_r:6.2f}x  (> 1)   {'met' if dt_t > dm_r else 'NOT met'}")
+    print(
+        f"  models: DM window / DM recurrent            {dm_w / dm_r:6.2f}x  (>= 5)  {'met' if dm_w / dm_r >= 5 else 'NOT met'}"
+    )
+    print(
+        f"  models: DT act / DM recurrent act           {dt_t / dm_r:6.2f}x  (> 1)   {'met' if dt_t > dm_r else 'NOT met'}"
+    )
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ librosa's numba JIT warm-up is done once before timing and reported separately.
 
     python benchmarks/bench_mdlt.py --repeats 5 [--dataset]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,10 +29,14 @@ import time  # noqa: E402
 
 
 def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--repeats", type=int, default=5, help="timed runs per method")
     p.add_argument("--seconds", type=float, default=30.0, help="length of each test piece")
-    p.add_argument("--dataset", action="store_true", help="also time the smoke default data set end to end")
+    p.add_argument(
+        "--dataset", action="store_true", help="also time the smoke default data set end to end"
+    )
     return p.parse_args()
 
 
@@ -74,7 +79,10 @@ def main() -> None:
 
     print(f"python {platform.python_version()}, librosa {librosa.__version__}, numpy {np.__version__}, "
           f"{platform.machine()}, load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")  # fmt: skip
-    pieces = [synth.synth_music(g, bpm, args.seconds, seed=i) for i, (g, bpm) in enumerate([("mHO", 124.0), ("mKR", 92.0)])]
+    pieces = [
+        synth.synth_music(g, bpm, args.seconds, seed=i)
+        for i, (g, bpm) in enumerate([("mHO", 124.0), ("mKR", 92.0)])
+    ]
     sr = audio.feature_sample_rate(60)
     ys = [librosa.resample(p.audio, orig_sr=synth.AUDIO_SR, target_sr=sr) for p in pieces]
     dur = sum(len(y) for y in ys) / sr
@@ -91,8 +99,10 @@ def main() -> None:
         bw, mw, bc, mc = timed(fn, args.repeats)
         rows.append((name, bw, mw, bc, mc))
     print(f"\n(a)/(b) {dur:.0f} s of music at {sr} Hz, 60 frames/s, one core, {args.repeats} runs")
-    print(f"{'method':28s} {'wall best':>9s} {'wall med':>9s} {'cpu best':>9s} {'x real time (cpu)':>18s} {'x real time (wall)':>19s}")
-    for name, bw, mw, bc, mc in rows:
+    print(
+        f"{'method':28s} {'wall best':>9s} {'wall med':>9s} {'cpu best':>9s} {'x real time (cpu)':>18s} {'x real time (wall)':>19s}"
+    )
+    for name, bw, mw, bc, _mc in rows:
         print(f"{name:28s} {bw:9.2f} {mw:9.2f} {bc:9.2f} {dur / bc:18.1f} {dur / bw:19.1f}")
     print(f"speed-up over the authors' recipe (cpu best): {rows[1][3] / rows[0][3]:.2f}x")
     ours = audio.audio_features(ys[0], sr=sr)
@@ -108,7 +118,9 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             os.environ["THESIS_MDLT_CACHE"] = os.path.join(tmp, "cache")
             w, c = time.perf_counter(), time.process_time()
-            root = synth.default_dataset("aist", "smoke", seed=0, root=os.path.join(tmp, "aist"), progress=False)
+            root = synth.default_dataset(
+                "aist", "smoke", seed=0, root=os.path.join(tmp, "aist"), progress=False
+            )
             w1, c1 = time.perf_counter(), time.process_time()
             seqs = readers.load_aist(root, progress=False)
             w2, c2 = time.perf_counter(), time.process_time()

@@ -16,6 +16,7 @@ the hardware). The Decision Mamba columns of Table 5.6 are the Decision Mamba ch
     python benchmarks/bench_seq.py                          # batch 64, 3 layers (the authors' HDT code)
     python benchmarks/bench_seq.py --table-5-6 --task hopper  # Table 5.6's configuration, Hopper row
 """
+
 from __future__ import annotations
 
 import argparse
@@ -33,16 +34,22 @@ from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 # Table 5.6's environment names.
-TABLE_5_6_ENV = {"halfcheetah": "HalfCheetah", "hopper": "Hopper", "walker2d": "Walker2d", "ant": "Ant",
-                 "kitchen": "Kitchen"}
+TABLE_5_6_ENV = {
+    "halfcheetah": "HalfCheetah",
+    "hopper": "Hopper",
+    "walker2d": "Walker2d",
+    "ant": "Ant",
+    "kitchen": "Kitchen",
+}
 
 
 def table_5_6(task: str) -> dict[str, dict[str, tuple[float, float]]]:
     """``{method: {"train" | "inference": (mean ms, std ms)}}`` of Table 5.6's row for ``task``."""
     from thesis_lib.book import load_reference
 
-    env = TABLE_5_6_ENV.get(task) or ("Maze2d" if task.startswith("maze2d") else
-                                      "Antmaze" if task.startswith("antmaze") else None)
+    env = TABLE_5_6_ENV.get(task) or (
+        "Maze2d" if task.startswith("maze2d") else "Antmaze" if task.startswith("antmaze") else None
+    )
     if env is None:
         return {}
     ref = load_reference("5.6")
@@ -53,15 +60,23 @@ def table_5_6(task: str) -> dict[str, dict[str, tuple[float, float]]]:
 
 
 def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--task", default="halfcheetah", help="task whose sizes and environment are used")
-    p.add_argument("--table-5-6", action="store_true", help="Table 5.6's configuration: batch 16, 6 layers")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--task", default="halfcheetah", help="task whose sizes and environment are used"
+    )
+    p.add_argument(
+        "--table-5-6", action="store_true", help="Table 5.6's configuration: batch 16, 6 layers"
+    )
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--K", type=int, default=20)
     p.add_argument("--d-model", type=int, default=128)
     p.add_argument("--n-layer", type=int, default=3)
     p.add_argument("--train-iters", type=int, default=10, help="iterations per timed training run")
-    p.add_argument("--env-steps", type=int, default=100, help="environment steps per timed inference run")
+    p.add_argument(
+        "--env-steps", type=int, default=100, help="environment steps per timed inference run"
+    )
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     p.add_argument("--device", default="cpu", help="cpu or cuda")
@@ -90,8 +105,16 @@ def make_data(K: int, sd: int = 17, ad: int = 6, seed: int = 0) -> SequenceDatas
     for i in range(20):
         T = 1000
         obs = rng.normal(size=(T + 1, sd))
-        eps.append(Episode(i, obs, rng.uniform(-1, 1, (T, ad)).astype(np.float32), rng.normal(size=T),
-                           np.zeros(T, bool), np.zeros(T, bool)))
+        eps.append(
+            Episode(
+                i,
+                obs,
+                rng.uniform(-1, 1, (T, ad)).astype(np.float32),
+                rng.normal(size=T),
+                np.zeros(T, bool),
+                np.zeros(T, bool),
+            )
+        )
     return SequenceDataset(eps, K=K, subgoal_fn=subgoal_fn(), seed=seed)
 
 
@@ -115,9 +138,11 @@ def main() -> None:
     trainers = {k: Trainer(m, seq, cfg) for k, m in models.items()}
     one = batch_to_torch(seq, seq.windows(np.array([0]), np.array([100])))  # one full K-step window
     history = {k: v.to(args.device) for k, v in one.items() if k != "mask"}
-    times: dict[str, dict[str, list[float]]] = {k: {"train": [], "act": [], "step": []} for k in models}
+    times: dict[str, dict[str, list[float]]] = {
+        k: {"train": [], "act": [], "step": []} for k in models
+    }
 
-    for k, tr in trainers.items():  # warm-up
+    for tr in trainers.values():  # warm-up
         for _ in range(2):
             tr.step()
         m = tr.model.eval()
@@ -139,27 +164,37 @@ def main() -> None:
                 torch.cuda.synchronize()
             times[k]["act"].append((time.perf_counter() - t) / 20)
             t = time.perf_counter()
-            res = evaluate(m, args.task, 1, target_return=1000.0, dataset=seq, max_steps=args.env_steps)
+            res = evaluate(
+                m, args.task, 1, target_return=1000.0, dataset=seq, max_steps=args.env_steps
+            )
             times[k]["step"].append((time.perf_counter() - t) / int(res.lengths.sum()))
 
-    print(f"# bench_seq: torch {torch.__version__}, {platform.processor() or platform.machine()}, "
-          f"{args.threads} thread(s), {args.device}; task {args.task} ({sd}-d states, {ad}-d actions); "
-          f"batch {args.batch}, K {args.K}, d {args.d_model}, {args.n_layer} layers; {args.repeats} repeats")
+    print(
+        f"# bench_seq: torch {torch.__version__}, {platform.processor() or platform.machine()}, "
+        f"{args.threads} thread(s), {args.device}; task {args.task} ({sd}-d states, {ad}-d actions); "
+        f"batch {args.batch}, K {args.K}, d {args.d_model}, {args.n_layer} layers; {args.repeats} repeats"
+    )
     ref = table_5_6(args.task)
     med = {k: {p: statistics.median(v) * 1e3 for p, v in d.items()} for k, d in times.items()}
     std = {k: {p: statistics.pstdev(v) * 1e3 for p, v in d.items()} for k, d in times.items()}
-    print(f"{'model':6} {'params':>9} | {'train ms':>15} {'best':>7} {'x DT':>5} | {'act ms':>7} | "
-          f"{'step ms':>15} {'best':>7} {'x DT':>5} || {'Table 5.6 train':>15} {'x DT':>5} | {'Table 5.6 infer':>15} {'x DT':>5}")
+    print(
+        f"{'model':6} {'params':>9} | {'train ms':>15} {'best':>7} {'x DT':>5} | {'act ms':>7} | "
+        f"{'step ms':>15} {'best':>7} {'x DT':>5} || {'Table 5.6 train':>15} {'x DT':>5} | {'Table 5.6 infer':>15} {'x DT':>5}"
+    )
     for k in models:
         n_params = sum(p.numel() for p in models[k].parameters())
         cells = []
         for phase in ("train", "inference"):
             r, r_dt = ref.get(k, {}).get(phase), ref.get("DT", {}).get(phase)
-            cells.append(f"{f'{r[0]:.0f} ± {r[1]:.0f}' if r else '-':>15} {f'{r[0] / r_dt[0]:.2f}' if r and r_dt else '-':>5}")
-        print(f"{k:6} {n_params:9d} | {med[k]['train']:7.2f} ± {std[k]['train']:5.2f} {min(times[k]['train']) * 1e3:7.2f} "
-              f"{med[k]['train'] / med['DT']['train']:5.2f} | {med[k]['act']:7.2f} | "
-              f"{med[k]['step']:7.2f} ± {std[k]['step']:5.2f} {min(times[k]['step']) * 1e3:7.2f} "
-              f"{med[k]['step'] / med['DT']['step']:5.2f} || {cells[0]} | {cells[1]}")
+            cells.append(
+                f"{f'{r[0]:.0f} ± {r[1]:.0f}' if r else '-':>15} {f'{r[0] / r_dt[0]:.2f}' if r and r_dt else '-':>5}"
+            )
+        print(
+            f"{k:6} {n_params:9d} | {med[k]['train']:7.2f} ± {std[k]['train']:5.2f} {min(times[k]['train']) * 1e3:7.2f} "
+            f"{med[k]['train'] / med['DT']['train']:5.2f} | {med[k]['act']:7.2f} | "
+            f"{med[k]['step']:7.2f} ± {std[k]['step']:5.2f} {min(times[k]['step']) * 1e3:7.2f} "
+            f"{med[k]['step'] / med['DT']['step']:5.2f} || {cells[0]} | {cells[1]}"
+        )
     if not ref:
         print(f"(Table 5.6 has no row for {args.task}.)")
 

@@ -1,4 +1,5 @@
 """Tests for thesis_lib.seq.attention: Eq. 2.1-2.3, masks, and the GPT block."""
+
 from __future__ import annotations
 
 import math
@@ -18,7 +19,6 @@ from thesis_lib.seq import (
     padding_mask,
     sinusoidal_positional_encoding,
 )
-
 
 # ---------------------------------------------------------------- positional encoding (Eq. 2.1-2.2)
 
@@ -66,7 +66,9 @@ def test_positional_encoding_errors(kwargs, match):
 
 
 def test_causal_and_padding_masks():
-    assert torch.equal(causal_mask(3), torch.tensor([[1, 0, 0], [1, 1, 0], [1, 1, 1]], dtype=torch.bool))
+    assert torch.equal(
+        causal_mask(3), torch.tensor([[1, 0, 0], [1, 1, 0], [1, 1, 1]], dtype=torch.bool)
+    )
     pm = padding_mask(torch.tensor([2, 4, 0]), 4)
     assert pm.dtype == torch.bool and pm.shape == (3, 4)
     assert pm.int().tolist() == [[1, 1, 0, 0], [1, 1, 1, 1], [0, 0, 0, 0]]
@@ -148,7 +150,9 @@ def test_attention_matches_sdpa(name, dtype, tol):
     q, k, v = _qkv(dtype=dtype)
     mask = _masks()[name]
     out, w = attention(q, k, v, mask)
-    sdpa_mask = mask[:, None] if mask is not None and mask.ndim == 3 else mask  # SDPA broadcasts (B,T,T) like numpy
+    sdpa_mask = (
+        mask[:, None] if mask is not None and mask.ndim == 3 else mask
+    )  # SDPA broadcasts (B,T,T) like numpy
     ref = F.scaled_dot_product_attention(q, k, v, attn_mask=sdpa_mask)
     assert out.shape == (3, 2, 6, 4) and w.shape == (3, 2, 6, 6)
     torch.testing.assert_close(out, ref, atol=tol, rtol=tol)
@@ -204,7 +208,9 @@ def test_config_validation():
     assert cfg.head_dim == 16
     with pytest.raises(ValueError, match=r"d_model=10 and n_head=4.*1, 2, 5, 10"):
         GPTBlockConfig(d_model=10, n_head=4)
-    with pytest.raises(ValueError, match=r"Unknown activation 'tanh'. Valid: gelu, gelu_tanh, relu, silu"):
+    with pytest.raises(
+        ValueError, match=r"Unknown activation 'tanh'. Valid: gelu, gelu_tanh, relu, silu"
+    ):
         GPTBlockConfig(activation="tanh")
     with pytest.raises(ValueError, match=r"dropout.*\[0, 1\).*1.5"):
         GPTBlockConfig(dropout=1.5)
@@ -227,7 +233,9 @@ def test_block_shape_and_causality(activation):
     y = block(x)
     assert y.shape == (2, 7, 16)
     x2 = x.clone()
-    x2[:, 4] = torch.randn(2, 16, dtype=torch.float64)  # change token 4 (not by a constant: LayerNorm removes it)
+    x2[:, 4] = torch.randn(
+        2, 16, dtype=torch.float64
+    )  # change token 4 (not by a constant: LayerNorm removes it)
     y2 = block(x2)
     torch.testing.assert_close(y2[:, :4], y[:, :4], atol=1e-12, rtol=0)  # earlier outputs unchanged
     assert not torch.allclose(y2[:, 5:], y[:, 5:])  # later outputs see it through attention
@@ -272,7 +280,9 @@ def test_attention_weights_match_sdpa_module():
     q, k, v = attn._qkv(x)
     y = (w @ v).transpose(1, 2).reshape(2, 5, 16)
     torch.testing.assert_close(attn.c_proj(y), attn(x, kpm), atol=1e-12, rtol=0)
-    torch.testing.assert_close(block.attention_weights(x, kpm), attn.attention_weights(block.ln_1(x), kpm))
+    torch.testing.assert_close(
+        block.attention_weights(x, kpm), attn.attention_weights(block.ln_1(x), kpm)
+    )
 
 
 def test_block_dropout_trains_and_input_errors():
@@ -295,7 +305,9 @@ def test_block_backward_is_finite_with_left_padding():
     torch.manual_seed(0)
     block = Block(GPTBlockConfig(d_model=8, n_head=2, dropout=0.0))
     x = torch.randn(2, 5, 8, requires_grad=True)
-    kpm = padding_mask([5, 2], 5, side="left")  # padded queries would have empty rows without the rule
+    kpm = padding_mask(
+        [5, 2], 5, side="left"
+    )  # padded queries would have empty rows without the rule
     block(x, kpm)[kpm].sum().backward()
     assert torch.isfinite(x.grad).all()
     assert all(torch.isfinite(p.grad).all() for p in block.parameters())

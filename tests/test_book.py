@@ -1,4 +1,5 @@
 """The book machinery: parameters, profiles, results, paper comparison, the survey data."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -34,8 +35,11 @@ class _Cfg:
 
 
 def test_unknown_parameter_lists_valid_names_and_suggests():
-    with pytest.raises(ValueError, match=r"Unknown parameter 'iteration' for notebook 04_hdt\. "
-                                         r"Did you mean: 'iterations'\? Valid: iterations, seed\."):
+    with pytest.raises(
+        ValueError,
+        match=r"Unknown parameter 'iteration' for notebook 04_hdt\. "
+        r"Did you mean: 'iterations'\? Valid: iterations, seed\.",
+    ):
         validate_parameters(["seed", "iteration"], ["seed", "iterations"], "04_hdt")
     validate_parameters([], ["seed"])  # nothing given is fine
 
@@ -43,8 +47,16 @@ def test_unknown_parameter_lists_valid_names_and_suggests():
 def test_config_from_namespace_ignores_kernel_names_modules_and_earlier_configs():
     import math
 
-    ns = {"seed": 3, "iterations": 5, "In": [], "_i1": "", "math": math, "_Cfg": _Cfg,
-          "cfg": _Cfg(), "config_from_namespace": config_from_namespace}
+    ns = {
+        "seed": 3,
+        "iterations": 5,
+        "In": [],
+        "_i1": "",
+        "math": math,
+        "_Cfg": _Cfg,
+        "cfg": _Cfg(),
+        "config_from_namespace": config_from_namespace,
+    }
     cfg = config_from_namespace(_Cfg, ns, "demo")
     assert cfg == _Cfg(seed=3, iterations=5)
 
@@ -70,9 +82,16 @@ def test_reference_tables_are_packaged_and_load_as_printed():
 
 def test_compare_with_paper_joins_and_explains():
     paper = load_reference("4.2")  # Seen 85.0 / Seen + Unseen / Unseen
-    ours = pd.DataFrame({"viewpoints": ["Seen", "Unseen", "Novel"], "accuracy_pct": [80.0, 70.0, 50.0]})
-    out = compare_with_paper("4.2", ours, on=["viewpoints"], value="accuracy_pct",
-                             differs={"data": "MuJoCo scene", "scale": "smoke"})
+    ours = pd.DataFrame(
+        {"viewpoints": ["Seen", "Unseen", "Novel"], "accuracy_pct": [80.0, 70.0, 50.0]}
+    )
+    out = compare_with_paper(
+        "4.2",
+        ours,
+        on=["viewpoints"],
+        value="accuracy_pct",
+        differs={"data": "MuJoCo scene", "scale": "smoke"},
+    )
     assert list(out.columns) == ["viewpoints", "paper", "ours", "difference", "what differs"]
     seen = out.set_index("viewpoints").loc["Seen"]
     expected = float(paper.set_index("viewpoints").loc["Seen", "accuracy_pct"])
@@ -90,11 +109,23 @@ def test_compare_with_paper_errors_and_filters():
     with pytest.raises(ValueError, match=r"Column\(s\) \['acc'\] not in the thesis table"):
         compare_with_paper("4.2", ours, on=["viewpoints"], value="acc")
     with pytest.raises(ValueError, match="Unknown deviation kind 'speed'"):
-        compare_with_paper("4.2", ours, on=["viewpoints"], value="acc", paper_value="accuracy_pct",
-                           differs={"speed": "x"})
+        compare_with_paper(
+            "4.2",
+            ours,
+            on=["viewpoints"],
+            value="acc",
+            paper_value="accuracy_pct",
+            differs={"speed": "x"},
+        )
     t = load_reference("4_3_4_4")
-    only43 = compare_with_paper("4_3_4_4", t[t.table == 4.3].head(0).assign(x=[]), on=["env"],
-                                value="x", paper_value="acc_reward_mean", where={"table": 4.3})
+    only43 = compare_with_paper(
+        "4_3_4_4",
+        t[t.table == 4.3].head(0).assign(x=[]),
+        on=["env"],
+        value="x",
+        paper_value="acc_reward_mean",
+        where={"table": 4.3},
+    )
     assert (only43["what differs"] == "not run").all()
     assert len(only43) == (t.table == 4.3).sum() == 36
 

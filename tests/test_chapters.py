@@ -3,6 +3,7 @@
 These are the slow tests (marked ``slow``): they execute notebooks through papermill exactly as
 ``make book`` does, into ``book/generated/``, with results redirected to a temporary folder.
 """
+
 from __future__ import annotations
 
 import json
@@ -57,7 +58,9 @@ def test_chapter_smoke_run_writes_results(executed, chapter):
     assert meta["git_commit"] and meta["versions"]["numpy"]
     # Target: under 5 minutes each on an idle 2-core machine; CI runs two chapters at once, so allow
     # some headroom before calling a smoke profile too big.
-    assert run.wall_time_s < 400, f"{chapter} smoke run took {run.wall_time_s:.0f} s (target < 5 min)"
+    assert run.wall_time_s < 400, (
+        f"{chapter} smoke run took {run.wall_time_s:.0f} s (target < 5 min)"
+    )
 
 
 @pytest.mark.slow
@@ -79,17 +82,35 @@ def test_papermill_cli_rejects_unknown_parameter(tmp_path):
     """papermill alone injects any name; the notebook's config cell turns a typo into an error."""
     out = tmp_path / "out.ipynb"
     proc = subprocess.run(
-        [sys.executable, "-m", "papermill", str(ROOT / "notebooks" / "survey.ipynb"), str(out),
-         "-p", "tpo", "3", "--cwd", str(ROOT)],
-        capture_output=True, text=True,
+        [
+            sys.executable,
+            "-m",
+            "papermill",
+            str(ROOT / "notebooks" / "survey.ipynb"),
+            str(out),
+            "-p",
+            "tpo",
+            "3",
+            "--cwd",
+            str(ROOT),
+        ],
+        capture_output=True,
+        text=True,
     )
     assert proc.returncode != 0
-    assert "Unknown parameter 'tpo' for notebook survey. Did you mean: 'top'? Valid: top." in proc.stdout + proc.stderr
+    assert (
+        "Unknown parameter 'tpo' for notebook survey. Did you mean: 'top'? Valid: top."
+        in proc.stdout + proc.stderr
+    )
 
 
 def test_thesis_cli_rejects_unknown_parameter_before_running():
-    proc = subprocess.run([sys.executable, "-m", "thesis_lib.cli", "run", "survey", "-p", "tpo", "3"],
-                          capture_output=True, text=True, cwd=ROOT)
+    proc = subprocess.run(
+        [sys.executable, "-m", "thesis_lib.cli", "run", "survey", "-p", "tpo", "3"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert proc.returncode == 1
     assert "Unknown parameter 'tpo' for notebook survey. Did you mean: 'top'?" in proc.stderr
 
@@ -98,12 +119,18 @@ def _write_project(root: Path, source: str) -> None:
     """A minimal project: _toc.yml with one chapter 'demo', its notebook and smoke profile."""
     (root / "notebooks").mkdir()
     (root / "params").mkdir()
-    (root / "_toc.yml").write_text("format: jb-book\nroot: intro\nchapters:\n  - file: book/generated/demo\n")
+    (root / "_toc.yml").write_text(
+        "format: jb-book\nroot: intro\nchapters:\n  - file: book/generated/demo\n"
+    )
     nb = nbformat.v4.new_notebook()
     params = nbformat.v4.new_code_cell("n = 1")
     params.metadata["tags"] = ["parameters"]
     nb.cells = [params, nbformat.v4.new_code_cell(source)]
-    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.metadata["kernelspec"] = {
+        "name": "python3",
+        "display_name": "Python 3",
+        "language": "python",
+    }
     nbformat.write(nb, root / "notebooks" / "demo.ipynb")
     (root / "params" / "demo.smoke.yml").write_text("n: 1\n")
 
@@ -112,17 +139,35 @@ def test_failing_chapter_names_the_cell_and_the_notebook(tmp_path):
     from thesis_lib.book import ChapterFailed, run_chapter
 
     _write_project(tmp_path, "raise RuntimeError(f'boom {n}')")
-    with pytest.raises(ChapterFailed, match=r"Chapter 'demo' failed in cell \d+ .*RuntimeError: boom 2"):
+    with pytest.raises(
+        ChapterFailed, match=r"Chapter 'demo' failed in cell \d+ .*RuntimeError: boom 2"
+    ):
         run_chapter("demo", {"n": 2}, root=tmp_path, progress=False)
     executed = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
-    assert any(o.get("ename") == "RuntimeError" for c in executed.cells for o in c.get("outputs", []))
+    assert any(
+        o.get("ename") == "RuntimeError" for c in executed.cells for o in c.get("outputs", [])
+    )
     with pytest.raises(ChapterFailed, match="boom 1"):
         run_chapters(["demo"], root=tmp_path)
 
 
 def test_thesis_cli_reports_bad_input_in_one_line():
-    proc = subprocess.run([sys.executable, "-m", "thesis_lib.cli", "data", "generate", "--task", "hoper",
-                           "--tier", "medium"], capture_output=True, text=True, cwd=ROOT)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "thesis_lib.cli",
+            "data",
+            "generate",
+            "--task",
+            "hoper",
+            "--tier",
+            "medium",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert proc.returncode == 1
     assert proc.stderr.startswith("thesis data: Unknown task 'hoper'. Did you mean: 'hopper'?")
     assert "Traceback" not in proc.stderr
@@ -134,8 +179,11 @@ def test_library_progress_bars_are_off_inside_executed_chapters(tmp_path, monkey
 
     monkeypatch.delenv("TQDM_DISABLE", raising=False)
     monkeypatch.setenv("MUJOCO_GL", "osmesa")  # a caller's choice is kept
-    _write_project(tmp_path, "import os\nprint('TQDM_DISABLE=' + os.environ.get('TQDM_DISABLE', 'unset'), "
-                             "'MUJOCO_GL=' + os.environ.get('MUJOCO_GL', 'unset'))")
+    _write_project(
+        tmp_path,
+        "import os\nprint('TQDM_DISABLE=' + os.environ.get('TQDM_DISABLE', 'unset'), "
+        "'MUJOCO_GL=' + os.environ.get('MUJOCO_GL', 'unset'))",
+    )
     run_chapter("demo", root=tmp_path, progress=False)
     executed = nbformat.read(tmp_path / GENERATED / "demo.ipynb", as_version=4)
     printed = "".join(o.get("text", "") for c in executed.cells for o in c.get("outputs", []))

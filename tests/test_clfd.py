@@ -1,4 +1,5 @@
 """CLfD (thesis 4.2): losses, alignment error, the environment and its expert, the reader, training."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,7 +40,9 @@ def test_nt_xent_matches_direct_computation():
     g = torch.Generator().manual_seed(0)
     z_a, z_p = torch.randn(5, 7, generator=g), torch.randn(5, 7, generator=g)
     for tau in (0.5, 0.1):
-        assert float(nt_xent(z_a, z_p, tau)) == pytest.approx(nt_xent_by_hand(z_a, z_p, tau), rel=1e-5)
+        assert float(nt_xent(z_a, z_p, tau)) == pytest.approx(
+            nt_xent_by_hand(z_a, z_p, tau), rel=1e-5
+        )
     # aligned pairs have a lower loss than shuffled ones
     assert nt_xent(z_a, z_a + 0.01) < nt_xent(z_a, z_a.roll(1, 0))
 
@@ -79,7 +82,10 @@ def test_scripted_demonstrations_succeed():
     assert success >= 0.95, f"scripted expert succeeded in {success:.0%} of 20 seeds"
     d = demos[0]
     assert set(np.unique(d.stages)) == {0, 1} and np.all(np.diff(d.stages) >= 0), "pick then place"
-    assert d.joint_angles.shape == (len(d.stages), 7) and d.joint_velocities.shape == (len(d.stages), 7)
+    assert d.joint_angles.shape == (len(d.stages), 7) and d.joint_velocities.shape == (
+        len(d.stages),
+        7,
+    )
     # the box really ends on the goal plane
     assert np.linalg.norm(d.box_pos[-1, :2] - d.goal[:2]) < 0.04
 
@@ -93,7 +99,9 @@ def test_cameras_see_the_box():
 
     env.reset(seed=0, options={"box_xy": (0.0, -0.08), "goal_xy": (-0.1, 0.12)})
     seen = red_pixels()
-    env.reset(seed=0, options={"box_xy": (3.0, 3.0), "goal_xy": (-0.1, 0.12)})  # box far off the table
+    env.reset(
+        seed=0, options={"box_xy": (3.0, 3.0), "goal_xy": (-0.1, 0.12)}
+    )  # box far off the table
     gone = red_pixels()
     env.close()
     for cam, n_seen, n_gone in zip(CAMERAS, seen, gone):
@@ -118,7 +126,9 @@ def test_env_api_and_errors():
 def _write_views(folder, name, lengths, size=12):
     rng = np.random.default_rng(0)
     for v, n in enumerate(lengths):
-        np.save(folder / f"{name}_view{v}.npy", rng.integers(0, 255, (n, size, size, 3), dtype=np.uint8))
+        np.save(
+            folder / f"{name}_view{v}.npy", rng.integers(0, 255, (n, size, size, 3), dtype=np.uint8)
+        )
 
 
 def test_reader_reads_synchronised_views_and_rejects_unsynchronised(tmp_path):
@@ -141,12 +151,16 @@ def test_reader_reads_synchronised_views_and_rejects_unsynchronised(tmp_path):
 
 
 def test_dataset_is_rendered_split_and_cached(tmp_path):
-    data = make_pick_place_dataset(n_demos=3, image_size=16, seed=0, cache_dir=tmp_path, progress=False)
+    data = make_pick_place_dataset(
+        n_demos=3, image_size=16, seed=0, cache_dir=tmp_path, progress=False
+    )
     assert {k: len(v) for k, v in data.items()} == {"train": 1, "val": 1, "test": 1}
     d = data["train"]
     assert d.cameras == CAMERAS and d.videos[0].shape[1:] == (5, 16, 16, 3)
     assert len(d.stages[0]) == len(d.videos[0]) == len(d.extras["joint_angles"][0])
-    again = make_pick_place_dataset(n_demos=3, image_size=16, seed=0, cache_dir=tmp_path, progress=False)
+    again = make_pick_place_dataset(
+        n_demos=3, image_size=16, seed=0, cache_dir=tmp_path, progress=False
+    )
     np.testing.assert_array_equal(again["test"].videos[0], data["test"].videos[0])
     with pytest.raises(ValueError, match="expected \\(T, 2, H, W, 3\\)"):
         MultiViewVideos([np.zeros((4, 3, 8, 8, 3), np.uint8)], ("a", "b"))
@@ -154,8 +168,10 @@ def test_dataset_is_rendered_split_and_cached(tmp_path):
 
 def _tiny_videos(n_videos=2, n=8, size=16):
     rng = np.random.default_rng(0)
-    return MultiViewVideos([rng.integers(0, 255, (n, 2, size, size, 3), dtype=np.uint8) for _ in range(n_videos)],
-                           ("a", "b"))
+    return MultiViewVideos(
+        [rng.integers(0, 255, (n, 2, size, size, 3), dtype=np.uint8) for _ in range(n_videos)],
+        ("a", "b"),
+    )
 
 
 def test_paper_compat_keeps_the_anchor_view_out_of_the_loss():
@@ -243,12 +259,22 @@ def test_reader_reads_videos(tmp_path):
 
     rng = np.random.default_rng(0)
     for v, n in enumerate([6, 6]):
-        iio.imwrite(tmp_path / f"pour_view{v}.mp4", rng.integers(0, 255, (n, 16, 16, 3), dtype=np.uint8),
-                    plugin="pyav", codec="libx264", fps=10)
+        iio.imwrite(
+            tmp_path / f"pour_view{v}.mp4",
+            rng.integers(0, 255, (n, 16, 16, 3), dtype=np.uint8),
+            plugin="pyav",
+            codec="libx264",
+            fps=10,
+        )
     vids = read_multiview_folder(tmp_path, image_size=16)
     assert vids.videos[0].shape == (6, 2, 16, 16, 3)
-    iio.imwrite(tmp_path / "pour_view1.mp4", rng.integers(0, 255, (4, 16, 16, 3), dtype=np.uint8),
-                plugin="pyav", codec="libx264", fps=10)
+    iio.imwrite(
+        tmp_path / "pour_view1.mp4",
+        rng.integers(0, 255, (4, 16, 16, 3), dtype=np.uint8),
+        plugin="pyav",
+        codec="libx264",
+        fps=10,
+    )
     with pytest.raises(ValueError, match="not synchronised"):
         read_multiview_folder(tmp_path)
 
@@ -257,9 +283,20 @@ def test_chapter_experiments_at_tiny_scale(tmp_path, monkeypatch):
     from thesis_lib.clfd import experiments as ex
 
     monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
-    cfg = ex.ClfdChapterConfig(n_demos=3, image_size=16, encoders=["tcn"], methods=["clfd", "tcn"], epochs=1,
-                               eval_every=1, tcn_width=4, mlp_epochs=5, rl_methods=["clfd"], rl_episodes=2,
-                               rl_steps=3, compat_encoders=["tcn"])
+    cfg = ex.ClfdChapterConfig(
+        n_demos=3,
+        image_size=16,
+        encoders=["tcn"],
+        methods=["clfd", "tcn"],
+        epochs=1,
+        eval_every=1,
+        tcn_width=4,
+        mlp_epochs=5,
+        rl_methods=["clfd"],
+        rl_episodes=2,
+        rl_steps=3,
+        compat_encoders=["tcn"],
+    )
     data = ex.load_data(cfg)
     t41, models, hist = ex.run_table_4_1(cfg, data)
     assert list(t41["method"]) == ["untrained", "CLfD", "TCN"]
@@ -268,12 +305,16 @@ def test_chapter_experiments_at_tiny_scale(tmp_path, monkeypatch):
     assert cmp.loc[cmp.dataset == "Pouring", "what differs"].eq("not run").all()
     compat = ex.run_paper_compat(cfg, data, models)
     assert list(compat["paper_compat"]) == [False, True]
-    assert compat.loc[0, "alignment_error_pct"] == t41.loc[1, "alignment_error_pct"]  # reused, not retrained
+    assert (
+        compat.loc[0, "alignment_error_pct"] == t41.loc[1, "alignment_error_pct"]
+    )  # reused, not retrained
     t42 = ex.run_table_4_2(cfg, data, models[("tcn", "clfd")])
     assert list(t42["viewpoints"]) == ["Seen", "Seen + Unseen", "Unseen"]
     assert t42["accuracy_pct"].between(0, 100).all()
     rl = ex.run_fig_4_4(cfg, data, models)
-    assert len(rl) == 2 and {"return", "final_grip_box_distance", "expert_return"} <= set(rl.columns)
+    assert len(rl) == 2 and {"return", "final_grip_box_distance", "expert_return"} <= set(
+        rl.columns
+    )
 
 
 def test_pouring_rows_run_on_a_pouring_layout_folder(tmp_path):
@@ -282,13 +323,23 @@ def test_pouring_rows_run_on_a_pouring_layout_folder(tmp_path):
     for split in ("train", "val", "test"):
         (tmp_path / split).mkdir()
         _write_views(tmp_path / split, f"pour_{split}", [8, 8], size=16)
-    cfg = ex.ClfdChapterConfig(image_size=16, encoders=["tcn"], methods=["clfd"], epochs=1, eval_every=1,
-                               tcn_width=4, pouring_dir=str(tmp_path), pouring_max_frames=6)
+    cfg = ex.ClfdChapterConfig(
+        image_size=16,
+        encoders=["tcn"],
+        methods=["clfd"],
+        epochs=1,
+        eval_every=1,
+        tcn_width=4,
+        pouring_dir=str(tmp_path),
+        pouring_max_frames=6,
+    )
     pouring = ex.load_pouring(cfg)
     assert pouring["train"].cameras == ("view0", "view1") and len(pouring["test"].videos[0]) == 6
     t41, _, _ = ex.run_table_4_1(cfg, pouring, dataset="Pouring")
     cmp = ex.thesis_table_4_1(t41, {"scale": "tiny"})
     row = cmp[(cmp.dataset == "Pouring") & (cmp.encoder == "TCN") & (cmp.method == "CLfD")].iloc[0]
-    assert row["paper"] == 19.84 and 0 <= row["ours"] <= 100 and "not run" not in row["what differs"]
+    assert (
+        row["paper"] == 19.84 and 0 <= row["ours"] <= 100 and "not run" not in row["what differs"]
+    )
     with pytest.raises(FileNotFoundError, match="no \\['train', 'val', 'test'\\] sub-folder"):
         ex.load_pouring(ex.ClfdChapterConfig(pouring_dir=str(tmp_path / "train")))

@@ -42,8 +42,11 @@ def _same_bytes(a: np.ndarray, b: np.ndarray) -> bool:
 
 @pytest.mark.parametrize(
     "task,tier",
-    [("maze2d-umaze", "expert"), ("inverted-double-pendulum", "medium-replay"),
-     ("inverted-double-pendulum", "random")],
+    [
+        ("maze2d-umaze", "expert"),
+        ("inverted-double-pendulum", "medium-replay"),
+        ("inverted-double-pendulum", "random"),
+    ],
 )
 def test_generate_store_load_round_trip_is_byte_identical(task, tier):
     if data.get_task(task).kind == "mujoco" and tier != "random" and not has_policies(task):
@@ -84,7 +87,6 @@ def test_stored_reference_scores_work_with_minari():
 
 def test_real_minari_dataset_under_minari_path_loads_the_same_way(tmp_path):
     """A data set written by Minari itself (not by us) under MINARI_DATASETS_PATH."""
-    import gymnasium as gym
     from minari import create_dataset_from_buffers
     from minari.data_collector import EpisodeBuffer
 
@@ -105,8 +107,13 @@ def test_real_minari_dataset_under_minari_path_loads_the_same_way(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         create_dataset_from_buffers(
-            "mujoco/hopper/medium-v0", bufs, env="Hopper-v5", eval_env="Hopper-v5",
-            ref_min_score=-20.272305, ref_max_score=3234.3, data_format="hdf5",
+            "mujoco/hopper/medium-v0",
+            bufs,
+            env="Hopper-v5",
+            eval_env="Hopper-v5",
+            ref_min_score=-20.272305,
+            ref_max_score=3234.3,
+            data_format="hdf5",
         )
     assert (tmp_path / "minari" / "mujoco" / "hopper" / "medium-v0").exists()
     ds = load("mujoco/hopper/medium-v0")
@@ -128,8 +135,11 @@ def test_get_dataset_generates_once_then_caches():
 # --- tiers ---------------------------------------------------------------------------------
 
 
-SHIPPED = [t for t in ("hopper", "inverted-double-pendulum", "halfcheetah", "walker2d", "ant")
-           if has_policies(t)]
+SHIPPED = [
+    t
+    for t in ("hopper", "inverted-double-pendulum", "halfcheetah", "walker2d", "ant")
+    if has_policies(t)
+]
 
 
 @pytest.mark.parametrize("task", SHIPPED[:2] or ["hopper"])
@@ -184,8 +194,14 @@ def test_normalized_scores_against_hand_computed_values():
 def _toy(lengths=(5, 30, 2), obs_dim=3, act_dim=2, seed=0):
     rng = np.random.default_rng(seed)
     return [
-        Episode(i, rng.standard_normal((T + 1, obs_dim)), rng.standard_normal((T, act_dim)),
-                rng.standard_normal(T), np.zeros(T, bool), np.zeros(T, bool))
+        Episode(
+            i,
+            rng.standard_normal((T + 1, obs_dim)),
+            rng.standard_normal((T, act_dim)),
+            rng.standard_normal(T),
+            np.zeros(T, bool),
+            np.zeros(T, bool),
+        )
         for i, T in enumerate(lengths)
     ]
 
@@ -194,8 +210,7 @@ def test_windows_are_right_padded_with_mask_and_aligned_timesteps():
     eps = _toy()
     ds = SequenceDataset(eps, K=4, rtg_scale=10.0, normalize_states=False)
     b = ds.windows(np.array([0, 1, 2]), np.array([3, 0, 1]))
-    assert b.mask.tolist() == [[True, True, False, False], [True] * 4,
-                               [True, False, False, False]]
+    assert b.mask.tolist() == [[True, True, False, False], [True] * 4, [True, False, False, False]]
     assert b.timesteps.tolist() == [[3, 4, 0, 0], [0, 1, 2, 3], [1, 0, 0, 0]]
     # Each real step carries its own state, action, a_{t-1} and return-to-go.
     np.testing.assert_allclose(b.states[0, :2], eps[0].observations[3:5], rtol=1e-6)
@@ -235,14 +250,14 @@ def test_state_normalisation_and_subgoal_hook():
 def test_sampling_is_proportional_to_length_and_uses_its_own_generator():
     eps = _toy(lengths=(10, 30, 60))
     a = SequenceDataset(eps, K=5, seed=7)
-    np.random.seed(0)
+    np.random.seed(0)  # noqa: NPY002 - the test checks the global generator is untouched
     b1 = a.sample(20_000)
     counts = np.bincount(b1.episode_index, minlength=3) / 20_000
     np.testing.assert_allclose(counts, [0.1, 0.3, 0.6], atol=0.02)
     assert np.all(b1.start < np.array([10, 30, 60])[b1.episode_index])
     b2 = SequenceDataset(eps, K=5, seed=7).sample(20_000)
     assert np.array_equal(b1.start, b2.start)
-    assert np.random.random() == np.random.RandomState(0).random_sample()  # global untouched
+    assert np.random.random() == np.random.RandomState(0).random_sample()  # noqa: NPY002  # global untouched
     assert b1.states.shape == (20_000, 5, 3) and b1.mask.dtype == bool
 
 
@@ -263,8 +278,10 @@ def test_unknown_task_and_tier_list_the_valid_ones():
 
 
 def test_missing_dataset_says_how_to_make_it():
-    msg = (r"No Minari dataset 'thesis/hopper/medium-v0'.*"
-           r"'thesis data generate --task hopper --tier medium'")
+    msg = (
+        r"No Minari dataset 'thesis/hopper/medium-v0'.*"
+        r"'thesis data generate --task hopper --tier medium'"
+    )
     with pytest.raises(FileNotFoundError, match=msg):
         load("thesis/hopper/medium-v0")
     with pytest.raises(FileNotFoundError, match="Set MINARI_DATASETS_PATH"):
@@ -272,8 +289,9 @@ def test_missing_dataset_says_how_to_make_it():
 
 
 def test_episode_with_wrong_observation_count_is_named():
-    bad = Episode(7, np.zeros((5, 3)), np.zeros((5, 2)), np.zeros(5), np.zeros(5, bool),
-                  np.zeros(5, bool))
+    bad = Episode(
+        7, np.zeros((5, 3)), np.zeros((5, 2)), np.zeros(5), np.zeros(5, bool), np.zeros(5, bool)
+    )
     msg = r"Episode 7 .*has 5 observations and 5 actions; expected 6"
     with pytest.raises(EpisodeFormatError, match=msg):
         data.write_dataset("thesis/hopper/random-v0", [bad], "Hopper-v5")
@@ -294,8 +312,21 @@ def _cli(argv):
 
 
 def test_cli_generate_list_card(capsys):
-    assert _cli(["data", "generate", "--task", "maze2d-umaze", "--tier", "expert",
-                 "--n-transitions", "600"]) == 0
+    assert (
+        _cli(
+            [
+                "data",
+                "generate",
+                "--task",
+                "maze2d-umaze",
+                "--tier",
+                "expert",
+                "--n-transitions",
+                "600",
+            ]
+        )
+        == 0
+    )
     assert _cli(["data", "list"]) == 0
     assert "thesis/maze2d-umaze/expert-v0" in capsys.readouterr().out
     assert _cli(["data", "card", "thesis/maze2d-umaze/expert-v0"]) == 0
@@ -380,13 +411,26 @@ def test_expert_training_is_deterministic_by_seed(tmp_path):
 
     from thesis_lib.data.experts import ARS_CONFIGS, train_experts
 
-    cfg = replace(ARS_CONFIGS["inverted-double-pendulum"], n_delta=2, n_top=2,
-                  total_steps=1500, checkpoint_every=500)
+    cfg = replace(
+        ARS_CONFIGS["inverted-double-pendulum"],
+        n_delta=2,
+        n_top=2,
+        total_steps=1500,
+        checkpoint_every=500,
+    )
     recs = []
     for run in ("a", "b"):
-        recs.append(train_experts("inverted-double-pendulum", cfg, out_dir=tmp_path / run,
-                                  n_eval_episodes=2, n_ckpt_eval_episodes=1,
-                                  n_select_episodes=1, log=lambda s: None))
+        recs.append(
+            train_experts(
+                "inverted-double-pendulum",
+                cfg,
+                out_dir=tmp_path / run,
+                n_eval_episodes=2,
+                n_ckpt_eval_episodes=1,
+                n_select_episodes=1,
+                log=lambda s: None,
+            )
+        )
     za, zb = (np.load(tmp_path / r / "inverted-double-pendulum.npz") for r in ("a", "b"))
     for k in za.files:
         assert _same_bytes(za[k], zb[k]), k

@@ -1,4 +1,5 @@
 """DEFENDER (thesis 4.3): methods against a direct computation, the wrapper's contract, errors."""
+
 from __future__ import annotations
 
 import gymnasium as gym
@@ -45,14 +46,16 @@ def naive_dtw(x: np.ndarray, y: np.ndarray) -> float:
 
 def direct_cost(traj: np.ndarray, demos: list[np.ndarray], name: str) -> float:
     """A method's cost spelled out from its definition in thesis 4.3.2 (no library windowing)."""
-    agg = {"Min": min, "Max": max, "Mean": lambda v: sum(v) / len(v)}[name[: 4 if name.startswith("Mean") else 3]]
+    agg = {"Min": min, "Max": max, "Mean": lambda v: sum(v) / len(v)}[
+        name[: 4 if name.startswith("Mean") else 3]
+    ]
     rest = name[4:] if name.startswith("Mean") else name[3:]
     costs = []
     for demo in demos:
         if rest == "Full":
             x, y = traj, demo
         elif rest == "Same":  # the demo's last L steps, L = the trajectory's length
-            x, y = traj, demo[-len(traj):]
+            x, y = traj, demo[-len(traj) :]
         else:
             kind, w = rest.split("W")
             w = int(w)
@@ -84,7 +87,10 @@ def test_each_method_matches_direct_computation(small_groups, name):
     assert method_cost(traj, demos, name) == pytest.approx(direct_cost(traj, demos, name))
     g = GroupCost(demos, name)
     for t in range(len(traj)):
-        assert g.append(traj[t]) == pytest.approx(direct_cost(traj[: t + 1], demos, name)), (name, t)
+        assert g.append(traj[t]) == pytest.approx(direct_cost(traj[: t + 1], demos, name)), (
+            name,
+            t,
+        )
 
 
 @pytest.mark.parametrize("name", ["MeanFull", "MinSame", "MaxDemoW5", "MeanTrajW10", "MinBothW5"])
@@ -93,14 +99,20 @@ def test_capped_trajectory_uses_last_steps(small_groups, name):
     g = GroupCost(demos, name, max_trajectory=5)
     for t in range(len(traj)):
         got = g.append(traj[t])
-        assert got == pytest.approx(direct_cost(traj[max(0, t - 4): t + 1], demos, name)), (name, t)
+        assert got == pytest.approx(direct_cost(traj[max(0, t - 4) : t + 1], demos, name)), (
+            name,
+            t,
+        )
     assert not g.incremental
 
 
 def test_incremental_used_where_possible(small_groups):
     _, demos = small_groups
     assert GroupCost(demos, "MeanDemoW5").incremental and GroupCost(demos, "MinFull").incremental
-    assert not GroupCost(demos, "MeanTrajW5").incremental and not GroupCost(demos, "MeanSame").incremental
+    assert (
+        not GroupCost(demos, "MeanTrajW5").incremental
+        and not GroupCost(demos, "MeanSame").incremental
+    )
 
 
 def test_fastdtw_backend_never_undercuts_exact(small_groups):
@@ -131,7 +143,10 @@ def test_first_fire_steps_agrees_with_the_rule(small_groups):
 
 # --------------------------------------------------------------------------- errors
 def test_unknown_method_lists_valid_and_close_match():
-    with pytest.raises(ValueError, match=r"Unknown DEFENDER method 'MeanDemoW7'\. Did you mean: 'MeanDemoW5'\? Valid: MinFull"):
+    with pytest.raises(
+        ValueError,
+        match=r"Unknown DEFENDER method 'MeanDemoW7'\. Did you mean: 'MeanDemoW5'\? Valid: MinFull",
+    ):
         parse_method("MeanDemoW7")
     with pytest.raises(ValueError, match="written 'safe/unsafe'"):
         parse_strategy("MeanDemoW5")
@@ -161,7 +176,9 @@ class CountingEnv(gym.Env):
 def _demo(xs, terminated):
     obs = np.stack([np.asarray(xs, float), np.ones(len(xs))], 1)
     acts = np.diff(obs[:, :1], axis=0)
-    return Demonstration(obs, acts, np.full(len(acts), 1.0 if not terminated else -5.0), terminated, not terminated)
+    return Demonstration(
+        obs, acts, np.full(len(acts), 1.0 if not terminated else -5.0), terminated, not terminated
+    )
 
 
 @pytest.fixture()
@@ -173,9 +190,14 @@ def walk_demos():
 
 def make_walk(walk_demos, **kw):
     safe, unsafe = walk_demos
-    return DefenderWrapper(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe,
-                           safe_method=kw.pop("safe_method", "MinDemoW5"),
-                           unsafe_method=kw.pop("unsafe_method", "MinDemoW5"), **kw)
+    return DefenderWrapper(
+        gym.wrappers.TimeLimit(CountingEnv(), 12),
+        safe,
+        unsafe,
+        safe_method=kw.pop("safe_method", "MinDemoW5"),
+        unsafe_method=kw.pop("unsafe_method", "MinDemoW5"),
+        **kw,
+    )
 
 
 def test_wrapper_errors_are_clear(walk_demos):
@@ -184,7 +206,9 @@ def test_wrapper_errors_are_clear(walk_demos):
     with pytest.raises(ValueError, match="at least one unsafe demonstration"):
         DefenderWrapper(env, safe, [])
     bad = Demonstration(np.zeros((4, 3)), np.zeros((3, 1)), np.zeros(3), True, False)
-    with pytest.raises(ValueError, match=r"unsafe demonstration 2 has states of size 3 .* observations of size 2"):
+    with pytest.raises(
+        ValueError, match=r"unsafe demonstration 2 has states of size 3 .* observations of size 2"
+    ):
         DefenderWrapper(env, safe, [*unsafe, bad])
     with pytest.raises(ValueError, match="Did you mean: 'MeanDemoW10'"):
         DefenderWrapper(env, safe, unsafe, unsafe_method="MeanDemoW01")
@@ -197,7 +221,7 @@ def test_wrapper_never_steps_real_env_when_it_filters(walk_demos):
     inner = env.unwrapped
     env.reset(seed=0)
     n_real = 0
-    for t in range(12):
+    for _ in range(12):
         before = inner.n_steps
         obs, reward, terminated, truncated, info = env.step(np.array([1.0], np.float32))
         if info["filtered"]:
@@ -223,9 +247,15 @@ def test_wrapper_never_steps_real_env_when_it_filters(walk_demos):
 def test_crash_labelling(walk_demos):
     safe, unsafe = walk_demos
     # a filter that never fires (unsafe cost always higher): real crashes are crashes
-    env = DefenderWrapper(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe, filter_reward=-1.0,
-                          safe_method="MinFull", unsafe_method="MinFull")
-    env._unsafe.append = lambda step: np.inf  # noqa: SLF001 (force "never fire")
+    env = DefenderWrapper(
+        gym.wrappers.TimeLimit(CountingEnv(), 12),
+        safe,
+        unsafe,
+        filter_reward=-1.0,
+        safe_method="MinFull",
+        unsafe_method="MinFull",
+    )
+    env._unsafe.append = lambda step: np.inf
     env.reset(seed=0)
     for _ in range(5):
         *_, term, trunc, info = env.step(np.array([1.0], np.float32))
@@ -242,7 +272,9 @@ def test_crash_labelling(walk_demos):
 
 
 def test_wrapper_with_random_action_loop(walk_demos):
-    env = make_walk(walk_demos, trajectory="state_action", safe_method="MeanBothW5", unsafe_method="MeanBothW5")
+    env = make_walk(
+        walk_demos, trajectory="state_action", safe_method="MeanBothW5", unsafe_method="MeanBothW5"
+    )
     env.action_space.seed(0)
     env.reset(seed=0)
     for _ in range(300):
@@ -261,11 +293,20 @@ def test_wrapper_trains_with_sb3(walk_demos, algo):
     from thesis_lib.rl import RLConfig, train
 
     env = make_walk(walk_demos)
-    cfg = RLConfig(algo=algo, env_id=None, total_timesteps=300, learning_starts=50, net_arch=[16, 16], batch_size=32)
+    cfg = RLConfig(
+        algo=algo,
+        env_id=None,
+        total_timesteps=300,
+        learning_starts=50,
+        net_arch=[16, 16],
+        batch_size=32,
+    )
     res = train(cfg, env=env, progress=False, info_keys=["filtered", "filter_step"])
     assert len(res.episodes) > 0 and "filtered" in res.episodes.columns
     assert env.n_real_steps == env.unwrapped.n_steps
-    assert env.dynamics.n_updates == env.n_real_steps // DYNAMICS_TRAIN_EVERY  # real transitions only
+    assert (
+        env.dynamics.n_updates == env.n_real_steps // DYNAMICS_TRAIN_EVERY
+    )  # real transitions only
 
 
 @pytest.mark.parametrize("algo", ["SAC", "TD3"])
@@ -274,24 +315,37 @@ def test_wrapper_with_sb3_directly_and_its_episode_log(walk_demos, algo):
     import stable_baselines3 as sb3
 
     env = make_walk(walk_demos, safe_method="MeanDemoW5", unsafe_method="MeanDemoW10")
-    model = getattr(sb3, algo)("MlpPolicy", env, learning_starts=50, batch_size=32, seed=0,
-                               policy_kwargs={"net_arch": [16, 16]}, device="cpu")
+    model = getattr(sb3, algo)(
+        "MlpPolicy",
+        env,
+        learning_starts=50,
+        batch_size=32,
+        seed=0,
+        policy_kwargs={"net_arch": [16, 16]},
+        device="cpu",
+    )
     model.learn(300)
     log = env.episodes
     assert list(log.columns) == list(EPISODE_LOG_COLUMNS) and len(log) > 0
     steps = env.n_real_steps + env.n_filtered_steps
-    assert steps == 300 and 0 <= steps - log.length.sum() < 12  # all but the unfinished last episode
+    assert (
+        steps == 300 and 0 <= steps - log.length.sum() < 12
+    )  # all but the unfinished last episode
     assert env.unwrapped.n_steps == env.n_real_steps
     assert log.filtered.sum() == env.n_filtered_steps  # a filtered step ends its episode
     fired = log[log.filtered]
-    assert (fired.filter_step == fired.length - 1).all() and log[~log.filtered].filter_step.isna().all()
+    assert (fired.filter_step == fired.length - 1).all() and log[
+        ~log.filtered
+    ].filter_step.isna().all()
     assert not (log.crashed & log.filtered).any()
     assert (log.crashed == (log.terminated & ~log.filtered & (log.length < 12))).all()
 
 
 def test_dynamics_update_rate_default_and_paper_compat(walk_demos):
     assert make_walk(walk_demos).dynamics.train_every == DYNAMICS_TRAIN_EVERY == 4
-    assert make_walk(walk_demos, paper_compat=True).dynamics.train_every == 1  # Algorithm 2: every step
+    assert (
+        make_walk(walk_demos, paper_compat=True).dynamics.train_every == 1
+    )  # Algorithm 2: every step
     assert make_walk(walk_demos, dynamics_train_every=1).dynamics.train_every == 1
     with pytest.raises(ValueError, match="once"):
         make_walk(walk_demos, dynamics_train_every=2, dynamics_kwargs={"train_every": 3})
@@ -346,7 +400,9 @@ def test_demonstrations_round_trip_and_diverse_subset(tmp_path, walk_demos):
 def test_expert_demonstrations_make_both_groups(tmp_path):
     from thesis_lib.defender import load_demonstrations_minari, save_demonstrations_minari
 
-    demos = expert_demonstrations("InvertedDoublePendulum-v5", n_safe=2, n_unsafe=2, max_episode_steps=30)
+    demos = expert_demonstrations(
+        "InvertedDoublePendulum-v5", n_safe=2, n_unsafe=2, max_episode_steps=30
+    )
     ids = save_demonstrations_minari(demos, root=tmp_path)  # the data-set issue's Minari storage
     assert ids["unsafe"] == "thesis/defender-inverteddoublependulum/unsafe-v0"
     back = load_demonstrations_minari("InvertedDoublePendulum-v5", root=tmp_path)
@@ -357,7 +413,10 @@ def test_expert_demonstrations_make_both_groups(tmp_path):
     assert all(d.terminated and d.length < 30 for d in demos.unsafe)
     assert demos.safe[0].observations.shape == (31, 9) and demos.safe[0].actions.shape == (30, 1)
     assert not np.array_equal(demos.safe[0].observations, demos.safe[1].observations)
-    with pytest.raises(ValueError, match="No shipped expert policy for 'Pendulum-v1'; experts ship for: .*Hopper-v5"):
+    with pytest.raises(
+        ValueError,
+        match="No shipped expert policy for 'Pendulum-v1'; experts ship for: .*Hopper-v5",
+    ):
         expert_demonstrations("Pendulum-v1", n_safe=1, n_unsafe=1)
 
 
@@ -366,16 +425,28 @@ def test_make_demonstrations_tops_up_a_missing_group():
     group from the expert and the thesis's recipe alone ("sac") fails with a clear message."""
     from thesis_lib.defender import experiments as ex
 
-    kw = dict(tasks=["InvertedDoublePendulum-v5"], max_episode_steps=20, demo_timesteps=200, n_demos=3,
-              n_demos_list=[2, 3], net_arch=[16, 16], batch_size=32)
+    kw = dict(
+        tasks=["InvertedDoublePendulum-v5"],
+        max_episode_steps=20,
+        demo_timesteps=200,
+        n_demos=3,
+        n_demos_list=[2, 3],
+        net_arch=[16, 16],
+        batch_size=32,
+    )
     runs = ex.make_demonstrations(ex.DefenderConfig(**kw))
     run = runs["InvertedDoublePendulum-v5"]
     assert run.n_sac["safe"] == 0 and run.n_sac["unsafe"] > 3
     assert run.sources() == {"safe": (0, 3), "unsafe": (3, 0)}
     table = ex.demo_table(runs, ex.DefenderConfig(**kw))
     assert table.recipe.tolist() == ["ARS expert + noise", "SAC roll-outs (thesis)"]
-    assert "came from the shipped ARS expert" in ex.describe_demonstrations(runs, ex.DefenderConfig(**kw))[0]
-    assert len(run.episodes) > 0 and all(len(d.actions) <= 20 for d in run.episodes)  # the ablation's log
+    assert (
+        "came from the shipped ARS expert"
+        in ex.describe_demonstrations(runs, ex.DefenderConfig(**kw))[0]
+    )
+    assert len(run.episodes) > 0 and all(
+        len(d.actions) <= 20 for d in run.episodes
+    )  # the ablation's log
     with pytest.raises(RuntimeError, match="0 safe .* expert_demonstrations"):
         ex.make_demonstrations(ex.DefenderConfig(**kw, demo_source="sac"))
 
@@ -383,7 +454,11 @@ def test_make_demonstrations_tops_up_a_missing_group():
 def test_strategy_ablation_scores(walk_demos):
     safe, unsafe = walk_demos
     demos = DemoSet(safe, unsafe, "walk")
-    episodes = [_demo(np.arange(6) * 1.0, True), _demo(np.zeros(12), False), _demo(np.linspace(0, -4, 9), True)]
+    episodes = [
+        _demo(np.arange(6) * 1.0, True),
+        _demo(np.zeros(12), False),
+        _demo(np.linspace(0, -4, 9), True),
+    ]
     scores = strategy_ablation(episodes, demos, horizon=11)
     assert len(scores) == 576 and scores.n_crashed.iloc[0] == 2
     assert scores.score.between(0, 1).all()
@@ -394,8 +469,9 @@ def test_strategy_ablation_scores(walk_demos):
     assert ranked.score.is_monotonic_decreasing
 
 
-
-@pytest.mark.parametrize(("name", "cap"), [("MeanTrajW5", None), ("MinSame", None), ("MeanFull", 7), ("MaxDemoW10", 30)])
+@pytest.mark.parametrize(
+    ("name", "cap"), [("MeanTrajW5", None), ("MinSame", None), ("MeanFull", 7), ("MaxDemoW10", 30)]
+)
 def test_long_trajectories_past_the_buffer(name, cap):
     """The trajectory buffer grows (uncapped) or slides (capped) past its first 64 rows correctly."""
     rng = np.random.default_rng(5)
@@ -405,7 +481,9 @@ def test_long_trajectories_past_the_buffer(name, cap):
     for t in range(len(traj)):
         got = g.append(traj[t])
         if t % 13 == 0 or t == len(traj) - 1:
-            assert got == pytest.approx(method_cost(traj[: t + 1], demos, name, max_trajectory=cap)), (name, t)
+            assert got == pytest.approx(
+                method_cost(traj[: t + 1], demos, name, max_trajectory=cap)
+            ), (name, t)
 
 
 # --------------------------------------------------------------------------- experiments (tables)
@@ -415,14 +493,44 @@ def _fake_runs():
     rows = []
     for seed in (0, 1):
         for algo in ("SAC", "TD3"):
-            rows.append({"task": "Hopper-v5", "algo": algo, "trajectory": "none", "strategy": "none",
-                         "safe_strategy": None, "unsafe_strategy": None, "n_demos": 0, "paper_compat": False,
-                         "seed": seed, "acc_reward": 100.0 + seed, "crash_pct": 60.0, "filtered_pct": 0.0,
-                         "mean_last_100": 50.0, "n_episodes": 10, "wall_time_s": 10.0})
-            rows.append({"task": "Hopper-v5", "algo": algo, "trajectory": "state", "strategy": "MeanDemoW5/MeanDemoW10",
-                         "safe_strategy": "MeanDemoW5", "unsafe_strategy": "MeanDemoW10", "n_demos": 5,
-                         "paper_compat": False, "seed": seed, "acc_reward": 90.0, "crash_pct": 10.0 + seed,
-                         "filtered_pct": 50.0, "mean_last_100": 40.0, "n_episodes": 20, "wall_time_s": 12.0})
+            rows.append(
+                {
+                    "task": "Hopper-v5",
+                    "algo": algo,
+                    "trajectory": "none",
+                    "strategy": "none",
+                    "safe_strategy": None,
+                    "unsafe_strategy": None,
+                    "n_demos": 0,
+                    "paper_compat": False,
+                    "seed": seed,
+                    "acc_reward": 100.0 + seed,
+                    "crash_pct": 60.0,
+                    "filtered_pct": 0.0,
+                    "mean_last_100": 50.0,
+                    "n_episodes": 10,
+                    "wall_time_s": 10.0,
+                }
+            )
+            rows.append(
+                {
+                    "task": "Hopper-v5",
+                    "algo": algo,
+                    "trajectory": "state",
+                    "strategy": "MeanDemoW5/MeanDemoW10",
+                    "safe_strategy": "MeanDemoW5",
+                    "unsafe_strategy": "MeanDemoW10",
+                    "n_demos": 5,
+                    "paper_compat": False,
+                    "seed": seed,
+                    "acc_reward": 90.0,
+                    "crash_pct": 10.0 + seed,
+                    "filtered_pct": 50.0,
+                    "mean_last_100": 40.0,
+                    "n_episodes": 20,
+                    "wall_time_s": 12.0,
+                }
+            )
     return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
 
 
@@ -434,7 +542,12 @@ def test_summarise_and_compare_with_thesis():
     assert row.time_pct == pytest.approx(120.0) and row.crash_pct_mean == pytest.approx(10.5)
     assert row.crash_pct_std == pytest.approx(np.std([10, 11], ddof=1)) and row.n_seeds == 2
     cmp = compare_tables(summary, differs={"scale": "test"})
-    sac = cmp[(cmp.table == "4.3") & (cmp.metric == "% Crash") & (cmp.algorithm == "SAC") & (cmp.env == "Hopper")]
+    sac = cmp[
+        (cmp.table == "4.3")
+        & (cmp.metric == "% Crash")
+        & (cmp.algorithm == "SAC")
+        & (cmp.env == "Hopper")
+    ]
     got = dict(zip(sac.safe_strategy.fillna("none").astype(str), zip(sac.paper, sac.ours)))
     assert got["none"] == (64, 60.0) and got["MeanDemoW5"] == (11, 10.5)
     assert (cmp[cmp.env == "Walker2d"]["what differs"] == "not run").all()
@@ -462,15 +575,29 @@ def test_chapter_pipeline_at_tiny_scale():
     """make_demonstrations -> ablation -> Tables 4.3-4.5 on Hopper with a 20-step horizon."""
     from thesis_lib.defender import experiments as ex
 
-    cfg = ex.DefenderConfig(tasks=["Hopper-v5"], max_episode_steps=20, demo_timesteps=600, n_demos=3,
-                            n_demos_list=[2, 3], algos=["SAC", "TD3"], train_timesteps=200, net_arch=[16, 16],
-                            paper_compat_check=False)
+    cfg = ex.DefenderConfig(
+        tasks=["Hopper-v5"],
+        max_episode_steps=20,
+        demo_timesteps=600,
+        n_demos=3,
+        n_demos_list=[2, 3],
+        algos=["SAC", "TD3"],
+        train_timesteps=200,
+        net_arch=[16, 16],
+        paper_compat_check=False,
+    )
     runs = ex.make_demonstrations(cfg)
     scores = ex.run_ablation(cfg, runs)
     assert len(scores) == 2 * 576
     tables = ex.run_tables_4_3_4_4(cfg, runs, progress=False)
-    assert len(tables.runs) == 6 and set(tables.runs.trajectory) == {"none", "state", "state_action"}
+    assert len(tables.runs) == 6 and set(tables.runs.trajectory) == {
+        "none",
+        "state",
+        "state_action",
+    }
     t45 = ex.run_table_4_5(cfg, runs, reuse=tables, progress=False)
     assert sorted(t45.runs.n_demos) == [2, 3] and set(t45.runs.algo) == {"SAC"}
-    assert set(t45.episodes.algo) == {"SAC"} and len(t45.episodes) == t45.runs.n_episodes.sum()  # reused run only
+    assert (
+        set(t45.episodes.algo) == {"SAC"} and len(t45.episodes) == t45.runs.n_episodes.sum()
+    )  # reused run only
     assert (tables.episodes.crashed & tables.episodes.filtered).sum() == 0

@@ -1,4 +1,5 @@
 """Tests for the Decision Mamba and the Hierarchical Decision Mamba (thesis 5.3): thesis_lib.seq.dm."""
+
 from __future__ import annotations
 
 import gymnasium as gym
@@ -40,7 +41,10 @@ def _model(kind, **kw):
     return DecisionMamba(DMConfig(SD, AD, use_rtg=kind == "dm-rtg", **{**SMALL, **kw}))
 
 
-@pytest.mark.parametrize("kind,paper_compat", [("dm", False), ("dm-rtg", False), ("hdm", False), ("dm", True), ("hdm", True)])
+@pytest.mark.parametrize(
+    "kind,paper_compat",
+    [("dm", False), ("dm-rtg", False), ("hdm", False), ("dm", True), ("hdm", True)],
+)
 def test_loss_falls_on_a_tiny_dataset(kind, paper_compat):
     seq = _dataset(paper_compat=paper_compat, hier=kind == "hdm")
     cfg = TrainConfig(iterations=60, batch_size=8, warmup_steps=5, lr=3e-3, progress=False)
@@ -93,7 +97,9 @@ def _rollout_histories(T, paper_compat=False, hier=False, seed=0):
     return states, actions, rtg
 
 
-@pytest.mark.parametrize("kind,paper_compat", [("dm", False), ("dm-rtg", False), ("dm", True), ("hdm", False)])
+@pytest.mark.parametrize(
+    "kind,paper_compat", [("dm", False), ("dm-rtg", False), ("dm", True), ("hdm", False)]
+)
 def test_recurrent_policy_equals_full_forward(kind, paper_compat):
     """Stepping conditions on the whole episode: equal to one forward over it (model built with K = T)."""
     T = 9
@@ -104,14 +110,26 @@ def test_recurrent_policy_equals_full_forward(kind, paper_compat):
     subgoals = torch.zeros(2, T + 1, SD)
     got = []
     for t in range(T):
-        h = {"states": states[:, : t + 1], "actions": actions[:, 1 : t + 2], "prev_actions": actions[:, : t + 1],
-             "returns_to_go": rtg[:, : t + 1], "subgoals": subgoals[:, 1 : t + 2], "prev_subgoals": subgoals[:, : t + 1]}
+        h = {
+            "states": states[:, : t + 1],
+            "actions": actions[:, 1 : t + 2],
+            "prev_actions": actions[:, : t + 1],
+            "returns_to_go": rtg[:, : t + 1],
+            "subgoals": subgoals[:, 1 : t + 2],
+            "prev_subgoals": subgoals[:, : t + 1],
+        }
         out = pol.act(h, torch.arange(2))
         if out.subgoals is not None:
             subgoals[:, t + 1] = out.subgoals
         got.append(out.actions)
-    full = {"states": states, "actions": actions[:, 1:], "prev_actions": actions[:, :-1], "returns_to_go": rtg,
-            "subgoals": subgoals[:, 1:], "prev_subgoals": subgoals[:, :-1]}
+    full = {
+        "states": states,
+        "actions": actions[:, 1:],
+        "prev_actions": actions[:, :-1],
+        "returns_to_go": rtg,
+        "subgoals": subgoals[:, 1:],
+        "prev_subgoals": subgoals[:, :-1],
+    }
     with torch.no_grad():
         want = m(full).actions
     torch.testing.assert_close(torch.stack(got, 1), want, atol=1e-5, rtol=1e-4)
@@ -126,7 +144,9 @@ def _pendulum_model(kind, paper_compat, mode):
     cls, ccls = (HDM, HDMConfig) if kind == "hdm" else (DecisionMamba, DMConfig)
     extra = {"use_rtg": True} if kind == "dm-rtg" else {}
     torch.manual_seed(1)
-    return cls(ccls(SD, 1, max_action=2.0, paper_compat=paper_compat, eval_mode=mode, **SMALL, **extra))
+    return cls(
+        ccls(SD, 1, max_action=2.0, paper_compat=paper_compat, eval_mode=mode, **SMALL, **extra)
+    )
 
 
 @pytest.mark.parametrize("kind,paper_compat", [("dm", False), ("dm-rtg", True), ("hdm", False)])
@@ -134,8 +154,12 @@ def test_recurrent_and_windowed_evaluation_agree_on_short_episodes(kind, paper_c
     """Episodes of at most K steps: both modes see the same tokens, so the same actions and returns."""
     kw = dict(target_return=-100.0) if kind == "dm-rtg" else {}
     stats = dict(state_mean=np.zeros(SD), state_std=np.ones(SD))
-    res = {mode: evaluate(_pendulum_model(kind, paper_compat, mode), _pendulum(K), 3, seed=5, **stats, **kw).returns
-           for mode in ("recurrent", "window")}
+    res = {
+        mode: evaluate(
+            _pendulum_model(kind, paper_compat, mode), _pendulum(K), 3, seed=5, **stats, **kw
+        ).returns
+        for mode in ("recurrent", "window")
+    }
     np.testing.assert_allclose(res["recurrent"], res["window"], rtol=1e-5)
 
 
@@ -155,7 +179,11 @@ def test_recurrent_and_windowed_differ_after_K_steps():
     diff = []
     for t in range(T):
         lo = max(0, t - K + 1)
-        h = {"states": states[:, lo : t + 1], "actions": actions[:, lo + 1 : t + 2], "prev_actions": actions[:, lo : t + 1]}
+        h = {
+            "states": states[:, lo : t + 1],
+            "actions": actions[:, lo + 1 : t + 2],
+            "prev_actions": actions[:, lo : t + 1],
+        }
         diff.append((pol.act(h).actions - m.act(h).actions).abs().max().item())
     assert max(diff[:K]) < 1e-6  # float rounding only
     assert min(diff[K:]) > 20 * max(max(diff[:K]), 1e-7)
@@ -195,21 +223,41 @@ def test_summary_and_win_counts_on_synthetic_curves():
     for seed, (dm, dt) in enumerate([(10.0, 5.0), (20.0, 7.0)]):
         for it, scale in ((1, 0.5), (2, 1.0)):
             base = dict(task="hopper", tier="medium", seed=seed, arch="L1 D8 K4", iteration=it)
-            rows.append(dict(base, method="DM", target="none", eval_mode="recurrent", return_mean=dm * scale))
-            rows.append(dict(base, method="HDM", target="none", eval_mode="recurrent", return_mean=1.0))
-            rows.append(dict(base, method="HDT", target="none", eval_mode="window", return_mean=2.0))
+            rows.append(
+                dict(
+                    base, method="DM", target="none", eval_mode="recurrent", return_mean=dm * scale
+                )
+            )
+            rows.append(
+                dict(base, method="HDM", target="none", eval_mode="recurrent", return_mean=1.0)
+            )
+            rows.append(
+                dict(base, method="HDT", target="none", eval_mode="window", return_mean=2.0)
+            )
             for tgt in ("half", "max", "10k"):
-                rows.append(dict(base, method="DT", target=tgt, eval_mode="window", return_mean=dt * scale))
+                rows.append(
+                    dict(base, method="DT", target=tgt, eval_mode="window", return_mean=dt * scale)
+                )
     s = summarize_dm(pd.DataFrame(rows))
     dm = s[s.method == "DM"].iloc[0]
-    assert dm.best_mean == pytest.approx(15.0) and dm.best_std == pytest.approx(5.0) and dm.n_seeds == 2
+    assert (
+        dm.best_mean == pytest.approx(15.0)
+        and dm.best_std == pytest.approx(5.0)
+        and dm.n_seeds == 2
+    )
     t = thesis_table_5_5(s)
-    row = t[(t.metric == "best during training (thesis)") & (t.method == "DM_without_R") & (t.task == "Hopper")
-            & (t.dataset == "medium")].iloc[0]
+    row = t[
+        (t.metric == "best during training (thesis)")
+        & (t.method == "DM_without_R")
+        & (t.task == "Hopper")
+        & (t.dataset == "medium")
+    ].iloc[0]
     assert row.paper == pytest.approx(1383.51) and row.ours == pytest.approx(15.0)
     wins = win_counts_5_5(t).set_index(["comparison", "metric"])
     w = wins.loc[("DM wo/ R beats DT (all three targets)", "best during training (thesis)")]
-    assert w["ours"] == "1/1" and w["thesis table (our settings)"] == "1/1"  # 1383.51 > 1144.2, 1241.6, 1252.95
+    assert (
+        w["ours"] == "1/1" and w["thesis table (our settings)"] == "1/1"
+    )  # 1383.51 > 1144.2, 1241.6, 1252.95
     h = wins.loc[("HDM beats HDT", "best during training (thesis)")]
     assert h["ours"] == "0/1" and h["thesis table (all settings)"] == "21/27"
 
@@ -225,13 +273,34 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale():
     eps = []
     for i in range(3):  # Hopper-sized episodes (state 11, action 3)
         T = 12
-        eps.append(Episode(i, rng.normal(size=(T + 1, 11)), rng.uniform(-1, 1, size=(T, 3)).astype(np.float32),
-                           rng.uniform(0, 2, size=T), np.zeros(T, bool), np.zeros(T, bool)))
+        eps.append(
+            Episode(
+                i,
+                rng.normal(size=(T + 1, 11)),
+                rng.uniform(-1, 1, size=(T, 3)).astype(np.float32),
+                rng.uniform(0, 2, size=T),
+                np.zeros(T, bool),
+                np.zeros(T, bool),
+            )
+        )
     data = {("hopper", "medium"): eps}
-    cfg = ch.DMChapterConfig(datasets=["hopper/medium"], iterations=4, batch_size=4, arch="1/8/4", eval_every=2,
-                             eval_episodes=1, max_eval_steps=5, warmup_steps=2, sweep_datasets=["hopper/medium"],
-                             sweep_archs=["1/8/4", "1/8/2"], timing_datasets=["hopper/medium"], timing_arch="1/8/4",
-                             timing_train_iters=1, timing_infer_steps=3, timing_infer_episodes=1)
+    cfg = ch.DMChapterConfig(
+        datasets=["hopper/medium"],
+        iterations=4,
+        batch_size=4,
+        arch="1/8/4",
+        eval_every=2,
+        eval_episodes=1,
+        max_eval_steps=5,
+        warmup_steps=2,
+        sweep_datasets=["hopper/medium"],
+        sweep_archs=["1/8/4", "1/8/2"],
+        timing_datasets=["hopper/medium"],
+        timing_arch="1/8/4",
+        timing_train_iters=1,
+        timing_infer_steps=3,
+        timing_infer_episodes=1,
+    )
     curves = ch.run_table_5_5(cfg, data)
     # evaluations at iterations 2 and 4; RTG methods at 3 targets; DM/HDM once more in the other mode
     n = {"DT": 6, "HDT": 2, "DM-RTG": 6 + 3, "DM": 2 + 1, "HDM": 2 + 1}
@@ -240,11 +309,19 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale():
     assert (curves.length_mean <= 5).all()
     summary = ch.summarize_dm(curves)
     t55 = ch.thesis_table_5_5(summary, "recurrent")
-    assert set(t55.dropna(subset=["ours"]).method) == {"DT", "HDT", "DM_with_R", "DM_without_R", "HDM"}
+    assert set(t55.dropna(subset=["ours"]).method) == {
+        "DT",
+        "HDT",
+        "DM_with_R",
+        "DM_without_R",
+        "HDM",
+    }
     assert len(ch.format_table_5_5(t55)) == 1
     sweep = ch.run_sweeps(cfg, data, reuse=curves)
     reused = sweep[sweep.arch == "L1 D8 K4"]
-    assert len(reused) == len(curves[curves.method.isin(cfg.sweep_methods)])  # taken from Table 5.5, not re-run
+    assert len(reused) == len(
+        curves[curves.method.isin(cfg.sweep_methods)]
+    )  # taken from Table 5.5, not re-run
     assert set(sweep[(sweep.arch == "L1 D8 K2") & (sweep.method == "DM-RTG")].target) == {"max"}
     timing = ch.time_methods(cfg, data)
     assert len(timing) == 5 + 5 + 3  # train x5, window inference x5, recurrent inference x3
@@ -261,10 +338,28 @@ def test_paper_compat_run_acts_on_the_window(method):
     from thesis_lib.seq import dm_experiments as ch
 
     rng = np.random.default_rng(1)
-    eps = [Episode(i, rng.normal(size=(9, 11)), rng.uniform(-1, 1, size=(8, 3)).astype(np.float32),
-                   rng.uniform(0, 2, size=8), np.zeros(8, bool), np.zeros(8, bool)) for i in range(3)]
-    cfg = ch.DMChapterConfig(iterations=2, batch_size=4, arch="1/8/4", eval_every=2, eval_episodes=1,
-                             max_eval_steps=6, warmup_steps=1, eval_mode="window", paper_compat=True)
+    eps = [
+        Episode(
+            i,
+            rng.normal(size=(9, 11)),
+            rng.uniform(-1, 1, size=(8, 3)).astype(np.float32),
+            rng.uniform(0, 2, size=8),
+            np.zeros(8, bool),
+            np.zeros(8, bool),
+        )
+        for i in range(3)
+    ]
+    cfg = ch.DMChapterConfig(
+        iterations=2,
+        batch_size=4,
+        arch="1/8/4",
+        eval_every=2,
+        eval_episodes=1,
+        max_eval_steps=6,
+        warmup_steps=1,
+        eval_mode="window",
+        paper_compat=True,
+    )
     rows = ch.run_dm_method(method, "hopper", "medium", 0, cfg, data=eps, compare_eval_modes=True)
     assert set(rows.eval_mode) == {"window", "recurrent"}
     assert set(rows.iteration) == {2}

@@ -1,6 +1,7 @@
 """thesis_lib.dtw: the thesis recursion (2.4) against hand-worked values, two independent
 libraries (dtaidistance, dtw-python), invariants of the path, and the DEFENDER (4.3) variants
 (batch, windows, incremental, fastdtw) against the plain pairwise DTW."""
+
 from __future__ import annotations
 
 import doctest
@@ -128,7 +129,9 @@ def test_matches_dtw_python(metric, n, m, f):
     the thesis recursion."""
     dtw_python = pytest.importorskip("dtw")
     x, y = random_pair(n, m, f, seed=3 * n + m + f)
-    expected = dtw_python.dtw(x, y, dist_method=SCIPY_NAMES[metric], step_pattern="symmetric1").distance
+    expected = dtw_python.dtw(
+        x, y, dist_method=SCIPY_NAMES[metric], step_pattern="symmetric1"
+    ).distance
     assert dtw(x, y, metric=metric) == pytest.approx(expected, rel=1e-12)
 
 
@@ -202,7 +205,9 @@ def test_batch_accepts_3d_array_and_1d_references():
     x = np.random.default_rng(7).normal(size=(6, 2))
     np.testing.assert_array_equal(dtw_batch(x, refs3), [dtw(x, r) for r in refs3])
     refs1 = [np.arange(4.0), np.arange(7.0)[::-1]]
-    np.testing.assert_array_equal(dtw_batch(np.arange(5.0), refs1), [dtw(np.arange(5.0), r) for r in refs1])
+    np.testing.assert_array_equal(
+        dtw_batch(np.arange(5.0), refs1), [dtw(np.arange(5.0), r) for r in refs1]
+    )
 
 
 @pytest.mark.parametrize("x_window,y_window", [(None, None), (4, 4), (3, 6)])
@@ -233,7 +238,9 @@ def test_incremental_equals_full_recomputation_at_every_step(metric, y_window):
     assert inc.n_steps == len(query)
     inc.reset()
     assert inc.n_steps == 0 and np.isinf(inc.costs).all()
-    np.testing.assert_array_equal(inc.extend(query[:5]), dtw_batch(query[:5], refs, metric=metric, y_window=y_window))
+    np.testing.assert_array_equal(
+        inc.extend(query[:5]), dtw_batch(query[:5], refs, metric=metric, y_window=y_window)
+    )
 
 
 def test_incremental_returns_copies():
@@ -250,8 +257,12 @@ def test_incremental_returns_copies():
 def test_fastdtw_with_large_radius_equals_exact_l1(n, m, f):
     pytest.importorskip("fastdtw")
     x, y = random_pair(n, m, f, seed=12)
-    assert fastdtw_cost(x, y, radius=max(n, m), metric="l1") == pytest.approx(dtw(x, y, metric="l1"), rel=1e-12)
-    assert fastdtw_cost(x, y, radius=max(n, m), metric="l2") == pytest.approx(dtw(x, y, metric="l2"), rel=1e-12)
+    assert fastdtw_cost(x, y, radius=max(n, m), metric="l1") == pytest.approx(
+        dtw(x, y, metric="l1"), rel=1e-12
+    )
+    assert fastdtw_cost(x, y, radius=max(n, m), metric="l2") == pytest.approx(
+        dtw(x, y, metric="l2"), rel=1e-12
+    )
 
 
 def test_fastdtw_radius_1_is_an_upper_bound_and_matches_the_package():
@@ -272,25 +283,52 @@ def test_fastdtw_radius_1_is_an_upper_bound_and_matches_the_package():
     [
         (lambda: dtw([], [1.0]), r"x is empty \(shape \(0, 1\)\)"),
         (lambda: dtw(np.zeros((3, 0)), np.zeros((3, 0))), "x is empty"),
-        (lambda: dtw([1.0, np.nan], [1.0]), "x at time step 1, feature 0 is nan; DTW needs finite values"),
+        (
+            lambda: dtw([1.0, np.nan], [1.0]),
+            "x at time step 1, feature 0 is nan; DTW needs finite values",
+        ),
         (lambda: dtw([1.0], [[0.0, np.inf]]), "y at time step 0, feature 1 is inf"),
         (lambda: dtw(np.zeros((4, 3)), np.zeros((5, 2))), r"x shape \(4, 3\) and y shape \(5, 2\)"),
-        (lambda: dtw([1.0], [1.0], metric="L1"), r"Unknown metric 'L1'\. Did you mean 'l1'\? Valid: 'l1', 'l2', 'sqeuclidean'"),
-        (lambda: dtw([1.0], [1.0], metric="euclidean"), r"Unknown metric 'euclidean'\. Did you mean 'l2'\?"),
-        (lambda: dtw([1.0], [1.0], metric="cosine"), r"Unknown metric 'cosine'\. Valid: 'l1', 'l2', 'sqeuclidean'"),
+        (
+            lambda: dtw([1.0], [1.0], metric="L1"),
+            r"Unknown metric 'L1'\. Did you mean 'l1'\? Valid: 'l1', 'l2', 'sqeuclidean'",
+        ),
+        (
+            lambda: dtw([1.0], [1.0], metric="euclidean"),
+            r"Unknown metric 'euclidean'\. Did you mean 'l2'\?",
+        ),
+        (
+            lambda: dtw([1.0], [1.0], metric="cosine"),
+            r"Unknown metric 'cosine'\. Valid: 'l1', 'l2', 'sqeuclidean'",
+        ),
         (lambda: dtw(["a", "b"], [1.0]), "x must be numeric .* got dtype <U1"),
         (lambda: dtw([1 + 1j], [1.0]), "x must be numeric"),
-        (lambda: dtw(np.zeros((2, 3, 4)), [1.0]), r"x must be 1-D \(N,\) or 2-D \(N, F\) .* got 3-D shape \(2, 3, 4\)"),
+        (
+            lambda: dtw(np.zeros((2, 3, 4)), [1.0]),
+            r"x must be 1-D \(N,\) or 2-D \(N, F\) .* got 3-D shape \(2, 3, 4\)",
+        ),
         (lambda: dtw(1.0, [1.0]), "x must be 1-D .* got 0-D"),
         (lambda: dtw([[1.0], [1.0, 2.0]], [1.0]), "x could not be read as a numeric array"),
         (lambda: dtw([1.0], [1.0], x_window=0), "x_window must be a positive int .* got 0"),
         (lambda: dtw([1.0], [1.0], y_window=2.5), "y_window must be a positive int"),
         (lambda: dtw_batch([1.0], []), "references is empty"),
         (lambda: dtw_batch([1.0], np.zeros((3, 4))), "A 2-D array is ambiguous"),
-        (lambda: dtw_batch([1.0], [[1.0], [np.nan, 1.0]]), r"references\[1\] at time step 0, feature 0 is nan"),
-        (lambda: dtw_batch(np.zeros((3, 2)), [np.zeros((4, 2)), np.zeros((4, 3))]), r"references\[1\] has shape \(4, 3\) but references\[0\] has shape \(4, 2\)"),
-        (lambda: dtw_batch(np.zeros((3, 2)), [np.zeros((4, 3))]), r"x has shape \(3, 2\) but the references have 3 feature"),
-        (lambda: IncrementalDTW([np.zeros((4, 3))]).append([1.0, 2.0]), r"observation has shape \(2,\) .* 3 feature"),
+        (
+            lambda: dtw_batch([1.0], [[1.0], [np.nan, 1.0]]),
+            r"references\[1\] at time step 0, feature 0 is nan",
+        ),
+        (
+            lambda: dtw_batch(np.zeros((3, 2)), [np.zeros((4, 2)), np.zeros((4, 3))]),
+            r"references\[1\] has shape \(4, 3\) but references\[0\] has shape \(4, 2\)",
+        ),
+        (
+            lambda: dtw_batch(np.zeros((3, 2)), [np.zeros((4, 3))]),
+            r"x has shape \(3, 2\) but the references have 3 feature",
+        ),
+        (
+            lambda: IncrementalDTW([np.zeros((4, 3))]).append([1.0, 2.0]),
+            r"observation has shape \(2,\) .* 3 feature",
+        ),
         (lambda: IncrementalDTW([np.zeros((4, 1))]).append(np.nan), "contains NaN or inf"),
         (lambda: fastdtw_cost([1.0], [1.0], radius=-1), "radius must be a non-negative int"),
     ],

@@ -1,4 +1,5 @@
 """Tests of thesis_lib.seq.mamba: the fast selective scan, the Mamba block, recurrent stepping."""
+
 from __future__ import annotations
 
 import pytest
@@ -8,11 +9,11 @@ from thesis_lib.seq._scan import SelectiveScanCPU, SelectiveScanTorch, scan_cpu_
 from thesis_lib.seq.mamba import (
     Mamba,
     MambaBlock,
-    causal_depthwise_conv1d,
     MambaConfig,
     MambaState,
     ScanOutput,
     _scan_with_mamba_ssm,
+    causal_depthwise_conv1d,
     resolve_scan_backend,
     selective_scan,
 )
@@ -24,7 +25,7 @@ TOL = {torch.float32: 1e-5, torch.float64: 1e-10}
 
 def scan_inputs(dtype=torch.float64, batch=2, L=9, Din=5, N=4, seed=0, requires_grad=False):
     g = torch.Generator().manual_seed(seed)
-    r = lambda *s: torch.randn(*s, generator=g, dtype=dtype)  # noqa: E731
+    r = lambda *s: torch.randn(*s, generator=g, dtype=dtype)
     out = {
         "u": r(batch, L, Din),
         "delta": r(batch, L, Din),  # raw: through bias + softplus, or made positive below
@@ -51,7 +52,13 @@ OPTIONS = [
 
 
 def call_args(x, opts):
-    args = (x["u"], x["delta"] if opts.get("delta_softplus") else x["delta"].abs() * 0.5, x["A"], x["B"], x["C"])
+    args = (
+        x["u"],
+        x["delta"] if opts.get("delta_softplus") else x["delta"].abs() * 0.5,
+        x["A"],
+        x["B"],
+        x["C"],
+    )
     kw = {
         "D": x["D"] if opts.get("D") else None,
         "z": x["z"] if opts.get("z") else None,
@@ -100,7 +107,9 @@ def test_selective_scan_gradcheck_full():
     x = scan_inputs(torch.float64, batch=1, L=4, Din=2, N=3, requires_grad=True)
 
     def f(u, delta, A, B, C, D, z, bias):
-        return selective_scan(u, delta, A, B, C, D, z, delta_bias=bias, delta_softplus=True, backend="numba")
+        return selective_scan(
+            u, delta, A, B, C, D, z, delta_bias=bias, delta_softplus=True, backend="numba"
+        )
 
     assert torch.autograd.gradcheck(f, tuple(x.values()))
 
@@ -111,10 +120,20 @@ def test_scan_last_state_continues_with_step(backend):
     x = scan_inputs(torch.float64)
     delta = x["delta"].abs() * 0.5
     full = selective_scan(x["u"], delta, x["A"], x["B"], x["C"], x["D"], backend=backend)
-    y, h = selective_scan(x["u"][:, :-1], delta[:, :-1], x["A"], x["B"][:, :-1], x["C"][:, :-1], x["D"],
-                          return_last_state=True, backend=backend)
+    y, h = selective_scan(
+        x["u"][:, :-1],
+        delta[:, :-1],
+        x["A"],
+        x["B"][:, :-1],
+        x["C"][:, :-1],
+        x["D"],
+        return_last_state=True,
+        backend=backend,
+    )
     assert isinstance(y, torch.Tensor) and h.shape == (2, 5, 4)
-    last = selective_scan_step(h, x["u"][:, -1], delta[:, -1], x["A"], x["B"][:, -1], x["C"][:, -1], x["D"])
+    last = selective_scan_step(
+        h, x["u"][:, -1], delta[:, -1], x["A"], x["B"][:, -1], x["C"][:, -1], x["D"]
+    )
     torch.testing.assert_close(last.y, full[:, -1], atol=1e-12, rtol=0)
 
 
@@ -141,20 +160,43 @@ def test_scan_rejects_bad_shapes():
 def test_mamba_ssm_layout_adapter():
     """The CUDA dispatch transposes to mamba_ssm's (B, Din, L) layout and back."""
 
-    def fake_selective_scan_fn(u, delta, A, B, C, D=None, z=None, delta_bias=None, delta_softplus=False,
-                               return_last_state=False):
+    def fake_selective_scan_fn(
+        u,
+        delta,
+        A,
+        B,
+        C,
+        D=None,
+        z=None,
+        delta_bias=None,
+        delta_softplus=False,
+        return_last_state=False,
+    ):
         assert u.shape == (2, 5, 9) and B.shape == (2, 4, 9)  # (B, Din, L), (B, N, L)
-        t = lambda x: None if x is None else x.transpose(1, 2)  # noqa: E731
-        y = selective_scan_reference(t(u), t(delta), A, t(B), t(C), D, t(z), delta_bias=delta_bias,
-                                     delta_softplus=delta_softplus).transpose(1, 2)
+        t = lambda x: None if x is None else x.transpose(1, 2)
+        y = selective_scan_reference(
+            t(u),
+            t(delta),
+            A,
+            t(B),
+            t(C),
+            D,
+            t(z),
+            delta_bias=delta_bias,
+            delta_softplus=delta_softplus,
+        ).transpose(1, 2)
         return (y, None) if return_last_state else y
 
     x = scan_inputs()
     args, kw = call_args(x, {"D": True, "z": True, "delta_bias": True, "delta_softplus": True})
-    got = _scan_with_mamba_ssm(fake_selective_scan_fn, *args, kw["D"], kw["z"], kw["delta_bias"], True, False)
+    got = _scan_with_mamba_ssm(
+        fake_selective_scan_fn, *args, kw["D"], kw["z"], kw["delta_bias"], True, False
+    )
     torch.testing.assert_close(got, selective_scan_reference(*args, **kw), atol=1e-12, rtol=0)
-    assert isinstance(_scan_with_mamba_ssm(fake_selective_scan_fn, *args, None, None, None, True, True),
-                      ScanOutput)
+    assert isinstance(
+        _scan_with_mamba_ssm(fake_selective_scan_fn, *args, None, None, None, True, True),
+        ScanOutput,
+    )
 
 
 def test_backend_dispatch(monkeypatch):
@@ -177,7 +219,9 @@ def test_causal_conv_matches_conv1d(K):
     conv = torch.nn.Conv1d(6, 6, K, groups=6, padding=K - 1)
     x = torch.randn(2, 7, 6)
     want = conv(x.transpose(1, 2))[..., :7].transpose(1, 2)
-    torch.testing.assert_close(causal_depthwise_conv1d(x, conv.weight, conv.bias), want, atol=1e-6, rtol=0)
+    torch.testing.assert_close(
+        causal_depthwise_conv1d(x, conv.weight, conv.bias), want, atol=1e-6, rtol=0
+    )
 
 
 # --------------------------------------------------------------------------- config
@@ -187,7 +231,10 @@ def test_causal_conv_matches_conv1d(K):
         ({"d_model": 0}, r"Expect `d_model` to be a positive int, actually: 0"),
         ({"n_layers": 2.5}, r"Expect `n_layers` to be a positive int, actually: 2.5"),
         ({"dt_rank": "big"}, r"Expect `dt_rank` to be 'auto' or a positive int, actually: 'big'"),
-        ({"dt_min": 0.5, "dt_max": 0.1}, r"Expect 0 < dt_min <= dt_max, actually: dt_min=0.5, dt_max=0.1"),
+        (
+            {"dt_min": 0.5, "dt_max": 0.1},
+            r"Expect 0 < dt_min <= dt_max, actually: dt_min=0.5, dt_max=0.1",
+        ),
         ({"dt_init": "normal"}, r"Unknown dt_init 'normal'. Valid: random, constant"),
         ({"norm_eps": 0.0}, r"Expect `norm_eps` to be positive"),
     ],
@@ -253,7 +300,9 @@ def test_step_with_autograd_uses_torch_ops():
     y, _ = model.step(x_t, model.allocate_state(2))  # grad enabled: differentiable path
     y.sum().backward()
     assert model.layers[0].mixer.in_proj.weight.grad is not None
-    with pytest.raises(RuntimeError, match=r"wrap the call in torch.no_grad\(\) or pass fused=False"):
+    with pytest.raises(
+        RuntimeError, match=r"wrap the call in torch.no_grad\(\) or pass fused=False"
+    ):
         model.step(x_t, model.allocate_state(2), fused=True)
 
 

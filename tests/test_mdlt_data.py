@@ -1,4 +1,5 @@
 """MDLT data side: audio features, poses -> UR3 angles, synchronisation, readers, default data set."""
+
 from __future__ import annotations
 
 import json
@@ -20,7 +21,9 @@ from thesis_lib.mdlt import synth as SY
 SR = 22050
 
 
-def click_track(bpm: float = 120.0, seconds: float = 4.0, sr: int = SR, start: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def click_track(
+    bpm: float = 120.0, seconds: float = 4.0, sr: int = SR, start: float = 0.5
+) -> tuple[np.ndarray, np.ndarray]:
     """Short decaying clicks at every beat, plus a quiet tone; returns (signal, click times)."""
     y = 0.01 * np.sin(2 * np.pi * 440 * np.arange(int(seconds * sr)) / sr)
     clicks = np.arange(start, seconds - 0.1, 60.0 / bpm)
@@ -65,7 +68,9 @@ def test_beats_and_onsets_where_the_clicks_are(click_features):
     # every detected beat lies on a click (within 2 frames = 33 ms)
     assert np.all(np.min(np.abs(beat_t[:, None] - clicks[None]), axis=1) <= 2 / 60 + 1e-9)
     onset = f[:, 52]
-    peaks = [int(np.argmax(onset[int(c * 60) - 5 : int(c * 60) + 6])) + int(c * 60) - 5 for c in clicks]
+    peaks = [
+        int(np.argmax(onset[int(c * 60) - 5 : int(c * 60) + 6])) + int(c * 60) - 5 for c in clicks
+    ]
     assert np.all(np.abs(np.array(peaks) / 60.0 - clicks) <= 2 / 60 + 1e-9)
     # the onset envelope is much stronger on the clicks than between them
     between = onset[[int((c + 0.25) * 60) for c in clicks[:-1]]]
@@ -239,14 +244,19 @@ def test_paper_compat_reproduces_the_authors_quirks():
     fwd, back = arm_pose(FWD, FWD)[None], arm_pose(BACK, BACK)[None]
     ours = A.pose_to_ur3_angles(np.concatenate([fwd, back]))
     theirs = A.pose_to_ur3_angles(np.concatenate([fwd, back]), paper_compat=True)
-    assert ours[0, 0] == pytest.approx(np.pi / 2, abs=1e-5) and ours[1, 0] == pytest.approx(-np.pi / 2, abs=1e-5)
+    assert ours[0, 0] == pytest.approx(np.pi / 2, abs=1e-5) and ours[1, 0] == pytest.approx(
+        -np.pi / 2, abs=1e-5
+    )
     assert theirs[0, 0] == pytest.approx(theirs[1, 0], abs=1e-5)  # unsigned: forward == backward
     np.testing.assert_allclose(theirs[:, 2:], ours[:, 2:], atol=1e-5)  # elbow and wrist agree
     # the reflection + identity-when-parallel: turning the body by 0.06 degrees flips their
     # second angle by pi, and their first angle reads a 45-degree forward arm as 135 degrees
     j = np.stack([arm_pose(FWD, UP), arm_pose([0, -1, 1], DOWN)])
     turned = j @ Rotation.from_euler("y", 1e-3).as_matrix().T
-    p0, p1 = A.pose_to_ur3_angles(j, paper_compat=True), A.pose_to_ur3_angles(turned, paper_compat=True)
+    p0, p1 = (
+        A.pose_to_ur3_angles(j, paper_compat=True),
+        A.pose_to_ur3_angles(turned, paper_compat=True),
+    )
     assert np.abs(p0 - p1).max() > 1.0
     np.testing.assert_allclose(A.pose_to_ur3_angles(turned), A.pose_to_ur3_angles(j), atol=1e-5)
     assert p0[1, 0] == pytest.approx(3 * np.pi / 4, abs=1e-4)
@@ -318,9 +328,13 @@ def test_synchronize_pairs_trims_and_paper_compat():
     f, p, idx = S.synchronize(feats, poses, ts_us, fps=60)
     # frames later than the last pose + half the median interval (0.15 s) are dropped
     assert len(f) == 9
-    np.testing.assert_array_equal(idx, [0, 1, 1, 2, 2, 2, 3, 4, 4])  # nearest in time, ties: earlier
+    np.testing.assert_array_equal(
+        idx, [0, 1, 1, 2, 2, 2, 3, 4, 4]
+    )  # nearest in time, ties: earlier
     np.testing.assert_array_equal(p[:, 0], idx)
-    _, _, idx_pc = S.synchronize(feats, poses, ts_us, fps=60, paper_compat=True, trim_to_poses=False)
+    _, _, idx_pc = S.synchronize(
+        feats, poses, ts_us, fps=60, paper_compat=True, trim_to_poses=False
+    )
     assert len(idx_pc) == 20  # frame i at (i + 1) / 60: one frame later than ours
     np.testing.assert_array_equal(idx_pc[: len(idx) - 1], idx[1:])
     with pytest.raises(ValueError, match="strictly increasing"):
@@ -357,8 +371,17 @@ def aist_fixture(tmp_path_factory):
         if k == 1:
             poses[10:13] = np.nan  # missing detections
         with open(root / "motions" / f"{name}.pkl", "wb") as f:
-            pickle.dump({"smpl_poses": poses, "smpl_trans": np.zeros((n, 3)), "smpl_scaling": np.array([90.0])}, f)
-        ts = (np.arange(n) * 1e6 / 30 + np.random.default_rng(k).normal(0, 1000, n)).astype(np.int64)
+            pickle.dump(
+                {
+                    "smpl_poses": poses,
+                    "smpl_trans": np.zeros((n, 3)),
+                    "smpl_scaling": np.array([90.0]),
+                },
+                f,
+            )
+        ts = (np.arange(n) * 1e6 / 30 + np.random.default_rng(k).normal(0, 1000, n)).astype(
+            np.int64
+        )
         with open(root / "keypoints2d" / f"{name}.pkl", "wb") as f:
             pickle.dump({"keypoints2d": np.zeros((1, n, 17, 3)), "timestamps": ts}, f)
         j = A.forward_kinematics(poses if k != 1 else _arm_down_poses(n).reshape(n, 72))
@@ -371,10 +394,17 @@ def aist_fixture(tmp_path_factory):
 
 def test_load_aist_one_sequence_per_music(aist_fixture):
     seqs = R.load_aist(aist_fixture, progress=False)
-    assert [s.name for s in seqs] == ["gBR_sBM_cAll_d04_mBR0_ch01", "gHO_sBM_cAll_d21_mHO1_ch02"]  # ignore list
+    assert [s.name for s in seqs] == [
+        "gBR_sBM_cAll_d04_mBR0_ch01",
+        "gHO_sBM_cAll_d21_mHO1_ch02",
+    ]  # ignore list
     s = seqs[0]
     assert (s.music_id, s.genre, s.dancer, s.fps) == ("mBR0", "mBR", "d04", 60)
-    assert s.features.shape[1] == 438 and s.angles.shape == (len(s), 4) and s.joints.shape == (len(s), 24, 3)
+    assert (
+        s.features.shape[1] == 438
+        and s.angles.shape == (len(s), 4)
+        and s.joints.shape == (len(s), 24, 3)
+    )
     assert s.features.dtype == np.float32 and s.angles.dtype == np.float32
     assert 115 <= len(s) <= 122  # 2 s of 60 fps frames, trimmed to the poses
     # arm down throughout, the elbow bending from 0 to 90 degrees: 60 fps frames follow 30 fps poses
@@ -394,7 +424,9 @@ def test_load_aist_all_sequences_missing_frames_and_keypoints3d(aist_fixture):
     assert np.all(np.isfinite(s.angles)) and not set(range(10, 13)) & set(s.pose_index.tolist())
     kp = R.load_aist(aist_fixture, source="keypoints3d", genres=["mHO"], progress=False)
     assert len(kp) == 1 and np.all(np.isfinite(kp[0].angles))
-    np.testing.assert_allclose(kp[0].angles[:, :3], 0, atol=0.02)  # mid-hip pelvis: spine tilts 0.5 deg
+    np.testing.assert_allclose(
+        kp[0].angles[:, :3], 0, atol=0.02
+    )  # mid-hip pelvis: spine tilts 0.5 deg
 
 
 def test_aist_bad_layouts(aist_fixture, tmp_path):
@@ -409,7 +441,12 @@ def test_aist_bad_layouts(aist_fixture, tmp_path):
     with pytest.raises(FileNotFoundError, match="no music"):
         R.load_aist(aist_fixture, audio_dir=empty_music, progress=False)
     with pytest.warns(UserWarning, match="Skipped"):
-        assert R.load_aist(aist_fixture, audio_dir=empty_music, skip_missing_audio=True, progress=False) == []
+        assert (
+            R.load_aist(
+                aist_fixture, audio_dir=empty_music, skip_missing_audio=True, progress=False
+            )
+            == []
+        )
     with pytest.raises(ValueError, match="Unknown genre"):
         R.load_aist(aist_fixture, genres=["mXX"], progress=False)
     with pytest.raises(R.DatasetLayoutError, match="neither"):
@@ -429,14 +466,20 @@ def phantom_fixture(tmp_path_factory):
     order = np.random.default_rng(0).permutation(len(bones))  # the reader matches bones by name
     mirror = np.diag([-1.0, 1.0, 1.0])  # Unity is left-handed: x right, y up, z forward
     for k, name in enumerate(["001", "002"]):
-        poses = _arm_down_poses(n, np.linspace(0, np.pi / 2, n) if k == 0 else None).reshape(n, 24, 3)
+        poses = _arm_down_poses(n, np.linspace(0, np.pi / 2, n) if k == 0 else None).reshape(
+            n, 24, 3
+        )
         local = Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(n, 24, 3, 3)
         world = local.copy()  # the official format stores world rotations
         for j in range(1, 24):
             world[:, j] = world[:, A.PARENTS[j]] @ local[:, j]
         unity = mirror @ world @ mirror
-        rot = np.concatenate([unity, np.repeat(np.eye(3)[None, None], n, 0)], axis=1)  # + an extra bone
-        q = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat().reshape(n, len(bones), 4)  # (x, y, z, w)
+        rot = np.concatenate(
+            [unity, np.repeat(np.eye(3)[None, None], n, 0)], axis=1
+        )  # + an extra bone
+        q = (
+            Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat().reshape(n, len(bones), 4)
+        )  # (x, y, z, w)
         obj = {"bone_name": [bones[i] for i in order], "root_positions": np.zeros((n, 3)).tolist(),
                "rotations": q[:, order].tolist()}  # fmt: skip
         (root / "motion" / f"{name}.json").write_text(json.dumps(obj))
@@ -450,7 +493,9 @@ def test_load_phantomdance(phantom_fixture):
     s = seqs[0]
     assert s.fps == 30 and s.features.shape[1] == 438 and abs(len(s) - 60) <= 1
     np.testing.assert_allclose(s.angles[:, :2], 0, atol=1e-5)
-    np.testing.assert_allclose(s.angles[:, 2], -np.linspace(0, np.pi / 2, 60)[s.pose_index], atol=1e-5)
+    np.testing.assert_allclose(
+        s.angles[:, 2], -np.linspace(0, np.pi / 2, 60)[s.pose_index], atol=1e-5
+    )
     np.testing.assert_array_equal(s.pose_index, np.arange(len(s)))  # same rate: frame i = pose i
     assert len(R.load_dance_dataset(phantom_fixture, skip=["002"], progress=False)) == 1
 
@@ -459,17 +504,31 @@ def test_phantom_world_rotations_and_unity_frame(tmp_path):
     """The official format: world rotations (a child of an unrotated bone carries its parent's
     rotation), (x, y, z, w), Unity's left-handed frame (a yaw turns the other way)."""
     n = 2
-    raise_arm = Rotation.from_euler("z", [[0.0], [np.pi / 2]]).as_matrix()  # frame 1: right arm up sideways
+    raise_arm = Rotation.from_euler(
+        "z", [[0.0], [np.pi / 2]]
+    ).as_matrix()  # frame 1: right arm up sideways
     world = np.repeat(np.eye(3)[None, None], n, 0).repeat(24, 1)
-    for j in (A.JOINT_NAMES.index(b) for b in ("right_shoulder", "right_elbow", "right_wrist", "right_hand")):
-        world[:, j] = raise_arm  # rigid arm: every bone below the shoulder has the same world rotation
+    for j in (
+        A.JOINT_NAMES.index(b)
+        for b in ("right_shoulder", "right_elbow", "right_wrist", "right_hand")
+    ):
+        world[:, j] = (
+            raise_arm  # rigid arm: every bone below the shoulder has the same world rotation
+        )
     local = np.zeros((n, 24, 3))
     local[:, A.JOINT_NAMES.index("right_shoulder")] = Rotation.from_matrix(raise_arm).as_rotvec()
     expect = A.forward_kinematics(local)
     q = Rotation.from_matrix(world.reshape(-1, 3, 3)).as_quat().reshape(n, 24, 4)
     p = tmp_path / "m.json"
-    p.write_text(json.dumps({"bone_name": list(R.PHANTOM_BONES), "root_positions": np.zeros((n, 3)).tolist(),
-                             "rotations": q.tolist()}))
+    p.write_text(
+        json.dumps(
+            {
+                "bone_name": list(R.PHANTOM_BONES),
+                "root_positions": np.zeros((n, 3)).tolist(),
+                "rotations": q.tolist(),
+            }
+        )
+    )
     got, _ = R.read_phantom_motion(p, frame="smpl")
     np.testing.assert_allclose(got, expect, atol=1e-9)
     as_local, _ = R.read_phantom_motion(p, frame="smpl", rotations="local")  # the old misreading
@@ -478,19 +537,41 @@ def test_phantom_world_rotations_and_unity_frame(tmp_path):
     yaw = Rotation.from_euler("y", 0.4).as_matrix()
     world_u = np.repeat(yaw[None, None], 1, 0).repeat(24, 1)  # the whole body turned
     pu = tmp_path / "u.json"
-    pu.write_text(json.dumps({"bone_name": list(R.PHANTOM_BONES), "root_positions": [[0.3, 0.9, 0.1]],
-                              "rotations": Rotation.from_matrix(world_u.reshape(-1, 3, 3)).as_quat().reshape(1, 24, 4).tolist()}))
+    pu.write_text(
+        json.dumps(
+            {
+                "bone_name": list(R.PHANTOM_BONES),
+                "root_positions": [[0.3, 0.9, 0.1]],
+                "rotations": Rotation.from_matrix(world_u.reshape(-1, 3, 3))
+                .as_quat()
+                .reshape(1, 24, 4)
+                .tolist(),
+            }
+        )
+    )
     got_u, _ = R.read_phantom_motion(pu)
     exp_local = np.zeros((1, 24, 3))
     exp_local[:, 0] = [0.0, -0.4, 0.0]
-    np.testing.assert_allclose(got_u, A.forward_kinematics(exp_local, np.array([[-0.3, 0.9, 0.1]])), atol=1e-9)
+    np.testing.assert_allclose(
+        got_u, A.forward_kinematics(exp_local, np.array([[-0.3, 0.9, 0.1]])), atol=1e-9
+    )
     # the writer of the default set is the reader's inverse
     poses = np.random.default_rng(0).normal(0, 0.4, (3, 24, 3))
     root = np.random.default_rng(1).normal(0, 1, (3, 3))
     qw, rp = R.smpl_to_phantom(poses, root)
     pw = tmp_path / "w.json"
-    pw.write_text(json.dumps({"bone_name": list(R.PHANTOM_BONES), "root_positions": rp.tolist(), "rotations": qw.tolist()}))
-    np.testing.assert_allclose(R.read_phantom_motion(pw)[0], A.forward_kinematics(poses, root), atol=1e-9)
+    pw.write_text(
+        json.dumps(
+            {
+                "bone_name": list(R.PHANTOM_BONES),
+                "root_positions": rp.tolist(),
+                "rotations": qw.tolist(),
+            }
+        )
+    )
+    np.testing.assert_allclose(
+        R.read_phantom_motion(pw)[0], A.forward_kinematics(poses, root), atol=1e-9
+    )
     with pytest.raises(ValueError, match="rotations must be"):
         R.read_phantom_motion(pw, rotations="global")
 
@@ -513,7 +594,9 @@ def test_phantomdance_bad_input(phantom_fixture, tmp_path):
 
 
 def _tree_bytes(root: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
+    }
 
 
 def test_synthetic_aist_same_seed_same_data(tmp_path):
@@ -530,7 +613,9 @@ def test_synthetic_aist_same_seed_same_data(tmp_path):
     for s in seqs:
         assert np.all(np.isfinite(s.angles)) and s.angles[:, 0].std() > 0.05  # the arm moves
     # genres dance differently: ballet jazz holds the arm higher than krump (GenreStyle.center)
-    mean_t1 = {g: np.mean([s.angles[:, 0].mean() for s in seqs if s.genre == g]) for g in ("mKR", "mJB")}
+    mean_t1 = {
+        g: np.mean([s.angles[:, 0].mean() for s in seqs if s.genre == g]) for g in ("mKR", "mJB")
+    }
     assert mean_t1["mJB"] > mean_t1["mKR"]
     # pose timestamps: ~60 fps with jitter and dropped frames, strictly increasing
     ts = R._load_pickle(a / "keypoints2d" / f"{seqs[0].name}.pkl")["timestamps"]
@@ -568,7 +653,9 @@ def test_default_dataset_caches_and_validates(tmp_path, monkeypatch):
     assert len(seqs) == 2 and seqs[0].genre == "mBR"
     marker = root / ".complete.json"
     spec = json.loads(marker.read_text())
-    marker.write_text(json.dumps({**spec, "generator": "mdlt-synth-v0"}))  # made by an older generator
+    marker.write_text(
+        json.dumps({**spec, "generator": "mdlt-synth-v0"})
+    )  # made by an older generator
     with pytest.warns(UserWarning, match="remaking"):
         SY.default_dataset("phantomdance", "smoke", seed=5, root=root)
     assert calls == [5, 5] and json.loads(marker.read_text()) == spec

@@ -1,4 +1,5 @@
 """MDLT model side: MDLT-T / MDLT-M, metrics, training, folds, the dance command (thesis 6.4-6.5)."""
+
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -47,18 +48,33 @@ def _sequences(n_genres=2, n_music=3, T=50, seed=0):
     for g in range(n_genres):
         for m in range(n_music):
             f, a = _song(T + 7 * m, rng)
-            out.append(SimpleNamespace(name=f"g{g}_m{m}", music_id=f"mG{g}{m}", genre=f"gG{g}", features=f, angles=a))
+            out.append(
+                SimpleNamespace(
+                    name=f"g{g}_m{m}", music_id=f"mG{g}{m}", genre=f"gG{g}", features=f, angles=a
+                )
+            )
     return out
 
 
 def _tiny_cfg(**kw) -> MDLTExperimentConfig:
-    base = dict(data_size="smoke", iterations=30, batch_size=8, lr=0.003, eval_every=0, K_transformer=6,
-                K_mamba=12, n_folds=2, progress=False, **TINY)
+    base = dict(
+        data_size="smoke",
+        iterations=30,
+        batch_size=8,
+        lr=0.003,
+        eval_every=0,
+        K_transformer=6,
+        K_mamba=12,
+        n_folds=2,
+        progress=False,
+        **TINY,
+    )
     base.update(kw)
     return MDLTExperimentConfig(**base)
 
 
 # ---------------------------------------------------------------------------------- metrics
+
 
 def test_aje_mae_against_direct_computation():
     rng = np.random.default_rng(0)
@@ -81,9 +97,13 @@ def test_frechet_distance_closed_form_for_diagonal_gaussians():
     # diagonal closed form within the off-diagonal noise
     cx, cy = np.cov(x, rowvar=False), np.cov(y, rowvar=False)
     w, v = np.linalg.eig(cx @ cy)
-    direct = ((mx - my) ** 2).sum() + np.trace(cx) + np.trace(cy) - 2 * np.sqrt(w.real.clip(0)).sum()
+    direct = (
+        ((mx - my) ** 2).sum() + np.trace(cx) + np.trace(cy) - 2 * np.sqrt(w.real.clip(0)).sum()
+    )
     assert frechet_distance(x, y) == pytest.approx(direct, rel=1e-6)
-    assert frechet_distance(x, y) == pytest.approx(((mx - my) ** 2).sum() + ((sx - sy) ** 2).sum(), rel=0.02)
+    assert frechet_distance(x, y) == pytest.approx(
+        ((mx - my) ** 2).sum() + ((sx - sy) ** 2).sum(), rel=0.02
+    )
     assert frechet_distance(x, x) == pytest.approx(0.0, abs=1e-8)
     const = np.tile(x.mean(0), (100, 1))  # a constant prediction: singular covariance
     assert frechet_distance(const, x) == pytest.approx(np.trace(cx), rel=1e-3)
@@ -91,7 +111,9 @@ def test_frechet_distance_closed_form_for_diagonal_gaussians():
 
 def test_beat_alignment_exact_and_bounded():
     t = np.arange(240)[:, None]
-    angles = np.sin(2 * np.pi * t / 40) * np.ones((1, 4))  # speed minima every 20 frames at 10, 30, ...
+    angles = np.sin(2 * np.pi * t / 40) * np.ones(
+        (1, 4)
+    )  # speed minima every 20 frames at 10, 30, ...
     beats_on = np.arange(10, 240, 20)
     assert beat_alignment(angles, beats_on) == pytest.approx(1.0)
     off = beat_alignment(angles, beats_on + 3)  # 3 frames off: exp(-9 / 18)
@@ -121,6 +143,7 @@ def test_table_6_1_is_the_thesis_table():
 
 # ---------------------------------------------------------------------------------- models
 
+
 def test_config_errors():
     with pytest.raises(ValueError, match="Unknown MDLT variant 'gru'"):
         MDLTConfig(variant="gru")
@@ -137,19 +160,30 @@ def test_transformer_padding_and_causal_masks():
     m = MDLTTransformer(MDLTConfig(K=8, **TINY)).eval()
     rng = np.random.default_rng(0)
     f, a = _song(5, rng)
-    batch = {"audio": torch.tensor(f)[None], "poses_in": torch.tensor(np.vstack([np.zeros((1, 4)), a[:-1]]),
-             dtype=torch.float32)[None], "timesteps": torch.arange(1, 6)[None], "mask": torch.ones(1, 5, dtype=torch.bool)}
+    batch = {
+        "audio": torch.tensor(f)[None],
+        "poses_in": torch.tensor(np.vstack([np.zeros((1, 4)), a[:-1]]), dtype=torch.float32)[None],
+        "timesteps": torch.arange(1, 6)[None],
+        "mask": torch.ones(1, 5, dtype=torch.bool),
+    }
     out = m(batch).actions
-    padded = {k: torch.cat([v, torch.zeros_like(v[:, :3]) + (7 if k != "mask" else 0)], 1) for k, v in batch.items()}
+    padded = {
+        k: torch.cat([v, torch.zeros_like(v[:, :3]) + (7 if k != "mask" else 0)], 1)
+        for k, v in batch.items()
+    }
     padded["mask"][:, 5:] = False
     padded["timesteps"][:, 5:] = 0
     out_p = m(padded).actions
-    assert torch.allclose(out, out_p[:, :5], atol=1e-5), "padding changed the outputs at real frames"
+    assert torch.allclose(out, out_p[:, :5], atol=1e-5), (
+        "padding changed the outputs at real frames"
+    )
     # causal: changing the pose input at frame 3 must not change predictions at frames 0..2
     changed = {k: v.clone() for k, v in batch.items()}
     changed["poses_in"][:, 3] += 1.0
     out_c = m(changed).actions
-    assert torch.allclose(out[:, :3], out_c[:, :3], atol=1e-6) and not torch.allclose(out[:, 3:], out_c[:, 3:])
+    assert torch.allclose(out[:, :3], out_c[:, :3], atol=1e-6) and not torch.allclose(
+        out[:, 3:], out_c[:, 3:]
+    )
     assert out.abs().max() <= np.pi
 
 
@@ -162,8 +196,12 @@ def test_transformer_generate_equals_windowed_forward_on_its_own_predictions():
     for t in (0, 2, 3, 7, 10):
         s = max(0, t - K + 1)
         poses_in = np.vstack([np.zeros((1, 4)), pred[s:t]]).astype(np.float32)
-        batch = {"audio": torch.tensor(f[s:t + 1])[None], "poses_in": torch.tensor(poses_in)[None],
-                 "timesteps": torch.arange(s + 1, t + 2)[None], "mask": torch.ones(1, t - s + 1, dtype=torch.bool)}
+        batch = {
+            "audio": torch.tensor(f[s : t + 1])[None],
+            "poses_in": torch.tensor(poses_in)[None],
+            "timesteps": torch.arange(s + 1, t + 2)[None],
+            "mask": torch.ones(1, t - s + 1, dtype=torch.bool),
+        }
         assert np.allclose(m(batch).actions[0, -1].detach().numpy(), pred[t], atol=1e-5)
     # a batch of songs gives what each song gives alone
     g = np.random.default_rng(3).random((7, 438)).astype(np.float32)
@@ -177,15 +215,21 @@ def test_mamba_recurrent_inference_equals_full_forward():
     rng = np.random.default_rng(4)
     f, a = _song(30, rng)
     shifted = np.vstack([np.zeros((1, 4)), a[:-1]]).astype(np.float32)
-    full = {"audio": torch.tensor(f)[None], "poses_in": torch.tensor(shifted)[None],
-            "mask": torch.ones(1, 30, dtype=torch.bool)}
+    full = {
+        "audio": torch.tensor(f)[None],
+        "poses_in": torch.tensor(shifted)[None],
+        "mask": torch.ones(1, 30, dtype=torch.bool),
+    }
     with torch.no_grad():
         forward = m(full).actions[0].numpy()
     # teacher-forced recurrence == one parallel scan over the whole song
     assert np.allclose(m.generate(f, teacher_poses=a), forward, atol=1e-4)
     # free-running recurrence == forward over the song fed its own previous predictions
     pred = m.generate(f)
-    own = dict(full, poses_in=torch.tensor(np.vstack([np.zeros((1, 4)), pred[:-1]]), dtype=torch.float32)[None])
+    own = dict(
+        full,
+        poses_in=torch.tensor(np.vstack([np.zeros((1, 4)), pred[:-1]]), dtype=torch.float32)[None],
+    )
     with torch.no_grad():
         assert np.allclose(m(own).actions[0].numpy(), pred, atol=1e-4)
     # a training window from the song's start (shorter than K, right-padded) sees the same
@@ -201,9 +245,11 @@ def test_mamba_recurrent_inference_equals_full_forward():
         state = m2.backbone.allocate_state(1)
         steps = []
         for t in range(30):
-            y, state = m2.backbone.step(m2.embed(torch.tensor(f[t:t + 1]), None), state)
+            y, state = m2.backbone.step(m2.embed(torch.tensor(f[t : t + 1]), None), state)
             steps.append(m2._out(y)[0].numpy())
-    assert np.allclose(np.stack(steps), scan, atol=1e-4) and np.allclose(m2.generate(f), scan, atol=1e-6)
+    assert np.allclose(np.stack(steps), scan, atol=1e-4) and np.allclose(
+        m2.generate(f), scan, atol=1e-6
+    )
 
 
 def test_dance_windows_layout():
@@ -216,12 +262,14 @@ def test_dance_windows_layout():
         n = b.mask.sum(1)
         for i in range(64):
             t0 = b.timesteps[i, 0] - 1
-            assert np.array_equal(b.poses[i, :n[i]], a[t0:t0 + n[i]])
-            assert np.array_equal(b.poses_in[i, 1:n[i]], a[t0:t0 + n[i] - 1])
-            assert (b.timesteps[i, n[i]:] == 0).all() and (b.audio[i, n[i]:] == 0).all()
+            assert np.array_equal(b.poses[i, : n[i]], a[t0 : t0 + n[i]])
+            assert np.array_equal(b.poses_in[i, 1 : n[i]], a[t0 : t0 + n[i] - 1])
+            assert (b.timesteps[i, n[i] :] == 0).all() and (b.audio[i, n[i] :] == 0).all()
     assert (bt.poses_in[:, 0] == 0).all()  # MDLT-T: always the zero start pose
     late = bm.timesteps[:, 0] > 1
-    assert late.any() and np.array_equal(bm.poses_in[late, 0], a[bm.timesteps[late, 0] - 2])  # MDLT-M: previous pose
+    assert late.any() and np.array_equal(
+        bm.poses_in[late, 0], a[bm.timesteps[late, 0] - 2]
+    )  # MDLT-M: previous pose
 
 
 @pytest.mark.parametrize("variant", ["transformer", "mamba"])
@@ -231,7 +279,9 @@ def test_loss_falls_and_same_seed_same_numbers(variant, tmp_path):
     m1, h1, _ = train_model(variant, seqs[:2], seqs[2:], cfg)
     m2, h2, _ = train_model(variant, seqs[:2], seqs[2:], cfg)
     loss = h1["loss"].to_numpy()
-    assert loss[-10:].mean() < 0.6 * loss[:10].mean(), f"{variant} loss did not fall: {loss[:10].mean()} -> {loss[-10:].mean()}"
+    assert loss[-10:].mean() < 0.6 * loss[:10].mean(), (
+        f"{variant} loss did not fall: {loss[:10].mean()} -> {loss[-10:].mean()}"
+    )
     assert np.array_equal(h1["loss"].to_numpy(), h2["loss"].to_numpy())
     f = seqs[2].features
     assert np.array_equal(m1.generate(f[:, :] * 0 + 0.5), m2.generate(f[:, :] * 0 + 0.5))
@@ -249,9 +299,20 @@ def test_checkpoint_carries_scaler_and_resumes(tmp_path):
     def run(iters, path, fresh_model=True):
         torch.manual_seed(0)
         model = build_model(cfg)
-        tr = MDLTTrainer(model, DanceWindows(feats, angles, K=6, seed=0),
-                         TrainConfig(iterations=iters, batch_size=4, lr=0.001, warmup_steps=1, progress=False,
-                                     checkpoint_path=str(path)), scaler=scaler, meta={"fps": 60})
+        tr = MDLTTrainer(
+            model,
+            DanceWindows(feats, angles, K=6, seed=0),
+            TrainConfig(
+                iterations=iters,
+                batch_size=4,
+                lr=0.001,
+                warmup_steps=1,
+                progress=False,
+                checkpoint_path=str(path),
+            ),
+            scaler=scaler,
+            meta={"fps": 60},
+        )
         return tr, tr.train()
 
     _, h_full = run(20, tmp_path / "a.pt")
@@ -273,6 +334,7 @@ def test_checkpoint_carries_scaler_and_resumes(tmp_path):
 
 # ---------------------------------------------------------------------------------- experiments
 
+
 def test_folds_follow_the_thesis():
     seqs = _sequences(3, 6, T=10)
     folds = aist_folds(seqs, "mG1", 6)
@@ -281,7 +343,9 @@ def test_folds_follow_the_thesis():
     assert sorted(held) == sorted(s.music_id for s in seqs if s.genre == "gG1")
     assert all(len(tr) == 5 and all(s.genre == "gG1" for s in tr) for tr, _ in folds)
     allg = aist_folds(seqs, None, 6)
-    assert all(len(va) == 3 and len({s.genre for s in va}) == 3 and len(tr) == 15 for tr, va in allg)
+    assert all(
+        len(va) == 3 and len({s.genre for s in va}) == 3 and len(tr) == 15 for tr, va in allg
+    )
     with pytest.raises(ValueError, match="No sequences of genre 'mXX'"):
         aist_folds(seqs, "mXX")
     pd_seqs = [SimpleNamespace(name=f"{i:03d}") for i in range(260)]
@@ -294,16 +358,26 @@ def test_run_fold_scores_models_and_baselines():
     seqs = _sequences(2, 3, T=40)
     tr, va = aist_folds(seqs, None, 1)[0]
     res = run_fold(tr, va, _tiny_cfg(iterations=5), "All Genres", 0)
-    assert set(res.rows["method"]) == {"MDLT-T", "MDLT-M", "mean pose", "last pose", "random", "genre mean pose (oracle)"}
+    assert set(res.rows["method"]) == {
+        "MDLT-T",
+        "MDLT-M",
+        "mean pose",
+        "last pose",
+        "random",
+        "genre mean pose (oracle)",
+    }
     assert len(res.rows) == 6 * len(va) and res.rows[["aje", "fid", "mae_deg"]].notna().all().all()
     table = summarize(res.rows)
     assert len(table) == 6 and (table["n_folds"] == 1).all()
     row = table[table.variant == "mean pose"].iloc[0]
     mean = np.concatenate([s.angles for s in tr]).mean(0)
-    assert row.aje_rad_mean == pytest.approx(np.mean([aje(np.tile(mean, (len(s.angles), 1)), s.angles) for s in va]), rel=1e-5)
+    assert row.aje_rad_mean == pytest.approx(
+        np.mean([aje(np.tile(mean, (len(s.angles), 1)), s.angles) for s in va]), rel=1e-5
+    )
 
 
 # ---------------------------------------------------------------------------------- dance command
+
 
 def test_dance_command_end_to_end_on_foreign_audio(tmp_path):
     """A chirp + noise at 22.05 kHz (not the project's synthesiser) through `thesis mdlt dance`."""
@@ -325,20 +399,67 @@ def test_dance_command_end_to_end_on_foreign_audio(tmp_path):
     model = build_model(MDLTConfig(variant="mamba", K=8, **TINY)).eval()
     ckpt = save_checkpoint(tmp_path / "tiny.pt", model, scaler, {"fps": 60})
     out, png, gif = tmp_path / "angles.csv", tmp_path / "angles.png", tmp_path / "arm.gif"
-    rc = main(["mdlt", "dance", "--audio", str(wav), "--checkpoint", str(ckpt), "--out", str(out), "--plot", str(png),
-               "--animation", str(gif), "--animation-seconds", "0.5", "-q"])
+    rc = main(
+        [
+            "mdlt",
+            "dance",
+            "--audio",
+            str(wav),
+            "--checkpoint",
+            str(ckpt),
+            "--out",
+            str(out),
+            "--plot",
+            str(png),
+            "--animation",
+            str(gif),
+            "--animation-seconds",
+            "0.5",
+            "-q",
+        ]
+    )
     assert rc == 0
     df = pd.read_csv(out)
     assert list(df.columns) == ["time_s", "shoulder_pan", "shoulder_lift", "elbow", "wrist_1"]
     assert abs(len(df) - dur * 60) <= 2 and np.isfinite(df.to_numpy()).all()
-    assert df.iloc[:, 1:].abs().to_numpy().max() <= np.pi and np.allclose(df.time_s.diff().iloc[1:], 1 / 60, atol=2e-6)
+    assert df.iloc[:, 1:].abs().to_numpy().max() <= np.pi and np.allclose(
+        df.time_s.diff().iloc[1:], 1 / 60, atol=2e-6
+    )
     assert png.stat().st_size > 1000 and gif.read_bytes()[:3] == b"GIF"
     # the same translation as the library call
     feats = scaler.transform(raw)
     assert np.allclose(df.iloc[:, 1:].to_numpy(), model.generate(feats), atol=1e-5)
     # bad input: one-line errors, exit code 1
-    assert main(["mdlt", "dance", "--audio", str(tmp_path / "nope.wav"), "--checkpoint", str(ckpt), "--out", str(out)]) == 1
-    assert main(["mdlt", "dance", "--audio", str(wav), "--checkpoint", str(tmp_path / "nope.pt"), "--out", str(out)]) == 1
+    assert (
+        main(
+            [
+                "mdlt",
+                "dance",
+                "--audio",
+                str(tmp_path / "nope.wav"),
+                "--checkpoint",
+                str(ckpt),
+                "--out",
+                str(out),
+            ]
+        )
+        == 1
+    )
+    assert (
+        main(
+            [
+                "mdlt",
+                "dance",
+                "--audio",
+                str(wav),
+                "--checkpoint",
+                str(tmp_path / "nope.pt"),
+                "--out",
+                str(out),
+            ]
+        )
+        == 1
+    )
 
 
 @pytest.mark.parametrize("variant", ["transformer", "mamba"])
@@ -346,8 +467,12 @@ def test_init_output_at_starts_at_the_given_pose(variant):
     from thesis_lib.mdlt.models import init_output_at
 
     torch.manual_seed(0)
-    m = build_model(MDLTConfig(variant=variant, K=6, d_model=16, n_layers=1, n_heads=2, d_ff=32)).eval()
-    pose = np.array([1.2, -0.5, 0.8, 3.5])  # the last one beyond pi: the head saturates near pi, no inf
+    m = build_model(
+        MDLTConfig(variant=variant, K=6, d_model=16, n_layers=1, n_heads=2, d_ff=32)
+    ).eval()
+    pose = np.array(
+        [1.2, -0.5, 0.8, 3.5]
+    )  # the last one beyond pi: the head saturates near pi, no inf
     f = np.random.default_rng(0).uniform(0.1, 0.9, (40, 438)).astype(np.float32)
     before = m.generate(f)
     init_output_at(m, pose)
@@ -369,4 +494,7 @@ def test_mute_features_reach_the_models_and_bad_names_fail():
     seqs = _sequences(1, 3, T=60)
     cfg = _tiny_cfg(iterations=2, mute_features=["tempogram"])
     _, _, scaler = train_model("mamba", seqs[:2], seqs[2:], cfg)
-    assert scaler.mute == ("tempogram",) and (scaler.transform(seqs[2].features)[:, 54:] == np.float32(0.1)).all()
+    assert (
+        scaler.mute == ("tempogram",)
+        and (scaler.transform(seqs[2].features)[:, 54:] == np.float32(0.1)).all()
+    )

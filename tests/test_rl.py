@@ -1,4 +1,5 @@
 """Tests for `thesis_lib.rl`: episode logging, seeding, config errors, curves, evaluation."""
+
 from __future__ import annotations
 
 import gymnasium as gym
@@ -57,7 +58,9 @@ def planned(plan: list[int | None], horizon: int | None) -> gym.Env:
 
 
 def returns_of(plan_lengths: list[int], first_k: int = 0) -> list[float]:
-    return [float(sum(10 * k + t for t in range(1, n + 1))) for k, n in enumerate(plan_lengths, first_k)]
+    return [
+        float(sum(10 * k + t for t in range(1, n + 1))) for k, n in enumerate(plan_lengths, first_k)
+    ]
 
 
 # No gradient step happens before `learning_starts`, so these runs only step the env.
@@ -69,7 +72,12 @@ def test_episode_logger_exact_rows_crash_vs_truncation():
     # no crash; SB3 reports it as terminated), crash after 2.
     env = planned([3, None, 5, 2], horizon=5)
     assert find_horizon(env) == 5
-    result = train(RLConfig(total_timesteps=15, **NO_LEARNING), env=env, progress=False, info_keys=["episode_id"])
+    result = train(
+        RLConfig(total_timesteps=15, **NO_LEARNING),
+        env=env,
+        progress=False,
+        info_keys=["episode_id"],
+    )
     ep = result.episodes
     assert list(ep.columns) == [*EPISODE_COLUMNS, "episode_id"]
     assert ep["episode"].tolist() == [0, 1, 2, 3]
@@ -102,7 +110,11 @@ def test_episode_logger_vector_env_logs_each_copy():
     second = ep[ep["env_index"] == 1]
     assert first["length"].tolist() == [2, 2, 2] and first["crashed"].all()
     assert first["return"].tolist() == returns_of([2, 2, 2])
-    assert second["length"].tolist() == [3, 3] and second["truncated"].all() and not second["crashed"].any()
+    assert (
+        second["length"].tolist() == [3, 3]
+        and second["truncated"].all()
+        and not second["crashed"].any()
+    )
     assert second["return"].tolist() == returns_of([3, 3])
     assert ep["episode"].tolist() == list(range(5))
     # Rows are in order of completion; `timestep` counts both copies' steps.
@@ -116,17 +128,30 @@ def test_episode_logger_continues_across_learn_calls():
     model.learn(4, callback=logger, reset_num_timesteps=False)  # the episode goes on
     assert logger.episodes["length"].tolist() == [5] and logger.episodes["timestep"].tolist() == [5]
     model.learn(6, callback=logger)  # SB3 resets the env: the unfinished 2-step episode is dropped
-    assert logger.episodes["length"].tolist() == [5, 5] and logger.episodes["timestep"].tolist() == [5, 5]
-    assert logger.episodes["return"].tolist() == returns_of([5, 5], first_k=0)[:1] + returns_of([5], first_k=2)
+    assert logger.episodes["length"].tolist() == [5, 5] and logger.episodes[
+        "timestep"
+    ].tolist() == [5, 5]
+    assert logger.episodes["return"].tolist() == returns_of([5, 5], first_k=0)[:1] + returns_of(
+        [5], first_k=2
+    )
 
 
 def test_same_seed_same_episodes_td3():
-    config = RLConfig(algo="TD3", total_timesteps=600, learning_starts=100, net_arch=[32, 32], device="cpu")
+    config = RLConfig(
+        algo="TD3", total_timesteps=600, learning_starts=100, net_arch=[32, 32], device="cpu"
+    )
     a = train(config, progress=False).episodes.drop(columns="wall_time_s")
     b = train(config, progress=False).episodes.drop(columns="wall_time_s")
     pd.testing.assert_frame_equal(a, b)
     assert len(a) == 3 and (a["length"] == 200).all() and a["truncated"].all()
-    other = RLConfig(algo="TD3", total_timesteps=600, learning_starts=100, net_arch=[32, 32], device="cpu", seed=1)
+    other = RLConfig(
+        algo="TD3",
+        total_timesteps=600,
+        learning_starts=100,
+        net_arch=[32, 32],
+        device="cpu",
+        seed=1,
+    )
     c = train(other, progress=False).episodes
     assert not np.allclose(a["return"], c["return"])
 
@@ -139,9 +164,18 @@ def test_same_seed_same_episodes_td3():
         ({"total_timesteps": 0}, r"total_timesteps must be a positive int, got 0"),
         ({"learning_starts": -1}, r"learning_starts must be >= 0, got -1"),
         ({"net_arch": []}, r"net_arch must list positive layer widths"),
-        ({"action_noise": "gaussian"}, r"Unknown action_noise 'gaussian'.*Valid: auto, normal, ornstein-uhlenbeck"),
-        ({"algo": "TD3", "extra": {"policy_dely": 3}}, r"TD3 does not accept\. Did you mean: 'policy_delay'\?"),
-        ({"algo": "SAC", "extra": {"policy_delay": 3}}, r"'policy_delay', which SAC does not accept"),
+        (
+            {"action_noise": "gaussian"},
+            r"Unknown action_noise 'gaussian'.*Valid: auto, normal, ornstein-uhlenbeck",
+        ),
+        (
+            {"algo": "TD3", "extra": {"policy_dely": 3}},
+            r"TD3 does not accept\. Did you mean: 'policy_delay'\?",
+        ),
+        (
+            {"algo": "SAC", "extra": {"policy_delay": 3}},
+            r"'policy_delay', which SAC does not accept",
+        ),
         ({"extra": {"seed": 3}}, r"which RLConfig fields own"),
     ],
 )
@@ -151,7 +185,9 @@ def test_bad_config_raises(kwargs, match):
 
 
 def test_config_from_params_rejects_unknown_names():
-    with pytest.raises(ValueError, match=r"Unknown RLConfig parameter 'seeds'\. Did you mean: 'seed'\?"):
+    with pytest.raises(
+        ValueError, match=r"Unknown RLConfig parameter 'seeds'\. Did you mean: 'seed'\?"
+    ):
         config_from_params({"seeds": 3})
     assert config_from_params({"algo": "DDPG"}).action_noise_resolved == "ornstein-uhlenbeck"
     assert RLConfig(algo="SAC").action_noise_resolved is None
@@ -211,7 +247,9 @@ def test_learning_curves_processes_give_the_same_rows():
     kwargs = dict(progress=False, net_arch=[16], learning_starts=100, device="cpu")
     serial = learning_curves(["TD3"], "Pendulum-v1", 400, seeds=[0, 1], n_jobs=1, **kwargs)
     parallel = learning_curves(["TD3"], "Pendulum-v1", 400, seeds=[0, 1], n_jobs=2, **kwargs)
-    pd.testing.assert_frame_equal(serial.drop(columns="wall_time_s"), parallel.drop(columns="wall_time_s"))
+    pd.testing.assert_frame_equal(
+        serial.drop(columns="wall_time_s"), parallel.drop(columns="wall_time_s")
+    )
 
 
 def test_learning_curves_resume_from_cache(tmp_path, monkeypatch):
@@ -222,10 +260,21 @@ def test_learning_curves_resume_from_cache(tmp_path, monkeypatch):
 
     train_mod = sys.modules["thesis_lib.rl.train"]  # the package re-exports the function `train`
 
-    kwargs = dict(algos=["TD3"], env_id="Pendulum-v1", total_timesteps=400, seeds=[0], progress=False,
-                  learning_starts=100, net_arch=[8], cache_dir=tmp_path)
+    kwargs = dict(
+        algos=["TD3"],
+        env_id="Pendulum-v1",
+        total_timesteps=400,
+        seeds=[0],
+        progress=False,
+        learning_starts=100,
+        net_arch=[8],
+        cache_dir=tmp_path,
+    )
     first = learning_curves(**kwargs)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["Pendulum-v1-TD3-seed0.csv", "Pendulum-v1-TD3-seed0.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "Pendulum-v1-TD3-seed0.csv",
+        "Pendulum-v1-TD3-seed0.json",
+    ]
 
     def no_training(*args, **kw):
         raise AssertionError("a cached run was trained again")

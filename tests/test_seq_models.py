@@ -1,4 +1,5 @@
 """Tests for thesis_lib.seq.models: BC, DT and HDT (thesis 2.8, 5.2)."""
+
 from __future__ import annotations
 
 import pytest
@@ -67,7 +68,9 @@ def test_no_output_depends_on_the_future(name, paper_compat):
         changed = {k: v.clone() for k, v in batch.items()}
         changed[key][:, t + 1 :] += 10.0  # only the future of step t changes
         out = _outputs(model, changed)
-        torch.testing.assert_close(out[:, : t + 1], base[:, : t + 1], msg=f"{name}: {key} leaks from the future")
+        torch.testing.assert_close(
+            out[:, : t + 1], base[:, : t + 1], msg=f"{name}: {key} leaks from the future"
+        )
 
 
 @pytest.mark.parametrize("name", ["dt", "hdt"])
@@ -106,7 +109,9 @@ def test_hdt_high_level_reads_previous_subgoal_and_low_level_the_current():
     batch = _batch()
     t = 2
     changed = {k: v.clone() for k, v in batch.items()}
-    changed["subgoals"][:, t] += 10.0  # g_t: the low level's input at step t, the high level's target
+    changed["subgoals"][:, t] += (
+        10.0  # g_t: the low level's input at step t, the high level's target
+    )
     out, base = hdt(changed), hdt(batch)
     assert not torch.allclose(out.actions[:, t], base.actions[:, t])
     torch.testing.assert_close(out.subgoals, base.subgoals)  # high level reads prev_subgoals only
@@ -116,7 +121,10 @@ def test_action_heads_are_bounded_by_max_action():
     torch.manual_seed(0)
     batch = _batch()
     batch["states"] *= 1e3
-    for model in (BC(BCConfig(SD, AD, K=K, max_action=0.4)), DecisionTransformer(DTConfig(SD, AD, max_action=0.4, **SMALL))):
+    for model in (
+        BC(BCConfig(SD, AD, K=K, max_action=0.4)),
+        DecisionTransformer(DTConfig(SD, AD, max_action=0.4, **SMALL)),
+    ):
         a = model(batch).actions
         assert a.abs().max() <= 0.4 + 1e-6
 
@@ -152,7 +160,9 @@ def test_act_returns_the_last_step():
 
 def test_state_dimension_mismatch_names_both_shapes():
     model = DecisionTransformer(DTConfig(11, AD, **SMALL))
-    with pytest.raises(ValueError, match=r"expects states of shape \(batch, seq_len, 11\), got \(2, 5, 3\)"):
+    with pytest.raises(
+        ValueError, match=r"expects states of shape \(batch, seq_len, 11\), got \(2, 5, 3\)"
+    ):
         model(_batch())
     with pytest.raises(ValueError, match=r"HDT expects states of shape \(batch, seq_len, 11\)"):
         HDT(HDTConfig(11, AD, **SMALL))(_batch())

@@ -1,4 +1,5 @@
 """Tests for thesis_lib.seq.ssm: ZOH (Eq. 2.5), recurrence == convolution (Eq. 2.6-2.7), selective scan."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,7 +27,9 @@ def _random_stable(N: int, rng: np.random.Generator) -> np.ndarray:
 # ---------------------------------------------------------------- ZOH (Eq. 2.5)
 
 
-@pytest.mark.parametrize("a, b, delta", [(-1.0, 1.0, 0.5), (-3.0, 2.0, 0.01), (0.7, -1.5, 0.2), (0.0, 2.0, 0.3)])
+@pytest.mark.parametrize(
+    "a, b, delta", [(-1.0, 1.0, 0.5), (-3.0, 2.0, 0.01), (0.7, -1.5, 0.2), (0.0, 2.0, 0.3)]
+)
 def test_zoh_scalar_closed_form(a, b, delta):
     A_bar, B_bar = zoh_discretize([a], [b], delta)
     assert A_bar[0] == pytest.approx(np.exp(delta * a), rel=1e-14)
@@ -43,7 +46,9 @@ def test_zoh_diagonal_matches_matrix_path():
     b = np.array([1.0, 2.0, -1.0, 0.5])
     A_bar, B_bar = zoh_discretize(a, b, 0.1)
     np.testing.assert_allclose(A_bar, np.exp(0.1 * a), rtol=1e-14)
-    np.testing.assert_allclose(B_bar, np.where(a != 0, np.expm1(0.1 * a) / np.where(a != 0, a, 1), 0.1) * b, rtol=1e-13)
+    np.testing.assert_allclose(
+        B_bar, np.where(a != 0, np.expm1(0.1 * a) / np.where(a != 0, a, 1), 0.1) * b, rtol=1e-13
+    )
     A_full, B_full = zoh_discretize(np.diag(a), b, 0.1)
     np.testing.assert_allclose(A_full, np.diag(A_bar), atol=1e-15)
     np.testing.assert_allclose(B_full, B_bar, rtol=1e-12)
@@ -57,7 +62,9 @@ def test_zoh_dense_matches_equation_2_5():
     A_bar, B_bar = zoh_discretize(A, B, delta)
     dA = delta * A
     expected_A = scipy.linalg.expm(dA)
-    expected_B = np.linalg.solve(dA, (expected_A - np.eye(5)) @ (delta * B))  # (ΔA)^{-1}(exp(ΔA) - I) ΔB
+    expected_B = np.linalg.solve(
+        dA, (expected_A - np.eye(5)) @ (delta * B)
+    )  # (ΔA)^{-1}(exp(ΔA) - I) ΔB
     np.testing.assert_allclose(A_bar, expected_A, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(B_bar, expected_B, rtol=1e-10, atol=1e-13)
 
@@ -108,7 +115,9 @@ def test_convolution_equals_recurrence(kind, method):
     y_conv = ssm_convolution(x, K, method=method)
     assert y_rec.shape == y_conv.shape == (3, L)
     np.testing.assert_allclose(y_conv, y_rec, rtol=0, atol=1e-10)
-    np.testing.assert_allclose(ssm_convolution(x[0], K, method=method), y_rec[0], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(
+        ssm_convolution(x[0], K, method=method), y_rec[0], rtol=0, atol=1e-10
+    )
 
 
 def test_kernel_is_impulse_response():
@@ -117,11 +126,15 @@ def test_kernel_is_impulse_response():
     A_bar, B_bar = zoh_discretize(A, B, 0.2)
     impulse = np.zeros(10)
     impulse[0] = 1.0
-    np.testing.assert_allclose(ssm_kernel(A_bar, B_bar, C, 10), ssm_recurrence(A_bar, B_bar, C, impulse), atol=1e-13)
+    np.testing.assert_allclose(
+        ssm_kernel(A_bar, B_bar, C, 10), ssm_recurrence(A_bar, B_bar, C, impulse), atol=1e-13
+    )
     # Diagonal Ā (Vandermonde path) equals the same system given as a diagonal matrix.
     a, b = -np.arange(1.0, 7.0), np.ones(6)
     Ad, Bd = zoh_discretize(a, b, 0.2)
-    np.testing.assert_allclose(ssm_kernel(Ad, Bd, C, 10), ssm_kernel(np.diag(Ad), Bd, C, 10), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(
+        ssm_kernel(Ad, Bd, C, 10), ssm_kernel(np.diag(Ad), Bd, C, 10), rtol=1e-13, atol=1e-15
+    )
     # K̄_j = C Ā^j B̄ by hand for a scalar system.
     np.testing.assert_allclose(ssm_kernel([0.9], [2.0], [0.5], 4), [1.0, 0.9, 0.81, 0.729])
 
@@ -145,7 +158,9 @@ def test_hippo_legs_structure():
     A, B = hippo_legs(5)
     assert A.shape == (5, 5) and B.shape == (5,)
     assert np.allclose(np.triu(A, 1), 0)  # lower triangular
-    np.testing.assert_allclose(np.sort(np.linalg.eigvals(A).real), -np.arange(5.0, 0.0, -1))  # -(n+1)
+    np.testing.assert_allclose(
+        np.sort(np.linalg.eigvals(A).real), -np.arange(5.0, 0.0, -1)
+    )  # -(n+1)
     assert A[3, 1] == pytest.approx(-np.sqrt(7 * 3))
     np.testing.assert_allclose(B, np.sqrt(2 * np.arange(5) + 1))
     with pytest.raises(ValueError, match=r"positive int, actually: 0"):
@@ -184,7 +199,9 @@ def test_selective_scan_constant_params_equals_lti_recurrence():
     for d in range(Din):
         A_bar = np.exp(deltas[d] * A[d])  # ZOH for A
         B_bar = deltas[d] * b  # Euler for B
-        np.testing.assert_allclose(y[:, :, d], ssm_recurrence(A_bar, B_bar, c, u[:, :, d]), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            y[:, :, d], ssm_recurrence(A_bar, B_bar, c, u[:, :, d]), rtol=0, atol=1e-12
+        )
         # ... and the same LTI channel is also the convolution of Eq. 2.7.
         K = ssm_kernel(A_bar, B_bar, c, L)
         np.testing.assert_allclose(y[:, :, d], ssm_convolution(u[:, :, d], K), rtol=0, atol=1e-12)
@@ -209,7 +226,9 @@ def test_selective_scan_matches_explicit_formula():
         for t in range(6):
             total = 0.0
             for s in range(t + 1):
-                decay = torch.exp(delta[0, s + 1 : t + 1, d].sum() * A[d])  # Π exp(Δ_r A) = exp(ΣΔ_r A)
+                decay = torch.exp(
+                    delta[0, s + 1 : t + 1, d].sum() * A[d]
+                )  # Π exp(Δ_r A) = exp(ΣΔ_r A)
                 total += (C[0, t] * decay * delta[0, s, d] * B[0, s] * u[0, s, d]).sum()
             assert y[0, t, d].item() == pytest.approx(total.item(), abs=1e-12)
 
@@ -222,7 +241,9 @@ def test_selective_scan_D_z_bias_softplus():
     bias = torch.randn(3, generator=g, dtype=torch.float64)
     base = selective_scan_reference(u, delta, A, B, C)
     full = selective_scan_reference(u, delta, A, B, C, D, z)
-    torch.testing.assert_close(full, (base + D * u) * torch.nn.functional.silu(z), atol=1e-12, rtol=0)
+    torch.testing.assert_close(
+        full, (base + D * u) * torch.nn.functional.silu(z), atol=1e-12, rtol=0
+    )
     raw = delta - 0.3
     fused = selective_scan_reference(u, raw, A, B, C, delta_bias=bias, delta_softplus=True)
     manual = selective_scan_reference(u, torch.nn.functional.softplus(raw + bias), A, B, C)

@@ -1,4 +1,5 @@
 """Tests for thesis_lib.seq.subgoals: HDT's sub-goal selection (thesis 5.2.2)."""
+
 from __future__ import annotations
 
 import time
@@ -22,7 +23,10 @@ def _reference(rewards, n_states, paper_compat=False):
             if not cands:
                 goal = i
             else:
-                w = [sum(float(x) for x in rewards[i:j]) / (j - i) + (1e-7 if paper_compat else 0.0) for j in cands]
+                w = [
+                    sum(float(x) for x in rewards[i:j]) / (j - i) + (1e-7 if paper_compat else 0.0)
+                    for j in cands
+                ]
                 goal = cands[int(np.argmax(w))]  # np.argmax: first maximum
         out.append(goal)
     return np.array(out)
@@ -31,7 +35,9 @@ def _reference(rewards, n_states, paper_compat=False):
 def test_hand_made_dense_rewards():
     # i=0: W(1)=0, W(2)=0, W(3)=5/3, W(4)=6/4, W(5)=6/5 -> 3, kept for states 0..2.
     # i=3: W(4)=1, W(5)=1/2 -> 4.  i=4: only the final observation 5.
-    np.testing.assert_array_equal(select_subgoal_indices([0.0, 0.0, 5.0, 1.0, 0.0]), [3, 3, 3, 4, 5])
+    np.testing.assert_array_equal(
+        select_subgoal_indices([0.0, 0.0, 5.0, 1.0, 0.0]), [3, 3, 3, 4, 5]
+    )
 
 
 def test_ties_go_to_the_earliest_state():
@@ -73,7 +79,9 @@ def test_kernel_matches_the_definition(paper_compat, with_final):
         # integer rewards make exact ties common; normal ones test ordinary maxima
         r = rng.integers(0, 3, T).astype(float) if trial % 2 else rng.normal(size=T)
         n_states = T + 1 if with_final and not paper_compat else T
-        got = select_subgoal_indices(r, n_states=None if with_final else T, paper_compat=paper_compat)
+        got = select_subgoal_indices(
+            r, n_states=None if with_final else T, paper_compat=paper_compat
+        )
         np.testing.assert_array_equal(got, _reference(r, n_states, paper_compat))
 
 
@@ -104,7 +112,14 @@ def test_hook_plugs_into_sequence_dataset():
     T = 12
     obs = rng.normal(size=(T + 1, 3))
     rew = rng.normal(size=T)
-    ep = Episode(0, obs, rng.normal(size=(T, 2)).astype(np.float32), rew, np.zeros(T, bool), np.zeros(T, bool))
+    ep = Episode(
+        0,
+        obs,
+        rng.normal(size=(T, 2)).astype(np.float32),
+        rew,
+        np.zeros(T, bool),
+        np.zeros(T, bool),
+    )
     seq = SequenceDataset([ep], K=4, subgoal_fn=subgoal_fn(), seed=0)
     idx = select_subgoal_indices(rew)
     expected = (obs[idx] - seq.state_mean) / seq.state_std  # z-scored with the state statistics

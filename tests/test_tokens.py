@@ -1,4 +1,5 @@
 """Tests for thesis_lib.seq.tokens: returns-to-go and the DT token layout (thesis Sec. 2.8)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -31,7 +32,9 @@ def test_returns_to_go_hand_values():
     np.testing.assert_array_equal(returns_to_go([1, 2, 3]), [6.0, 5.0, 3.0])  # ints are fine
     assert returns_to_go([1, 2, 3]).dtype == np.float64
     np.testing.assert_array_equal(returns_to_go([5.0], gamma=0.0), [5.0])
-    np.testing.assert_array_equal(returns_to_go([1.0, 2.0], gamma=0.0), [1.0, 2.0])  # γ = 0: just r_t
+    np.testing.assert_array_equal(
+        returns_to_go([1.0, 2.0], gamma=0.0), [1.0, 2.0]
+    )  # γ = 0: just r_t
     assert returns_to_go(np.array([])).shape == (0,)
 
 
@@ -84,17 +87,31 @@ def test_interleave_tokens_layout():
     assert df["timestep"].tolist() == [0, 0, 0, 1, 1, 1, 2, 2, 2]
     assert df["modality"].tolist() == list(MODALITIES) * 3
     assert df["modality"].cat.ordered
-    assert df["value"].tolist() == [6.0, (0.0, 1.0), -1.0, 5.0, (0.5, 1.5), 0.0, 3.0, (1.0, 2.0), 1.0]
+    assert df["value"].tolist() == [
+        6.0,
+        (0.0, 1.0),
+        -1.0,
+        5.0,
+        (0.5, 1.5),
+        0.0,
+        3.0,
+        (1.0, 2.0),
+        1.0,
+    ]
     # position = 3 * step + modality index
     codes = df["modality"].cat.codes.to_numpy()
     np.testing.assert_array_equal(df["position"].to_numpy(), 3 * np.arange(3).repeat(3) + codes)
 
 
 def test_interleave_tokens_timesteps_and_errors():
-    df = interleave_tokens([2.0, 1.0], [[0.1], [0.2]], [[1.0], [2.0]], timesteps=np.array([100, 101]))
+    df = interleave_tokens(
+        [2.0, 1.0], [[0.1], [0.2]], [[1.0], [2.0]], timesteps=np.array([100, 101])
+    )
     assert df["timestep"].tolist() == [100, 100, 100, 101, 101, 101]
     assert df["value"].tolist() == [2.0, 0.1, 1.0, 1.0, 0.2, 2.0]  # (T, 1) columns become floats
-    with pytest.raises(ValueError, match=r"`states` of shape \(T,\) or \(T, dim\) with T=2.*\(3,\)"):
+    with pytest.raises(
+        ValueError, match=r"`states` of shape \(T,\) or \(T, dim\) with T=2.*\(3,\)"
+    ):
         interleave_tokens([2.0, 1.0], [0.1, 0.2, 0.3], [1.0, 2.0])
     with pytest.raises(ValueError, match=r"`actions`.*T=2"):
         interleave_tokens([2.0, 1.0], [0.1, 0.2], [1.0])

@@ -1,4 +1,5 @@
 """Tests for thesis_lib.seq.trainer and thesis_lib.seq.evaluate (thesis 5.2.5)."""
+
 from __future__ import annotations
 
 import gymnasium as gym
@@ -10,7 +11,15 @@ import torch.nn as nn
 
 from thesis_lib.data import Episode, SequenceDataset
 from thesis_lib.seq.evaluate import evaluate
-from thesis_lib.seq.models import HDT, BC, BCConfig, DecisionTransformer, DTConfig, HDTConfig, SeqOutput
+from thesis_lib.seq.models import (
+    BC,
+    HDT,
+    BCConfig,
+    DecisionTransformer,
+    DTConfig,
+    HDTConfig,
+    SeqOutput,
+)
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
@@ -34,7 +43,9 @@ def _episodes(n=6, T=30, seed=0):
 
 
 def _dataset(seed=0, paper_compat=False):
-    return SequenceDataset(_episodes(), K=K, subgoal_fn=subgoal_fn(paper_compat), paper_compat=paper_compat, seed=seed)
+    return SequenceDataset(
+        _episodes(), K=K, subgoal_fn=subgoal_fn(paper_compat), paper_compat=paper_compat, seed=seed
+    )
 
 
 def _model(kind, paper_compat=False):
@@ -47,10 +58,14 @@ def _model(kind, paper_compat=False):
 
 
 def _cfg(**kw):
-    return TrainConfig(**{**dict(iterations=60, batch_size=8, warmup_steps=5, lr=3e-3, progress=False), **kw})
+    return TrainConfig(
+        **{**dict(iterations=60, batch_size=8, warmup_steps=5, lr=3e-3, progress=False), **kw}
+    )
 
 
-@pytest.mark.parametrize("kind,paper_compat", [("bc", False), ("dt", False), ("hdt", False), ("dt", True), ("hdt", True)])
+@pytest.mark.parametrize(
+    "kind,paper_compat", [("bc", False), ("dt", False), ("hdt", False), ("dt", True), ("hdt", True)]
+)
 def test_loss_falls_on_a_tiny_dataset(kind, paper_compat):
     trainer = Trainer(_model(kind, paper_compat), _dataset(paper_compat=paper_compat), _cfg())
     h = trainer.train()
@@ -72,7 +87,9 @@ def test_trainer_leaves_the_global_rng_alone():
 def test_same_seed_same_numbers():
     def run(seed):
         trainer = Trainer(_model("hdt"), _dataset(seed=seed), _cfg(iterations=15, seed=seed))
-        return trainer.train()["loss"].to_numpy(), torch.nn.utils.parameters_to_vector(trainer.model.parameters())
+        return trainer.train()["loss"].to_numpy(), torch.nn.utils.parameters_to_vector(
+            trainer.model.parameters()
+        )
 
     (l1, p1), (l2, p2), (l3, _) = run(0), run(0), run(1)
     np.testing.assert_array_equal(l1, l2)
@@ -86,10 +103,14 @@ def test_resume_matches_an_uninterrupted_run(kind, tmp_path):
     h_full = full.train()
 
     path = tmp_path / "ckpt.pt"
-    first = Trainer(_model(kind), _dataset(), _cfg(iterations=12, checkpoint_path=str(path), checkpoint_every=5))
+    first = Trainer(
+        _model(kind), _dataset(), _cfg(iterations=12, checkpoint_path=str(path), checkpoint_every=5)
+    )
     first.train(iterations=6)  # stopped after 6 of 12
     torch.manual_seed(123)  # a fresh process: other global RNG, other initial weights
-    second = Trainer(_model(kind), _dataset(seed=99), _cfg(iterations=12, checkpoint_path=str(path)))
+    second = Trainer(
+        _model(kind), _dataset(seed=99), _cfg(iterations=12, checkpoint_path=str(path))
+    )
     assert second.iteration == 6  # resumed from the checkpoint at construction
     h_resumed = second.train()
     np.testing.assert_array_equal(h_resumed["loss"].to_numpy(), h_full["loss"].to_numpy())
@@ -111,12 +132,18 @@ def test_dataset_model_mismatch_is_a_clear_error():
 
 def test_prev_subgoals_come_from_the_episode():
     seq = _dataset()
-    batch = seq.windows(np.array([0, 1, 2]), np.array([0, 5, 28]))  # starts: episode start, inside, near the end
+    batch = seq.windows(
+        np.array([0, 1, 2]), np.array([0, 5, 28])
+    )  # starts: episode start, inside, near the end
     t = batch_to_torch(seq, batch)
     prev = t["prev_subgoals"].numpy()
     np.testing.assert_array_equal(prev[0, 0], 0.0)  # g_{-1} = 0
-    np.testing.assert_array_equal(prev[1, 0], seq.subgoals[seq.offsets[1] + 4])  # g_4 before a window at 5
-    np.testing.assert_array_equal(prev[:, 1:][batch.mask[:, 1:]], batch.subgoals[:, :-1][batch.mask[:, 1:]])
+    np.testing.assert_array_equal(
+        prev[1, 0], seq.subgoals[seq.offsets[1] + 4]
+    )  # g_4 before a window at 5
+    np.testing.assert_array_equal(
+        prev[:, 1:][batch.mask[:, 1:]], batch.subgoals[:, :-1][batch.mask[:, 1:]]
+    )
     assert not prev[2, 2:].any()  # padding
 
 
@@ -127,7 +154,9 @@ def test_eval_callback_every_n_iterations():
         calls.append(model.training)
         return float(len(calls))
 
-    h = Trainer(_model("bc"), _dataset(), _cfg(iterations=10, eval_every=4), eval_fn=eval_fn).train()
+    h = Trainer(
+        _model("bc"), _dataset(), _cfg(iterations=10, eval_every=4), eval_fn=eval_fn
+    ).train()
     assert calls == [False, False]  # called in eval mode, at 4 and 8
     assert h["eval_return"].notna().tolist() == [i in (4, 8) for i in range(1, 11)]
     assert h.loc[h.iteration == 8, "eval_return"].item() == 2.0
@@ -176,8 +205,15 @@ class _Recorder(nn.Module):
 
 def test_rtg_bookkeeping_and_history_window():
     model = _Recorder()
-    res = evaluate(model, lambda: _ScriptedEnv([1.0, 2.0, 3.0, 4.0]), n_episodes=2, target_return=100.0,
-                   rtg_scale=10.0, state_mean=np.zeros(SD), state_std=np.ones(SD))
+    res = evaluate(
+        model,
+        lambda: _ScriptedEnv([1.0, 2.0, 3.0, 4.0]),
+        n_episodes=2,
+        target_return=100.0,
+        rtg_scale=10.0,
+        state_mean=np.zeros(SD),
+        state_std=np.ones(SD),
+    )
     np.testing.assert_array_equal(res.returns, [10.0, 10.0])
     np.testing.assert_array_equal(res.lengths, [4, 4])
     assert res.scores is None
@@ -194,8 +230,15 @@ def test_rtg_bookkeeping_and_history_window():
 
 def test_one_target_per_episode_in_one_batch():
     model = _Recorder()
-    res = evaluate(model, lambda: _ScriptedEnv([1.0, 2.0]), n_episodes=3, target_return=[100.0, 50.0, 10.0],
-                   rtg_scale=10.0, state_mean=np.zeros(SD), state_std=np.ones(SD))
+    res = evaluate(
+        model,
+        lambda: _ScriptedEnv([1.0, 2.0]),
+        n_episodes=3,
+        target_return=[100.0, 50.0, 10.0],
+        rtg_scale=10.0,
+        state_mean=np.zeros(SD),
+        state_std=np.ones(SD),
+    )
     np.testing.assert_array_equal(res.returns, [3.0, 3.0, 3.0])
     assert len(model.seen) == 2  # all three targets stepped together
     np.testing.assert_allclose(model.seen[0]["returns_to_go"][:, 0, 0], [10.0, 5.0, 1.0], rtol=1e-6)
@@ -203,8 +246,15 @@ def test_one_target_per_episode_in_one_batch():
     # more episodes than environments: each round takes its own slice of the targets
     model = _Recorder()
     venv = gym.vector.SyncVectorEnv([lambda: _ScriptedEnv([1.0])] * 2)
-    evaluate(model, venv, n_episodes=3, target_return=[30.0, 20.0, 10.0], rtg_scale=10.0,
-             state_mean=np.zeros(SD), state_std=np.ones(SD))
+    evaluate(
+        model,
+        venv,
+        n_episodes=3,
+        target_return=[30.0, 20.0, 10.0],
+        rtg_scale=10.0,
+        state_mean=np.zeros(SD),
+        state_std=np.ones(SD),
+    )
     assert [h["returns_to_go"][:, 0, 0].tolist() for h in model.seen] == [[3.0, 2.0], [1.0, 1.0]]
     with pytest.raises(ValueError, match=r"one per episode \(3,\)"):
         evaluate(_Recorder(), lambda: _ScriptedEnv([1.0]), n_episodes=3, target_return=[1.0, 2.0])
@@ -215,11 +265,15 @@ def test_raw_state_datasets_are_evaluated_on_raw_observations():
     assert not seq.normalize_states
     np.testing.assert_array_equal(seq.normalize(np.ones((2, SD))), np.ones((2, SD)))
     model = _Recorder()
-    evaluate(model, lambda: _ScriptedEnv([1.0, 1.0, 1.0]), n_episodes=1, target_return=1.0, dataset=seq)
+    evaluate(
+        model, lambda: _ScriptedEnv([1.0, 1.0, 1.0]), n_episodes=1, target_return=1.0, dataset=seq
+    )
     assert model.seen[2]["states"][0, -1].tolist() == [2.0, 0.0, 0.0]  # obs as the env gave it
     model = _Recorder()
     z = SequenceDataset(_episodes(), K=K)
-    evaluate(model, lambda: _ScriptedEnv([1.0, 1.0, 1.0]), n_episodes=1, target_return=1.0, dataset=z)
+    evaluate(
+        model, lambda: _ScriptedEnv([1.0, 1.0, 1.0]), n_episodes=1, target_return=1.0, dataset=z
+    )
     want = (np.array([2.0, 0.0, 0.0]) - z.state_mean) / z.state_std
     np.testing.assert_allclose(model.seen[2]["states"][0, -1].numpy(), want, rtol=1e-5)
 
@@ -234,7 +288,9 @@ def test_dataset_returns_to_go_use_the_one_implementation():
     np.testing.assert_array_equal(discounted_cumsum(r, 0.9), returns_to_go(r, 0.9))
     eps = _episodes(n=2, T=5)
     seq = SequenceDataset(eps, K=K, gamma=0.9, rtg_scale=2.0)
-    np.testing.assert_allclose(seq.returns_to_go[5:], returns_to_go(eps[1].rewards, 0.9) / 2.0, rtol=1e-6)
+    np.testing.assert_allclose(
+        seq.returns_to_go[5:], returns_to_go(eps[1].rewards, 0.9) / 2.0, rtol=1e-6
+    )
 
 
 def test_batch_prev_subgoals_are_the_shifted_episode_subgoals():
@@ -246,14 +302,20 @@ def test_batch_prev_subgoals_are_the_shifted_episode_subgoals():
         g = seq.subgoals[seq.offsets[e] : seq.offsets[e] + seq.lengths[e]]
         want = np.vstack([np.zeros((1, SD)), g[:-1]])[st : st + K]  # g_{t-1}, zero at t = 0
         np.testing.assert_array_equal(batch.prev_subgoals[b, : len(want)], want)
-        assert not batch.prev_subgoals[b, len(want):].any()  # padding
+        assert not batch.prev_subgoals[b, len(want) :].any()  # padding
     assert SequenceDataset(_episodes(), K=K).sample(2).prev_subgoals is None
 
 
 def test_hdt_rolls_its_subgoals_forward():
     model = _Recorder(hdt=True)
-    evaluate(model, lambda: _ScriptedEnv([0.0] * 4), n_episodes=1, target_return=0.0,
-             state_mean=np.zeros(SD), state_std=np.ones(SD))
+    evaluate(
+        model,
+        lambda: _ScriptedEnv([0.0] * 4),
+        n_episodes=1,
+        target_return=0.0,
+        state_mean=np.zeros(SD),
+        state_std=np.ones(SD),
+    )
     # the high level sees its own earlier predictions g_{t-1} (call n predicted n), zero at the start
     assert [h["prev_subgoals"][0, -1, 0].item() for h in model.seen] == [0.0, 1.0, 2.0, 3.0]
     assert model.seen[3]["subgoals"][0, :, 0].tolist() == [3.0, 0.0]  # g_2, placeholder for g_3
@@ -265,7 +327,14 @@ def test_episodes_of_different_lengths_and_rounds():
     def make():
         return _ScriptedEnv([1.0] * next(lengths))
 
-    res = evaluate(_Recorder(), make, n_episodes=3, target_return=1.0, state_mean=np.zeros(SD), state_std=np.ones(SD))
+    res = evaluate(
+        _Recorder(),
+        make,
+        n_episodes=3,
+        target_return=1.0,
+        state_mean=np.zeros(SD),
+        state_std=np.ones(SD),
+    )
     np.testing.assert_array_equal(res.lengths, [2, 5, 3])
     np.testing.assert_array_equal(res.returns, [2.0, 5.0, 3.0])
 
@@ -274,15 +343,25 @@ def test_evaluate_errors():
     with pytest.raises(ValueError, match="target_return="):
         evaluate(_Recorder(), lambda: _ScriptedEnv([1.0]), n_episodes=1)
     wrong = BC(BCConfig(5, AD))
-    with pytest.raises(ValueError, match="state_dim=5, the environment gives observations of size 3"):
-        evaluate(wrong, lambda: _ScriptedEnv([1.0]), n_episodes=1, state_mean=np.zeros(5), state_std=np.ones(5))
+    with pytest.raises(
+        ValueError, match="state_dim=5, the environment gives observations of size 3"
+    ):
+        evaluate(
+            wrong,
+            lambda: _ScriptedEnv([1.0]),
+            n_episodes=1,
+            state_mean=np.zeros(5),
+            state_std=np.ones(5),
+        )
     with pytest.raises(ValueError, match="Unknown task 'hoper'. Did you mean: 'hopper'"):
         evaluate(wrong, "hoper", n_episodes=1)
 
 
 def test_evaluate_on_a_real_task_gives_d4rl_scores():
     model = HDT(HDTConfig(11, 3, K=5, d_model=16, n_layer=1))
-    res = evaluate(model, "hopper", n_episodes=2, max_steps=5, state_mean=np.zeros(11), state_std=np.ones(11))
+    res = evaluate(
+        model, "hopper", n_episodes=2, max_steps=5, state_mean=np.zeros(11), state_std=np.ones(11)
+    )
     assert res.returns.shape == (2,) and res.scores.shape == (2,)
     np.testing.assert_allclose(res.scores, 100 * (res.returns + 20.272305) / (3234.3 + 20.272305))
 
@@ -312,7 +391,16 @@ def test_trained_models_beat_a_random_policy(kind):
     eps = []
     for i in range(10):
         obs = rng.normal(size=(21, SD))
-        eps.append(Episode(i, obs, _expert(obs[:-1]).astype(np.float32), np.ones(20), np.zeros(20, bool), np.zeros(20, bool)))
+        eps.append(
+            Episode(
+                i,
+                obs,
+                _expert(obs[:-1]).astype(np.float32),
+                np.ones(20),
+                np.zeros(20, bool),
+                np.zeros(20, bool),
+            )
+        )
     seq = SequenceDataset(eps, K=K, rtg_scale=10.0, subgoal_fn=subgoal_fn(), seed=0)
     trainer = Trainer(_model(kind), seq, _cfg(iterations=150, batch_size=16))
     trainer.train()
@@ -332,16 +420,43 @@ def test_experiment_rows_and_both_metrics():
     data = []
     for i in range(3):
         obs = rng.normal(size=(16, 11))
-        data.append(Episode(i, obs, rng.uniform(-1, 1, (15, 3)).astype(np.float32), rng.normal(size=15) + 3 * i,
-                            np.zeros(15, bool), np.zeros(15, bool)))
-    cfg = HDTExperimentConfig(iterations=4, eval_every=2, eval_episodes=2, max_eval_steps=3, K=4, d_model=16,
-                              n_layer=1, batch_size=4, warmup_steps=2, seeds=(0, 1), progress=False)
-    curves = pd.concat([run_method(m, "hopper", "medium", s, cfg, data=data)
-                        for m in ("DT", "HDT") for s in cfg.seeds], ignore_index=True)
+        data.append(
+            Episode(
+                i,
+                obs,
+                rng.uniform(-1, 1, (15, 3)).astype(np.float32),
+                rng.normal(size=15) + 3 * i,
+                np.zeros(15, bool),
+                np.zeros(15, bool),
+            )
+        )
+    cfg = HDTExperimentConfig(
+        iterations=4,
+        eval_every=2,
+        eval_episodes=2,
+        max_eval_steps=3,
+        K=4,
+        d_model=16,
+        n_layer=1,
+        batch_size=4,
+        warmup_steps=2,
+        seeds=(0, 1),
+        progress=False,
+    )
+    curves = pd.concat(
+        [
+            run_method(m, "hopper", "medium", s, cfg, data=data)
+            for m in ("DT", "HDT")
+            for s in cfg.seeds
+        ],
+        ignore_index=True,
+    )
     dt = curves[curves.method == "DT"]
     assert sorted(dt.target.unique()) == ["10k", "half", "max"]
     assert dt[dt.seed == 0].iteration.tolist() == [2, 2, 2, 4, 4, 4]
-    assert dt.target_return[dt.target == "max"].iloc[0] == pytest.approx(max(e.rewards.sum() for e in data))
+    assert dt.target_return[dt.target == "max"].iloc[0] == pytest.approx(
+        max(e.rewards.sum() for e in data)
+    )
     assert curves[curves.method == "HDT"].target.unique().tolist() == ["none"]
     s = summarize(curves)
     assert len(s) == 4 and (s.n_seeds == 2).all()
@@ -360,13 +475,19 @@ def test_experiment_config_errors_and_seeds():
     from thesis_lib.seq.hdt_chapter import HDTChapterConfig
 
     assert HDTChapterConfig is HDTExperimentConfig  # one config for the chapter and its experiments
-    cfg = HDTExperimentConfig(datasets=["hopper/medium", "maze2d-umaze/expert"], seeds=[0], extra_seeds=[1, 0],
-                              extra_seed_datasets=["maze2d-umaze/expert"])
+    cfg = HDTExperimentConfig(
+        datasets=["hopper/medium", "maze2d-umaze/expert"],
+        seeds=[0],
+        extra_seeds=[1, 0],
+        extra_seed_datasets=["maze2d-umaze/expert"],
+    )
     assert cfg.pairs == [("hopper", "medium"), ("maze2d-umaze", "expert")]
     assert cfg.seeds_for("hopper/medium") == [0] and cfg.seeds_for("maze2d-umaze/expert") == [0, 1]
     per_set = cfg.experiment_configs()
     assert [(c.datasets, c.seeds_for(c.datasets[0])) for c in per_set] == [
-        (["hopper/medium"], [0]), (["maze2d-umaze/expert"], [0, 1])]
+        (["hopper/medium"], [0]),
+        (["maze2d-umaze/expert"], [0, 1]),
+    ]
     with pytest.raises(ValueError, match="'task/tier'"):
         HDTExperimentConfig(datasets=["hopper-medium"])
     with pytest.raises(ValueError, match="not in datasets"):
@@ -396,16 +517,43 @@ def test_paper_compat_is_measured_beside_the_default():
 
 
 def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
-    from thesis_lib.seq.experiments import HDTExperimentConfig, compare_paper_compat, run_hdt_experiments, run_paper_compat
+    from thesis_lib.seq.experiments import (
+        HDTExperimentConfig,
+        compare_paper_compat,
+        run_hdt_experiments,
+        run_paper_compat,
+    )
 
-    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))  # a tiny data set, not the cached smoke one
-    cfg = HDTExperimentConfig(datasets=["maze2d-open/expert"], methods=["DT", "HDT"], seeds=[0], extra_seeds=[1],
-                              extra_seed_datasets=["maze2d-open/expert"], compat_dataset="maze2d-open/expert",
-                              compat_methods=["HDT"], iterations=2, eval_every=1, eval_episodes=2, max_eval_steps=3,
-                              K=4, d_model=8, n_layer=1, batch_size=4, warmup_steps=1, n_transitions=300, progress=False)
+    monkeypatch.setenv(
+        "THESIS_DATA_DIR", str(tmp_path)
+    )  # a tiny data set, not the cached smoke one
+    cfg = HDTExperimentConfig(
+        datasets=["maze2d-open/expert"],
+        methods=["DT", "HDT"],
+        seeds=[0],
+        extra_seeds=[1],
+        extra_seed_datasets=["maze2d-open/expert"],
+        compat_dataset="maze2d-open/expert",
+        compat_methods=["HDT"],
+        iterations=2,
+        eval_every=1,
+        eval_episodes=2,
+        max_eval_steps=3,
+        K=4,
+        d_model=8,
+        n_layer=1,
+        batch_size=4,
+        warmup_steps=1,
+        n_transitions=300,
+        progress=False,
+    )
     curves = run_hdt_experiments(cfg)
     # 2 seeds x (DT: 3 targets, HDT: 1) x 2 evaluations
-    assert len(curves) == 2 * (3 + 1) * 2 and set(curves.seed) == {0, 1} and not curves.paper_compat.any()
+    assert (
+        len(curves) == 2 * (3 + 1) * 2
+        and set(curves.seed) == {0, 1}
+        and not curves.paper_compat.any()
+    )
     # max_eval_steps caps locomotion only: Maze2D's sparse-reward scores need whole episodes
     assert (curves.length_mean > 3).all() and curves.length_mean.nunique() == 1
     again = run_hdt_experiments(cfg)
@@ -413,4 +561,6 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     compat = run_paper_compat(cfg)
     assert compat.paper_compat.all() and set(compat.method) == {"HDT"}
     table = compare_paper_compat(curves, compat)
-    assert set(table.method) == {"HDT"} and (table.n_seeds == 2).all() and len(table) == 2  # two metrics
+    assert (
+        set(table.method) == {"HDT"} and (table.n_seeds == 2).all() and len(table) == 2
+    )  # two metrics

@@ -1,4 +1,5 @@
 """UR3 model, reaching task, demonstrations, dance playback and Table 5.4 at tiny scale."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -24,7 +25,9 @@ def test_mujoco_fk_equals_dh_product():
 def test_dh_closed_forms():
     # all zero: the arm stretched along -x; x = a2 + a3, y = -(d4 + d6), z = d1 - d5
     p = fk_dh(np.zeros(6))[6][:3, 3]
-    np.testing.assert_allclose(p, [DH.a[1] + DH.a[2], -(DH.d[3] + DH.d[5]), DH.d[0] - DH.d[4]], atol=1e-12)
+    np.testing.assert_allclose(
+        p, [DH.a[1] + DH.a[2], -(DH.d[3] + DH.d[5]), DH.d[0] - DH.d[4]], atol=1e-12
+    )
     # base rotation by 90 degrees rotates the flange position about z
     q = np.zeros(6)
     q[0] = np.pi / 2
@@ -45,10 +48,14 @@ def test_model_limits_and_speeds_in_mjcf():
 # -- reaching task ------------------------------------------------------------------------------
 def test_reward_and_one_hot_bookkeeping():
     goals = np.array([[0.5] * 6, [1.0] * 6])
-    env = reach.UR3ReachEnv(goals=goals, max_step=0.5, tolerance=0.05, start=np.zeros(6), max_steps=10)
+    env = reach.UR3ReachEnv(
+        goals=goals, max_step=0.5, tolerance=0.05, start=np.zeros(6), max_steps=10
+    )
     obs, _ = env.reset()
     assert obs.shape == (8,) and obs[6:].tolist() == [0, 0]
-    obs, r, term, trunc, info = env.step(np.ones(6) * 0.5)  # q = 0.25: nearest open goal 0, L1 error 1.5
+    obs, r, term, trunc, info = env.step(
+        np.ones(6) * 0.5
+    )  # q = 0.25: nearest open goal 0, L1 error 1.5
     assert r == pytest.approx(-1.5) and obs[6:].tolist() == [0, 0] and not term
     obs, r, term, trunc, info = env.step(np.ones(6) * 0.5)  # q = 0.5: reaches goal 0, rewarded 0
     assert r == pytest.approx(0.0) and obs[6:].tolist() == [1, 0] and info["goals_reached"] == 1
@@ -152,8 +159,16 @@ def test_table_5_4_tiny():
 
     eps = reach.make_demonstrations(24, seed=0)
     demos = reach.split_demonstrations(eps, n_train=4, n_val=0, n_test=3)
-    cfg = ReachConfig(train_demos=(4,), seeds=(0,), iterations=3, batch_size=4, d_model=16, n_layer=1,
-                      warmup_steps=1, max_eval_steps=12)
+    cfg = ReachConfig(
+        train_demos=(4,),
+        seeds=(0,),
+        iterations=3,
+        batch_size=4,
+        d_model=16,
+        n_layer=1,
+        warmup_steps=1,
+        max_eval_steps=12,
+    )
     rows = [run_reach_method(m, 4, 0, cfg, demos) for m in ("HDT", "DT")]
     import pandas as pd
 
@@ -164,7 +179,9 @@ def test_table_5_4_tiny():
     assert list(t.columns[:4]) == ["method", "train_demos", "goals_mean", "goals_std"]
     curves = success_curves(rows, horizon=12)
     last = curves[curves.step == 12].set_index("method")["goals_mean"]
-    np.testing.assert_allclose(last.loc[["HDT", "DT"]].to_numpy(), t.set_index("method").loc[["HDT", "DT"], "goals_mean"])
+    np.testing.assert_allclose(
+        last.loc[["HDT", "DT"]].to_numpy(), t.set_index("method").loc[["HDT", "DT"], "goals_mean"]
+    )
     with pytest.raises(ValueError, match="Did you mean: 'HDT'"):
         ReachConfig(methods=("HTD",))
 

@@ -1,4 +1,5 @@
 """The robot driver: dry-run, refusal of unsafe motion, emergency stop, a fake UR endpoint on localhost."""
+
 from __future__ import annotations
 
 import socket
@@ -95,7 +96,9 @@ def test_unsafe_trajectories_are_refused_and_nothing_moves():
         drv.play(floor, fps=50)
     assert not backend.history and "refused" in drv.log[-1]
     # a slower speed scale refuses what full speed allows
-    slow = UR3Driver(SimBackend(), limits=SafetyLimits(speed_scale=0.25), dry_run=False, approach_speed=0.5)
+    slow = UR3Driver(
+        SimBackend(), limits=SafetyLimits(speed_scale=0.25), dry_run=False, approach_speed=0.5
+    )
     with pytest.raises(UnsafeTrajectoryError):
         slow.play(_wave(amp=0.2, fps=50), fps=50)  # 1.26 rad/s > 0.785
 
@@ -130,7 +133,10 @@ def test_urscript_backend_against_fake_robot(fake_ur):
     text = fake_ur.text()
     lines = text.splitlines()
     assert lines[0].startswith("movej([") and "v=0.5000" in lines[0]
-    assert lines[1] == "def thesis_play():" and sum(line.strip().startswith("servoj(") for line in lines) == 5
+    assert (
+        lines[1] == "def thesis_play():"
+        and sum(line.strip().startswith("servoj(") for line in lines) == 5
+    )
     first = [float(x) for x in lines[2].split("[")[1].split("]")[0].split(",")]
     np.testing.assert_allclose(first, q[0], atol=1e-6)
     assert "t=0.020000" in lines[2] and lines[-1] == "stopj(4.0)"
@@ -163,7 +169,9 @@ def test_ur3_play_reads_the_csv_that_mdlt_dance_writes(tmp_path):
     t = np.arange(30) / 60
     angles = np.stack([0.1 * np.sin(t + k) for k in range(4)], axis=1)
     path = tmp_path / "angles.csv"
-    pd.DataFrame({"time_s": t, **{c: angles[:, j] for j, c in enumerate(JOINT_COLUMNS)}}).to_csv(path, index=False)
+    pd.DataFrame({"time_s": t, **{c: angles[:, j] for j, c in enumerate(JOINT_COLUMNS)}}).to_csv(
+        path, index=False
+    )
     np.testing.assert_allclose(read_angles(path), angles)
     np.savetxt(tmp_path / "plain.csv", angles, delimiter=",")
     np.testing.assert_allclose(read_angles(tmp_path / "plain.csv"), angles)

@@ -8,6 +8,7 @@ Sub-packages are imported on first use, so ``import thesis_lib`` is cheap and
     >>> thesis_lib.dtw.dtw([0.0, 1.0, 2.0], [0.0, 0.0, 1.0, 2.0], metric="l1")
     0.0
 """
+
 from __future__ import annotations
 
 import importlib

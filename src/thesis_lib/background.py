@@ -6,6 +6,7 @@ calls; the computation lives in :mod:`thesis_lib.dtw`, :mod:`thesis_lib.seq` and
 
 Used in: Background chapter (thesis 2.2–2.8).
 """
+
 from __future__ import annotations
 
 import time
@@ -46,7 +47,9 @@ class BackgroundConfig:
     """Gymnasium task for the DDPG/TD3/SAC learning curves."""
     rl_algos: list[str] = field(default_factory=lambda: ["DDPG", "TD3", "SAC"])
     """Algorithms to train."""
-    rl_timesteps: int | dict[str, int] = field(default_factory=lambda: {"DDPG": 5000, "TD3": 8000, "SAC": 4000})
+    rl_timesteps: int | dict[str, int] = field(
+        default_factory=lambda: {"DDPG": 5000, "TD3": 8000, "SAC": 4000}
+    )
     """Environment steps per run: one number for all algorithms, or one per algorithm (the
     defaults are where each has learned Pendulum at seed 0 with the small networks)."""
     rl_learning_rate: float = 1e-3
@@ -63,21 +66,36 @@ class BackgroundConfig:
     resumes. Off by default so that the book always retrains."""
 
     def __post_init__(self) -> None:
-        ints = {"dtw_features": self.dtw_features, "dtw_pairs": self.dtw_pairs, "fastdtw_radius": self.fastdtw_radius,
-                "pe_positions": self.pe_positions, "pe_dim": self.pe_dim, "ssm_state": self.ssm_state,
-                "ssm_length": self.ssm_length, "n_jobs": self.n_jobs}
+        ints = {
+            "dtw_features": self.dtw_features,
+            "dtw_pairs": self.dtw_pairs,
+            "fastdtw_radius": self.fastdtw_radius,
+            "pe_positions": self.pe_positions,
+            "pe_dim": self.pe_dim,
+            "ssm_state": self.ssm_state,
+            "ssm_length": self.ssm_length,
+            "n_jobs": self.n_jobs,
+        }
         for name, value in ints.items():
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
         if self.pe_dim % 2:
             raise ValueError(f"pe_dim must be even (sin/cos pairs), got {self.pe_dim}")
         if not self.dtw_lengths or any(int(n) < 2 for n in self.dtw_lengths):
-            raise ValueError(f"dtw_lengths must be a non-empty list of lengths ≥ 2, got {self.dtw_lengths!r}")
+            raise ValueError(
+                f"dtw_lengths must be a non-empty list of lengths ≥ 2, got {self.dtw_lengths!r}"
+            )
         valid = ("DDPG", "TD3", "SAC")
         bad = [a for a in self.rl_algos if a not in valid]
         if bad:
-            raise ValueError(f"Unknown algorithm {bad[0]!r} in rl_algos. Valid: {', '.join(valid)}.")
-        steps = self.rl_timesteps if isinstance(self.rl_timesteps, dict) else {a: self.rl_timesteps for a in self.rl_algos}
+            raise ValueError(
+                f"Unknown algorithm {bad[0]!r} in rl_algos. Valid: {', '.join(valid)}."
+            )
+        steps = (
+            self.rl_timesteps
+            if isinstance(self.rl_timesteps, dict)
+            else {a: self.rl_timesteps for a in self.rl_algos}
+        )
         for algo in self.rl_algos:
             n = steps.get(algo)
             if not isinstance(n, int) or isinstance(n, bool) or n < 1:
@@ -89,6 +107,7 @@ class BackgroundConfig:
 
 
 # --------------------------------------------------------------------------- DTW (thesis 2.4)
+
 
 def delayed_example() -> tuple[np.ndarray, np.ndarray]:
     """The two sequences of the DTW figures: ``y`` is ``x`` delayed by two steps.
@@ -139,8 +158,14 @@ def plot_matching(x: np.ndarray, y: np.ndarray, pairs: np.ndarray | None, ax=Non
     return ax
 
 
-def plot_cost_matrix(matrix: np.ndarray, path: np.ndarray | None = None, *, filled: bool = True, ax=None,
-                     title: str = ""):
+def plot_cost_matrix(
+    matrix: np.ndarray,
+    path: np.ndarray | None = None,
+    *,
+    filled: bool = True,
+    ax=None,
+    title: str = "",
+):
     """Draw the (N+1)×(M+1) DTW cost matrix with its values (Figs 2.5–2.7).
 
     Args:
@@ -167,8 +192,15 @@ def plot_cost_matrix(matrix: np.ndarray, path: np.ndarray | None = None, *, fill
             if np.isnan(v):
                 continue
             text = "∞" if np.isinf(v) else f"{v:g}"
-            ax.text(j, i, text, ha="center", va="center", fontsize=8,
-                    fontweight="bold" if (i, j) in on_path else "normal")
+            ax.text(
+                j,
+                i,
+                text,
+                ha="center",
+                va="center",
+                fontsize=8,
+                fontweight="bold" if (i, j) in on_path else "normal",
+            )
     ax.set_xticks(range(m1), ["0"] + [str(j) for j in range(1, m1)])
     ax.set_yticks(range(n1), ["0"] + [str(i) for i in range(1, n1)])
     ax.set_xlabel("j (index in y)")
@@ -177,8 +209,15 @@ def plot_cost_matrix(matrix: np.ndarray, path: np.ndarray | None = None, *, fill
     return ax
 
 
-def dtw_vs_fastdtw(lengths: list[int], n_features: int, n_pairs: int, *, radius: int = 1,
-                   metric: str = "l1", seed: int = 0) -> pd.DataFrame:
+def dtw_vs_fastdtw(
+    lengths: list[int],
+    n_features: int,
+    n_pairs: int,
+    *,
+    radius: int = 1,
+    metric: str = "l1",
+    seed: int = 0,
+) -> pd.DataFrame:
     """Exact DTW against FastDTW on random multi-dimensional sequences: cost error and time.
 
     Sequences are random walks (so that they have structure to align); the second of each pair
@@ -207,17 +246,25 @@ def dtw_vs_fastdtw(lengths: list[int], n_features: int, n_pairs: int, *, radius:
             t_fast += t2 - t1
         exact_a, approx_a = np.array(exact), np.array(approx)
         rel = (approx_a - exact_a) / exact_a * 100
-        rows.append({
-            "length": n, "features": n_features, "pairs": n_pairs,
-            "exact_cost": exact_a.mean(), "fastdtw_cost": approx_a.mean(),
-            "rel_error_pct": rel.mean(), "max_rel_error_pct": rel.max(),
-            "exact_ms": 1000 * t_exact / n_pairs, "fastdtw_ms": 1000 * t_fast / n_pairs,
-            "speedup": t_fast / max(t_exact, 1e-12),
-        })
+        rows.append(
+            {
+                "length": n,
+                "features": n_features,
+                "pairs": n_pairs,
+                "exact_cost": exact_a.mean(),
+                "fastdtw_cost": approx_a.mean(),
+                "rel_error_pct": rel.mean(),
+                "max_rel_error_pct": rel.max(),
+                "exact_ms": 1000 * t_exact / n_pairs,
+                "fastdtw_ms": 1000 * t_fast / n_pairs,
+                "speedup": t_fast / max(t_exact, 1e-12),
+            }
+        )
     return pd.DataFrame(rows)
 
 
 # --------------------------------------------------------------------------- Transformers (2.2)
+
 
 def plot_positional_encoding(n_positions: int, d_model: int):
     """Heatmaps of Eq 2.1–2.2 with the standard base 10000 and with the thesis's printed 1000."""
@@ -226,7 +273,9 @@ def plot_positional_encoding(n_positions: int, d_model: int):
     from thesis_lib.seq import sinusoidal_positional_encoding
 
     fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
-    for ax, base, label in zip(axes, (10000.0, 1000.0), ("standard: base 10000", "as printed in Eq 2.1–2.2: base 1000")):
+    for ax, base, label in zip(
+        axes, (10000.0, 1000.0), ("standard: base 10000", "as printed in Eq 2.1–2.2: base 1000")
+    ):
         pe = sinusoidal_positional_encoding(n_positions, d_model, base=base).numpy()
         im = ax.imshow(pe, aspect="auto", cmap="RdBu_r", vmin=-1, vmax=1, interpolation="nearest")
         ax.set_title(label)
@@ -236,8 +285,9 @@ def plot_positional_encoding(n_positions: int, d_model: int):
     return fig
 
 
-def attention_mask_check(lengths: tuple[int, ...] = (6, 4), n_heads: int = 2, head_dim: int = 8,
-                         seed: int = 0) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
+def attention_mask_check(
+    lengths: tuple[int, ...] = (6, 4), n_heads: int = 2, head_dim: int = 8, seed: int = 0
+) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
     """Eq 2.3 with causal, padding and combined masks, checked against PyTorch's fused attention.
 
     Returns:
@@ -251,7 +301,9 @@ def attention_mask_check(lengths: tuple[int, ...] = (6, 4), n_heads: int = 2, he
 
     gen = torch.Generator().manual_seed(seed)
     B, T = len(lengths), max(lengths)
-    q, k, v = (torch.randn(B, n_heads, T, head_dim, generator=gen, dtype=torch.float64) for _ in range(3))
+    q, k, v = (
+        torch.randn(B, n_heads, T, head_dim, generator=gen, dtype=torch.float64) for _ in range(3)
+    )
     pad = padding_mask(list(lengths), T)
     masks = {
         "none": None,
@@ -265,9 +317,17 @@ def attention_mask_check(lengths: tuple[int, ...] = (6, 4), n_heads: int = 2, he
         ours = attention(q, k, v, mask)
         ref = F.scaled_dot_product_attention(q, k, v, attn_mask=mask)
         diff = (ours.out - ref).abs().where(real_q, torch.zeros(()))
-        allowed = torch.ones(B, 1, T, T, dtype=torch.bool) if mask is None else mask.expand(B, 1, T, T)
+        allowed = (
+            torch.ones(B, 1, T, T, dtype=torch.bool) if mask is None else mask.expand(B, 1, T, T)
+        )
         leaked = ours.weights.where(~allowed & real_q, torch.zeros(())).abs().max()
-        rows.append({"mask": name, "max_abs_diff_vs_torch": float(diff.max()), "weight_on_masked_keys": float(leaked)})
+        rows.append(
+            {
+                "mask": name,
+                "max_abs_diff_vs_torch": float(diff.max()),
+                "weight_on_masked_keys": float(leaked),
+            }
+        )
         weights[name] = ours.weights[-1, 0].numpy()
     return pd.DataFrame(rows), weights
 
@@ -288,6 +348,7 @@ def plot_attention_weights(weights: dict[str, np.ndarray]):
 
 # --------------------------------------------------------------------------- SSMs (2.3)
 
+
 def ssm_check(n_state: int = 8, length: int = 200, delta: float = 0.05, seed: int = 0) -> dict:
     """ZOH-discretise a HiPPO-LegS SSM and compare the convolution (Eq 2.7) with the recurrence (Eq 2.6).
 
@@ -301,7 +362,12 @@ def ssm_check(n_state: int = 8, length: int = 200, delta: float = 0.05, seed: in
     import torch
 
     from thesis_lib.seq import (
-        hippo_legs, selective_scan_reference, ssm_convolution, ssm_kernel, ssm_recurrence, zoh_discretize,
+        hippo_legs,
+        selective_scan_reference,
+        ssm_convolution,
+        ssm_kernel,
+        ssm_recurrence,
+        zoh_discretize,
     )
 
     rng = np.random.default_rng(seed)
@@ -317,18 +383,25 @@ def ssm_check(n_state: int = 8, length: int = 200, delta: float = 0.05, seed: in
     # Selective scan with constant parameters on a diagonal system (Mamba's A is diagonal).
     a_diag = -np.exp(rng.normal(size=n_state))
     b, c = rng.normal(size=n_state), rng.normal(size=n_state)
-    u = torch.tensor(x, dtype=torch.float64)[None, :, None]                       # (1, L, 1)
+    u = torch.tensor(x, dtype=torch.float64)[None, :, None]  # (1, L, 1)
     dt = torch.full_like(u, delta)
     Bt = torch.tensor(b)[None, None, :].expand(1, length, n_state)
     Ct = torch.tensor(c)[None, None, :].expand(1, length, n_state)
     y_sel = selective_scan_reference(u, dt, torch.tensor(a_diag)[None, :], Bt, Ct)[0, :, 0].numpy()
     A_lti = np.exp(delta * a_diag)
     y_lti = ssm_recurrence(A_lti, delta * b, c, x)
-    table = pd.DataFrame([
-        {"check": "convolution (Eq 2.7) vs recurrence (Eq 2.6)", "max_abs_diff": float(np.abs(y_conv - y_rec).max())},
-        {"check": "selective scan, constant Δ,B,C vs LTI recurrence (ZOH Ā, Euler B̄)",
-         "max_abs_diff": float(np.abs(y_sel - y_lti).max())},
-    ])
+    table = pd.DataFrame(
+        [
+            {
+                "check": "convolution (Eq 2.7) vs recurrence (Eq 2.6)",
+                "max_abs_diff": float(np.abs(y_conv - y_rec).max()),
+            },
+            {
+                "check": "selective scan, constant Δ,B,C vs LTI recurrence (ZOH Ā, Euler B̄)",
+                "max_abs_diff": float(np.abs(y_sel - y_lti).max()),
+            },
+        ]
+    )
     return {"x": x, "kernel": K, "y_recurrence": y_rec, "y_convolution": y_conv, "table": table}
 
 
@@ -351,15 +424,29 @@ def plot_ssm(check: dict):
 
 # --------------------------------------------------------------------------- DDPG, TD3, SAC (2.5–2.7)
 
+
 def rl_summary(episodes: pd.DataFrame, last: int = 5) -> pd.DataFrame:
     """First and last-``last``-episode mean returns per algorithm (mean over seeds)."""
     rows = []
     for (algo, seed), g in episodes.groupby(["algo", "seed"], sort=False):
         g = g.sort_values("episode")
-        rows.append({"algo": algo, "seed": seed, "episodes": len(g), "first_return": g["return"].iloc[0],
-                     f"mean_return_last_{last}": g["return"].tail(last).mean(), "best_return": g["return"].max()})
+        rows.append(
+            {
+                "algo": algo,
+                "seed": seed,
+                "episodes": len(g),
+                "first_return": g["return"].iloc[0],
+                f"mean_return_last_{last}": g["return"].tail(last).mean(),
+                "best_return": g["return"].max(),
+            }
+        )
     per_seed = pd.DataFrame(rows)
-    return per_seed.groupby("algo", sort=False).mean(numeric_only=True).drop(columns="seed").reset_index()
+    return (
+        per_seed.groupby("algo", sort=False)
+        .mean(numeric_only=True)
+        .drop(columns="seed")
+        .reset_index()
+    )
 
 
 def plot_learning_curves(episodes: pd.DataFrame, window: int = 3):
@@ -378,6 +465,7 @@ def plot_learning_curves(episodes: pd.DataFrame, window: int = 3):
 
 
 # --------------------------------------------------------------------------- Decision Transformer (2.8)
+
 
 def dt_token_example() -> pd.DataFrame:
     """A four-step trajectory laid out as DT tokens (rtg, s, a) with its returns-to-go."""

@@ -8,6 +8,7 @@
 
 Errors in what you typed are reported in one line; THESIS_DEBUG=1 shows the traceback.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -16,7 +17,6 @@ import os
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -26,7 +26,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     params = {name: parse_value(value) for name, value in (args.param or [])}
     profile: str | Path | None = args.file or args.profile
     try:
-        result = run_chapter(args.chapter, params, profile=profile, output=args.output, progress=not args.quiet)
+        result = run_chapter(
+            args.chapter, params, profile=profile, output=args.output, progress=not args.quiet
+        )
     except (ValueError, FileNotFoundError, ChapterFailed) as err:
         print(f"thesis run: {err}", file=sys.stderr)
         return 1
@@ -65,30 +67,49 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     script = folder / f"bench_{args.name}.py"
     if not script.is_file():
         names = sorted(p.stem.removeprefix("bench_") for p in folder.glob("bench_*.py"))
-        print(f"thesis bench: no benchmark '{args.name}'. Available: {', '.join(names)}", file=sys.stderr)
+        print(
+            f"thesis bench: no benchmark '{args.name}'. Available: {', '.join(names)}",
+            file=sys.stderr,
+        )
         return 1
     return subprocess.call([sys.executable, str(script), *args.rest])
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="thesis", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="thesis", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="command", required=True)
 
     run = sub.add_parser("run", help="execute one chapter notebook with papermill")
     run.add_argument("chapter", help="chapter name, e.g. 01_background (see 'thesis list')")
-    run.add_argument("-p", "--param", nargs=2, action="append", metavar=("NAME", "VALUE"), help="set a parameter")
-    run.add_argument("-f", "--file", help="YAML file of parameters (e.g. params/01_background.full.yml)")
-    run.add_argument("--profile", default="smoke", help="'smoke' (default) or 'full'; ignored with -f")
-    run.add_argument("-o", "--output", help="executed notebook path (default book/generated/<chapter>.ipynb)")
+    run.add_argument(
+        "-p", "--param", nargs=2, action="append", metavar=("NAME", "VALUE"), help="set a parameter"
+    )
+    run.add_argument(
+        "-f", "--file", help="YAML file of parameters (e.g. params/01_background.full.yml)"
+    )
+    run.add_argument(
+        "--profile", default="smoke", help="'smoke' (default) or 'full'; ignored with -f"
+    )
+    run.add_argument(
+        "-o", "--output", help="executed notebook path (default book/generated/<chapter>.ipynb)"
+    )
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_cmd_run)
 
     book = sub.add_parser("book", help="run every chapter, then build the HTML book")
     book.add_argument("chapters", nargs="*", help="only these chapters (default: all in _toc.yml)")
-    book.add_argument("-j", "--jobs", type=int, default=1, help="chapters run in parallel processes")
+    book.add_argument(
+        "-j", "--jobs", type=int, default=1, help="chapters run in parallel processes"
+    )
     book.add_argument("--profile", default="smoke", help="'smoke' (default) or 'full'")
-    book.add_argument("--no-run", action="store_true", help="only build from already executed notebooks")
-    book.add_argument("--no-strict", action="store_true", help="do not turn Sphinx warnings into errors")
+    book.add_argument(
+        "--no-run", action="store_true", help="only build from already executed notebooks"
+    )
+    book.add_argument(
+        "--no-strict", action="store_true", help="do not turn Sphinx warnings into errors"
+    )
     book.set_defaults(func=_cmd_book)
 
     lst = sub.add_parser("list", help="list the chapters and their parameters")

@@ -2,7 +2,13 @@
 
 Used by every chapter notebook and by the ``thesis`` command line.
 """
-from thesis_lib.book.compare import DEVIATION_KINDS, compare_with_paper, load_reference, reference_tables
+
+from thesis_lib.book.compare import (
+    DEVIATION_KINDS,
+    compare_with_paper,
+    load_reference,
+    reference_tables,
+)
 from thesis_lib.book.params import config_from_namespace, validate_parameters
 from thesis_lib.book.paths import project_root, results_dir
 from thesis_lib.book.results import ChapterResults, run_metadata

@@ -8,6 +8,7 @@ shows a number without its context.
 
 Used by every chapter notebook that regenerates a thesis table.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -60,7 +61,9 @@ def _explain(differs: str | Mapping[str, str] | None) -> str:
         return differs
     unknown = [k for k in differs if k not in DEVIATION_KINDS]
     if unknown:
-        raise ValueError(f"Unknown deviation kind {unknown[0]!r}. Valid: {', '.join(DEVIATION_KINDS)}.")
+        raise ValueError(
+            f"Unknown deviation kind {unknown[0]!r}. Valid: {', '.join(DEVIATION_KINDS)}."
+        )
     return "; ".join(f"{kind}: {why}" if why else kind for kind, why in differs.items())
 
 
@@ -100,7 +103,10 @@ def compare_with_paper(
     paper = load_reference(table_id)
     paper_value = paper_value or value
     on = list(on)
-    for name, frame, cols in (("thesis table", paper, [*on, paper_value]), ("our table", ours, [*on, value])):
+    for name, frame, cols in (
+        ("thesis table", paper, [*on, paper_value]),
+        ("our table", ours, [*on, value]),
+    ):
         missing = [c for c in cols if c not in frame.columns]
         if missing:
             raise ValueError(
@@ -109,7 +115,9 @@ def compare_with_paper(
     if where:
         for col, val in where.items():
             if col not in paper.columns:
-                raise ValueError(f"Cannot filter on '{col}': the thesis table {table_id} has {', '.join(paper.columns)}.")
+                raise ValueError(
+                    f"Cannot filter on '{col}': the thesis table {table_id} has {', '.join(paper.columns)}."
+                )
             paper = paper[paper[col].astype(str) == str(val)]
     left = paper[on + [paper_value]].rename(columns={paper_value: "paper"})
     right_cols = on + [value] + (["differs"] if "differs" in ours.columns else [])

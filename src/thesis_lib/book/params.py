@@ -4,6 +4,7 @@ Papermill silently injects any ``-p name value`` it is given, even a misspelt on
 notebook therefore calls :func:`config_from_namespace` right after its ``parameters`` cell, and
 the ``thesis run`` command checks names before it starts a kernel (:func:`validate_parameters`).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,7 +19,9 @@ T = TypeVar("T")
 _KERNEL_NAMES = frozenset({"In", "Out", "get_ipython", "exit", "quit", "open"})
 
 
-def validate_parameters(given: Iterable[str], valid: Iterable[str], chapter: str = "this notebook") -> None:
+def validate_parameters(
+    given: Iterable[str], valid: Iterable[str], chapter: str = "this notebook"
+) -> None:
     """Raise if any name in ``given`` is not a valid parameter.
 
     Raises:
@@ -42,7 +45,9 @@ def validate_parameters(given: Iterable[str], valid: Iterable[str], chapter: str
             )
 
 
-def config_from_namespace(cls: type[T], namespace: Mapping[str, Any], chapter: str = "this notebook") -> T:
+def config_from_namespace(
+    cls: type[T], namespace: Mapping[str, Any], chapter: str = "this notebook"
+) -> T:
     """Build the chapter's config dataclass from the notebook's global names.
 
     Call it right after the ``parameters`` cell (and papermill's injected cell): every public

@@ -1,4 +1,5 @@
 """Where the project, its notebooks and its results are on disk."""
+
 from __future__ import annotations
 
 import os

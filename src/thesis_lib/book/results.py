@@ -6,6 +6,7 @@ package versions and wall time, so a table can always be traced back to its run.
 
 Used by every chapter notebook.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -14,7 +15,7 @@ import platform
 import subprocess
 import sys
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -25,9 +26,22 @@ from thesis_lib.book.paths import project_root, results_dir
 
 #: Packages whose versions are recorded in every run.json.
 RECORDED_PACKAGES = (
-    "thesis_lib", "numpy", "scipy", "pandas", "numba", "torch", "gymnasium", "mujoco",
-    "gymnasium-robotics", "minari", "stable-baselines3", "sb3-contrib", "librosa", "fastdtw",
-    "papermill", "jupyter-book",
+    "thesis_lib",
+    "numpy",
+    "scipy",
+    "pandas",
+    "numba",
+    "torch",
+    "gymnasium",
+    "mujoco",
+    "gymnasium-robotics",
+    "minari",
+    "stable-baselines3",
+    "sb3-contrib",
+    "librosa",
+    "fastdtw",
+    "papermill",
+    "jupyter-book",
 )
 
 
@@ -42,11 +56,20 @@ def git_commit(path: str | Path | None = None) -> str:
         cwd = Path.cwd()
     try:
         sha = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, check=True, timeout=10
+            ["git", "rev-parse", "HEAD"],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=10,
         ).stdout.strip()
         dirty = subprocess.run(
             ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=cwd, capture_output=True, text=True, check=True, timeout=10,
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=10,
         ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
@@ -77,8 +100,12 @@ def run_metadata(config: Any, seed: int | None, **extra: Any) -> dict[str, Any]:
         "seed": seed,
         "git_commit": git_commit(),
         "versions": package_versions(),
-        "platform": {"machine": platform.machine(), "system": platform.system(), "argv": sys.argv[:1]},
-        "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "platform": {
+            "machine": platform.machine(),
+            "system": platform.system(),
+            "argv": sys.argv[:1],
+        },
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         **extra,
     }
 
@@ -90,7 +117,7 @@ def _glue(name: str, value: Any) -> None:
         return
     try:
         glue(name, value, display=False)
-    except Exception:  # noqa: BLE001 - glue needs an IPython kernel; files are what matter
+    except Exception:
         pass
 
 
@@ -158,9 +185,12 @@ class ChapterResults:
     def finish(self, **extra: Any) -> dict[str, Any]:
         """Write ``run.json`` (config, seed, commit, versions, wall time, artifacts) and return it."""
         meta = run_metadata(
-            self.config, self.seed, chapter=self.chapter,
+            self.config,
+            self.seed,
+            chapter=self.chapter,
             wall_time_s=round(time.perf_counter() - self._t0, 3),
-            artifacts=list(self.artifacts), **extra,
+            artifacts=list(self.artifacts),
+            **extra,
         )
         (self.dir / "run.json").write_text(json.dumps(meta, indent=2, default=str))
         return meta

@@ -7,6 +7,7 @@ executed copies (``execute_notebooks: off`` in ``_config.yml``: papermill is the
 Profiles are YAML files of parameters: ``params/<name>.smoke.yml`` (the notebook's defaults,
 minutes on a laptop CPU) and ``params/<name>.full.yml`` (the thesis's scale).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -64,7 +65,9 @@ def list_chapters(root: Path | None = None) -> list[str]:
     root = root or project_root()
     toc = yaml.safe_load((root / "_toc.yml").read_text())
     prefix = GENERATED.as_posix() + "/"
-    return [f[len(prefix):].removesuffix(".ipynb") for f in _toc_files(toc) if f.startswith(prefix)]
+    return [
+        f[len(prefix) :].removesuffix(".ipynb") for f in _toc_files(toc) if f.startswith(prefix)
+    ]
 
 
 def resolve_chapter(name: str, root: Path | None = None) -> str:
@@ -98,11 +101,17 @@ def notebook_parameters(chapter: str, root: Path | None = None) -> dict[str, Any
     import papermill as pm
 
     info = pm.inspect_notebook(str(notebook_path(chapter, root)))
-    return {name: parse_value(spec["default"]) if isinstance(spec.get("default"), str) else spec.get("default")
-            for name, spec in info.items()}
+    return {
+        name: parse_value(spec["default"])
+        if isinstance(spec.get("default"), str)
+        else spec.get("default")
+        for name, spec in info.items()
+    }
 
 
-def load_profile(chapter: str, profile: str | Path = "smoke", root: Path | None = None) -> dict[str, Any]:
+def load_profile(
+    chapter: str, profile: str | Path = "smoke", root: Path | None = None
+) -> dict[str, Any]:
     """Parameters of a profile: ``'smoke'``, ``'full'`` or the path of a YAML file.
 
     Raises:
@@ -114,12 +123,16 @@ def load_profile(chapter: str, profile: str | Path = "smoke", root: Path | None 
     else:
         path = Path(profile)
         if path.suffix not in (".yml", ".yaml"):
-            raise ValueError(f"Unknown profile '{profile}'. Use one of {', '.join(PROFILES)} or a .yml file.")
+            raise ValueError(
+                f"Unknown profile '{profile}'. Use one of {', '.join(PROFILES)} or a .yml file."
+            )
     if not path.is_file():
         raise FileNotFoundError(f"No parameter file {path} for chapter '{chapter}'.")
     data = yaml.safe_load(path.read_text()) or {}
     if not isinstance(data, dict):
-        raise ValueError(f"{path} must hold a mapping of parameter names to values, got {type(data).__name__}.")
+        raise ValueError(
+            f"{path} must hold a mapping of parameter names to values, got {type(data).__name__}."
+        )
     return data
 
 
@@ -160,8 +173,13 @@ def run_chapter(
     try:
         with _kernel_environment():
             pm.execute_notebook(
-                str(notebook_path(chapter, root)), str(out), parameters=params, kernel_name=kernel,
-                cwd=str(root), progress_bar=progress, log_output=False,
+                str(notebook_path(chapter, root)),
+                str(out),
+                parameters=params,
+                kernel_name=kernel,
+                cwd=str(root),
+                progress_bar=progress,
+                log_output=False,
             )
     except pm.PapermillExecutionError as err:
         raise ChapterFailed(
@@ -233,7 +251,10 @@ def run_chapters(
 
     def _report(result: ChapterRun) -> None:
         done.append(result)
-        print(f"[thesis] {result.chapter}: done in {result.wall_time_s:.0f} s -> {result.output}", flush=True)
+        print(
+            f"[thesis] {result.chapter}: done in {result.wall_time_s:.0f} s -> {result.output}",
+            flush=True,
+        )
 
     if jobs <= 1:
         for task in tasks:
@@ -245,7 +266,10 @@ def run_chapters(
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {pool.submit(_run_one, t): t[0] for t in tasks}
-            print(f"[thesis] running {', '.join(futures.values())} with {jobs} processes ...", flush=True)
+            print(
+                f"[thesis] running {', '.join(futures.values())} with {jobs} processes ...",
+                flush=True,
+            )
             for fut in as_completed(futures):
                 try:
                     _report(fut.result())
@@ -271,11 +295,19 @@ def build_book(root: Path | None = None, *, strict: bool = True) -> Path:
             f"Chapters not executed yet: {', '.join(missing)}. Run 'thesis run <chapter>' or 'thesis book'."
         )
     exe = Path(sys.executable).with_name("jupyter-book")
-    cmd = [str(exe) if exe.exists() else "jupyter-book", "build", str(root), "--path-output", str(root)]
+    cmd = [
+        str(exe) if exe.exists() else "jupyter-book",
+        "build",
+        str(root),
+        "--path-output",
+        str(root),
+    ]
     if strict:
         cmd += ["-W", "-n", "--keep-going"]
     env = {**os.environ, "PYDEVD_DISABLE_FILE_VALIDATION": "1"}
     proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, env=env)
     if proc.returncode != 0:
-        raise RuntimeError(f"jupyter-book build failed ({proc.returncode}):\n{proc.stdout[-6000:]}\n{proc.stderr[-6000:]}")
+        raise RuntimeError(
+            f"jupyter-book build failed ({proc.returncode}):\n{proc.stdout[-6000:]}\n{proc.stderr[-6000:]}"
+        )
     return root / "_build" / "html" / "index.html"

@@ -6,6 +6,7 @@ helpers split them, so a paper counts once under each value it names.
 
 Used in: the Survey page of the book (thesis ch. 3).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -36,7 +37,9 @@ def split_values(cell: object) -> list[str]:
     return [part.strip() for part in cell.split(",") if part.strip()]
 
 
-def count_values(df: pd.DataFrame, column: str, *, top: int | None = None, case_insensitive: bool = True) -> pd.Series:
+def count_values(
+    df: pd.DataFrame, column: str, *, top: int | None = None, case_insensitive: bool = True
+) -> pd.Series:
     """How many papers name each value of ``column`` (multi-valued cells split).
 
     Args:
@@ -73,8 +76,12 @@ def plot_survey(df: pd.DataFrame, *, top: int = 12):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(12, 9))
-    specs = [("year", "Papers per year"), ("technique", "Per technique"),
-             ("learned_goal", "Per learned goal"), ("benchmark", f"Per benchmark (top {top})")]
+    specs = [
+        ("year", "Papers per year"),
+        ("technique", "Per technique"),
+        ("learned_goal", "Per learned goal"),
+        ("benchmark", f"Per benchmark (top {top})"),
+    ]
     for ax, (column, title) in zip(axes.flat, specs):
         counts = count_values(df, column, top=None if column == "year" else top)
         if column == "year":

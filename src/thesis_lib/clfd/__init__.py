@@ -15,16 +15,23 @@ before MuJoCo is imported.
 
 Used in: chapter 02_clfd.
 """
+
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from thesis_lib.clfd.data import MultiViewVideos, make_pick_place_dataset, read_multiview_folder  # noqa: E402
-from thesis_lib.clfd.env import CAMERAS, STAGES, MultiViewPickPlace, ScriptedPickPlace, run_demonstration  # noqa: E402
-from thesis_lib.clfd.losses import cmc_loss, nt_xent, triplet_loss  # noqa: E402
-from thesis_lib.clfd.metrics import alignment_distance, alignment_error  # noqa: E402
-from thesis_lib.clfd.models import ProjectionHead, ResNet18, TCNEncoder  # noqa: E402
-from thesis_lib.clfd.train import CLfD, mean_alignment_error  # noqa: E402
+from thesis_lib.clfd.data import MultiViewVideos, make_pick_place_dataset, read_multiview_folder
+from thesis_lib.clfd.env import (
+    CAMERAS,
+    STAGES,
+    MultiViewPickPlace,
+    ScriptedPickPlace,
+    run_demonstration,
+)
+from thesis_lib.clfd.losses import cmc_loss, nt_xent, triplet_loss
+from thesis_lib.clfd.metrics import alignment_distance, alignment_error
+from thesis_lib.clfd.models import ProjectionHead, ResNet18, TCNEncoder
+from thesis_lib.clfd.train import CLfD, mean_alignment_error
 
 __all__ = [
     "CAMERAS",

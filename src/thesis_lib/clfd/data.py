@@ -10,6 +10,7 @@ state) from :class:`~thesis_lib.clfd.env.MultiViewPickPlace`, and caches it on d
 
 Used in: CLfD (thesis 4.2), chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 import json
@@ -62,7 +63,9 @@ class MultiViewVideos:
                     f"for cameras {self.cameras}."
                 )
             if v.dtype != np.uint8:
-                raise ValueError(f"Video {name!r} has dtype {v.dtype}; expected uint8 frames (0-255).")
+                raise ValueError(
+                    f"Video {name!r} has dtype {v.dtype}; expected uint8 frames (0-255)."
+                )
         if self.stages is not None:
             for name, v, s in zip(self.names, self.videos, self.stages):
                 if len(s) != len(v):
@@ -84,7 +87,9 @@ class MultiViewVideos:
         out = []
         for c in cameras:
             if c not in self.cameras:
-                raise ValueError(f"Unknown camera {c!r}. This data set has: {', '.join(self.cameras)}.")
+                raise ValueError(
+                    f"Unknown camera {c!r}. This data set has: {', '.join(self.cameras)}."
+                )
             out.append(self.cameras.index(c))
         return out
 
@@ -108,8 +113,13 @@ class MultiViewVideos:
             if self.stages is not None:
                 arrays["stages"] = self.stages[i]
             np.savez(folder / f"{name}.npz", **arrays)
-        meta = {"format_version": FORMAT_VERSION, "cameras": list(self.cameras), "names": self.names,
-                "extras": sorted(self.extras), "has_stages": self.stages is not None}
+        meta = {
+            "format_version": FORMAT_VERSION,
+            "cameras": list(self.cameras),
+            "names": self.names,
+            "extras": sorted(self.extras),
+            "has_stages": self.stages is not None,
+        }
         (folder / "meta.json").write_text(json.dumps(meta, indent=1))
         return folder
 
@@ -132,8 +142,13 @@ class MultiViewVideos:
                     stages.append(z["stages"])
                 for k in extras:
                     extras[k].append(z[k])
-        return cls(videos, tuple(meta["cameras"]), list(meta["names"]),
-                   stages if meta["has_stages"] else None, extras)
+        return cls(
+            videos,
+            tuple(meta["cameras"]),
+            list(meta["names"]),
+            stages if meta["has_stages"] else None,
+            extras,
+        )
 
 
 # -- the pick-and-place data set -----------------------------------------------------------------
@@ -200,7 +215,9 @@ def make_pick_place_dataset(
             demos.append(d)
             bar.update(1)
         if i > 2 * n_demos + 20:
-            raise RuntimeError(f"The scripted expert succeeded in only {len(demos)} of {i} episodes.")
+            raise RuntimeError(
+                f"The scripted expert succeeded in only {len(demos)} of {i} episodes."
+            )
     bar.close()
     env.close()
     full = MultiViewVideos(
@@ -255,7 +272,7 @@ def _read_frames(path: Path) -> np.ndarray:
 
         try:
             arr = iio.imread(path)  # a video: needs an imageio plugin (pyav or imageio-ffmpeg)
-        except Exception as exc:  # noqa: BLE001 - re-raised with what to do
+        except Exception as exc:
             raise ValueError(
                 f"Cannot read video {path} ({exc}). Install a video plugin (`pip install av`) or convert "
                 "the videos to frame arrays (.npy, shape (T, H, W, 3))."
@@ -315,8 +332,10 @@ def read_multiview_folder(
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise FileNotFoundError(f"No folder {folder}. Point read_multiview_folder at a folder of "
-                                "'<sequence>_view<k>' videos or frame arrays.")
+        raise FileNotFoundError(
+            f"No folder {folder}. Point read_multiview_folder at a folder of "
+            "'<sequence>_view<k>' videos or frame arrays."
+        )
     groups: dict[str, dict[int, Path]] = {}
     for p in sorted(folder.iterdir()):
         stem = p.name if p.is_dir() else p.stem
@@ -334,8 +353,10 @@ def read_multiview_folder(
     for seq, g in sorted(groups.items()):
         missing = [v for v in wanted if v not in g]
         if missing:
-            raise ValueError(f"Sequence {seq!r} has views {sorted(g)} but not {missing}; every sequence needs "
-                             f"views {wanted}.")
+            raise ValueError(
+                f"Sequence {seq!r} has views {sorted(g)} but not {missing}; every sequence needs "
+                f"views {wanted}."
+            )
         frames = [_read_frames(g[v]) for v in wanted]
         lengths = [len(f) for f in frames]
         if len(set(lengths)) != 1:
@@ -349,7 +370,9 @@ def read_multiview_folder(
             frames = [_resize(f, image_size) for f in frames]
         shapes = {f.shape[1:] for f in frames}
         if len(shapes) != 1:
-            raise ValueError(f"Sequence {seq!r}: views have different frame sizes {sorted(shapes)}; pass image_size.")
+            raise ValueError(
+                f"Sequence {seq!r}: views have different frame sizes {sorted(shapes)}; pass image_size."
+            )
         video = np.stack(frames, axis=1)  # (T, V, H, W, 3)
         if max_frames is not None and len(video) > max_frames:
             video = video[np.linspace(0, len(video) - 1, max_frames).round().astype(int)]

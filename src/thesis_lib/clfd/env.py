@@ -12,6 +12,7 @@ Rendering needs an OpenGL back end: ``MUJOCO_GL=egl`` (Mesa) is set when nothing
 
 Used in: CLfD (thesis 4.2), chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 import os
@@ -40,7 +41,9 @@ _HOME = np.array([-0.12, 0.0, 0.22])
 _LOW, _HIGH = np.array([-0.25, -0.3, 0.015]), np.array([0.3, 0.3, 0.35])  # grasp-point workspace
 _OPEN, _CLOSED = 0.04, 0.0
 BOX_HALF = 0.02
-SUCCESS_DIST = 0.04  # box centre within 4 cm of the goal centre (the plane is 8 cm wide), on the table
+SUCCESS_DIST = (
+    0.04  # box centre within 4 cm of the goal centre (the plane is 8 cm wide), on the table
+)
 
 
 def model_path() -> str:
@@ -98,10 +101,16 @@ class MultiViewPickPlace(gym.Env):
         self.n_substeps = 20
         self.action_space = gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (27,), np.float64)
-        self._arm_qpos = np.array([self.model.jnt_qposadr[self.model.joint(j).id] for j in ARM_JOINTS])
-        self._arm_qvel = np.array([self.model.jnt_dofadr[self.model.joint(j).id] for j in ARM_JOINTS])
+        self._arm_qpos = np.array(
+            [self.model.jnt_qposadr[self.model.joint(j).id] for j in ARM_JOINTS]
+        )
+        self._arm_qvel = np.array(
+            [self.model.jnt_dofadr[self.model.joint(j).id] for j in ARM_JOINTS]
+        )
         self._box_qpos = self.model.jnt_qposadr[self.model.joint("box").id]
-        self._fingers = [self.model.jnt_qposadr[self.model.joint(j).id] for j in ("finger_left", "finger_right")]
+        self._fingers = [
+            self.model.jnt_qposadr[self.model.joint(j).id] for j in ("finger_left", "finger_right")
+        ]
         self._renderer: mujoco.Renderer | None = None
         self._steps = 0
         self._lifted = False
@@ -136,7 +145,9 @@ class MultiViewPickPlace(gym.Env):
 
     def _info(self) -> dict[str, Any]:
         box = self.box_pos
-        on_goal = np.linalg.norm(box[:2] - self.goal[:2]) < SUCCESS_DIST and box[2] < BOX_HALF + 0.01
+        on_goal = (
+            np.linalg.norm(box[:2] - self.goal[:2]) < SUCCESS_DIST and box[2] < BOX_HALF + 0.01
+        )
         return {
             "stage": STAGES[int(self._lifted)],
             "is_success": bool(on_goal and not self._held()),
@@ -146,10 +157,14 @@ class MultiViewPickPlace(gym.Env):
     def _held(self) -> bool:
         """The box is off the table and between the fingers."""
         d = self.box_pos - self.grip_pos
-        return bool(self.box_pos[2] > BOX_HALF + 0.01 and np.abs(d[:2]).max() < 0.03 and abs(d[2]) < 0.04)
+        return bool(
+            self.box_pos[2] > BOX_HALF + 0.01 and np.abs(d[:2]).max() < 0.03 and abs(d[2]) < 0.04
+        )
 
     # -- gymnasium API -------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+    def reset(
+        self, *, seed: int | None = None, options: dict | None = None
+    ) -> tuple[np.ndarray, dict]:
         """New episode: box and goal at random places at least 10 cm apart.
 
         ``options`` may fix ``box_xy`` and/or ``goal_xy``.
@@ -180,17 +195,23 @@ class MultiViewPickPlace(gym.Env):
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
         a = np.asarray(action, dtype=float).reshape(-1)
         if a.shape != (4,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"MultiViewPickPlace expects a finite action of shape (4,), got {np.asarray(action)!r}.")
+            raise ValueError(
+                f"MultiViewPickPlace expects a finite action of shape (4,), got {np.asarray(action)!r}."
+            )
         a = np.clip(a, -1.0, 1.0)
         mid = self.model.body("target").mocapid[0]
-        grip_target = np.clip(self.data.mocap_pos[mid] - _HAND_TO_GRIP + a[:3] * self.max_move, _LOW, _HIGH)
+        grip_target = np.clip(
+            self.data.mocap_pos[mid] - _HAND_TO_GRIP + a[:3] * self.max_move, _LOW, _HIGH
+        )
         self.data.mocap_pos[mid] = grip_target + _HAND_TO_GRIP
         self.data.ctrl[:] = _OPEN * (1.0 - a[3]) / 2.0
         mujoco.mj_step(self.model, self.data, nstep=self.n_substeps)
         self._steps += 1
         self._lifted = self._lifted or self._held()
         info = self._info()
-        reward = float(info["is_success"]) - 1.0  # sparse, as Fetch; the chapter uses Eq 4.2 instead
+        reward = (
+            float(info["is_success"]) - 1.0
+        )  # sparse, as Fetch; the chapter uses Eq 4.2 instead
         truncated = self._steps >= self.max_episode_steps
         return self._obs(), reward, False, truncated, info
 
@@ -199,9 +220,12 @@ class MultiViewPickPlace(gym.Env):
         if self._renderer is None:
             try:
                 self._renderer = mujoco.Renderer(self.model, self.image_size, self.image_size)
-            except Exception as exc:  # noqa: BLE001 - re-raised with what to do
-                why = ("mujoco was imported before thesis_lib.clfd could choose EGL"
-                       if _MUJOCO_IMPORTED_FIRST else f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}")
+            except Exception as exc:
+                why = (
+                    "mujoco was imported before thesis_lib.clfd could choose EGL"
+                    if _MUJOCO_IMPORTED_FIRST
+                    else f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}"
+                )
                 raise RuntimeError(
                     f"MuJoCo could not create an OpenGL context for rendering ({why}): {exc}. Set "
                     "MUJOCO_GL=egl (or osmesa) in the environment before anything imports mujoco, e.g. "
@@ -237,8 +261,26 @@ def check_cameras(cameras: tuple[str, ...] | list[str]) -> None:
 
 
 # -- the scripted expert -----------------------------------------------------------------------
-PHASES: tuple[str, ...] = ("reach", "descend", "grasp", "lift", "carry", "lower", "release", "retreat")
-_PHASE_STAGE = {"reach": 0, "descend": 0, "grasp": 0, "lift": 1, "carry": 1, "lower": 1, "release": 1, "retreat": 1}
+PHASES: tuple[str, ...] = (
+    "reach",
+    "descend",
+    "grasp",
+    "lift",
+    "carry",
+    "lower",
+    "release",
+    "retreat",
+)
+_PHASE_STAGE = {
+    "reach": 0,
+    "descend": 0,
+    "grasp": 0,
+    "lift": 1,
+    "carry": 1,
+    "lower": 1,
+    "release": 1,
+    "retreat": 1,
+}
 
 
 class ScriptedPickPlace:

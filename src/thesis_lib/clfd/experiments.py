@@ -5,6 +5,7 @@ notebook's parameters) and returns tidy DataFrames; the notebook only narrates a
 
 Used in: chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -16,9 +17,21 @@ import pandas as pd
 from thesis_lib.book import compare_with_paper
 from thesis_lib.clfd.data import MultiViewVideos, make_pick_place_dataset
 from thesis_lib.clfd.env import CAMERAS, STAGES, MultiViewPickPlace, run_demonstration
-from thesis_lib.clfd.metrics import balanced_indices, classifier_accuracy, pca_2d, train_stage_classifier
+from thesis_lib.clfd.metrics import (
+    balanced_indices,
+    classifier_accuracy,
+    pca_2d,
+    train_stage_classifier,
+)
 from thesis_lib.clfd.models import ENCODERS
-from thesis_lib.clfd.train import ENCODER_LABELS, METHOD_LABELS, METHODS, CLfD, _pairs_of, mean_alignment_error
+from thesis_lib.clfd.train import (
+    ENCODER_LABELS,
+    METHOD_LABELS,
+    METHODS,
+    CLfD,
+    _pairs_of,
+    mean_alignment_error,
+)
 
 
 @dataclass
@@ -92,13 +105,19 @@ class ClfdChapterConfig:
             if c not in CAMERAS:
                 raise ValueError(f"Unknown camera {c!r}. Valid: {', '.join(CAMERAS)}.")
         if len(self.seen_cameras) < 2:
-            raise ValueError(f"seen_cameras needs at least two cameras to pair, got {self.seen_cameras}.")
+            raise ValueError(
+                f"seen_cameras needs at least two cameras to pair, got {self.seen_cameras}."
+            )
         if set(self.seen_cameras) & set(self.unseen_cameras):
-            raise ValueError("A camera cannot be both seen and unseen: "
-                             f"{sorted(set(self.seen_cameras) & set(self.unseen_cameras))}.")
+            raise ValueError(
+                "A camera cannot be both seen and unseen: "
+                f"{sorted(set(self.seen_cameras) & set(self.unseen_cameras))}."
+            )
         if self.n_demos < 3 or self.epochs < 1 or self.image_size < 16:
-            raise ValueError(f"Need n_demos >= 3, epochs >= 1, image_size >= 16; got {self.n_demos}, "
-                             f"{self.epochs}, {self.image_size}.")
+            raise ValueError(
+                f"Need n_demos >= 3, epochs >= 1, image_size >= 16; got {self.n_demos}, "
+                f"{self.epochs}, {self.image_size}."
+            )
 
 
 def load_data(cfg: ClfdChapterConfig) -> dict[str, MultiViewVideos]:
@@ -117,16 +136,31 @@ def load_pouring(cfg: ClfdChapterConfig) -> dict[str, MultiViewVideos] | None:
     root = Path(cfg.pouring_dir).expanduser()
     missing = [s for s in ("train", "val", "test") if not (root / s).is_dir()]
     if missing:
-        raise FileNotFoundError(f"pouring_dir {root} has no {missing} sub-folder(s); point it at the folder "
-                                "holding Multi-View Pouring's train/val/test video folders.")
-    return {s: read_multiview_folder(root / s, cfg.image_size, max_frames=cfg.pouring_max_frames)
-            for s in ("train", "val", "test")}
+        raise FileNotFoundError(
+            f"pouring_dir {root} has no {missing} sub-folder(s); point it at the folder "
+            "holding Multi-View Pouring's train/val/test video folders."
+        )
+    return {
+        s: read_multiview_folder(root / s, cfg.image_size, max_frames=cfg.pouring_max_frames)
+        for s in ("train", "val", "test")
+    }
 
 
-def build_model(cfg: ClfdChapterConfig, encoder: str, method: str, paper_compat: bool = False) -> CLfD:
+def build_model(
+    cfg: ClfdChapterConfig, encoder: str, method: str, paper_compat: bool = False
+) -> CLfD:
     width = cfg.resnet_width if encoder == "resnet18" else cfg.tcn_width
-    return CLfD(encoder=encoder, method=method, width=width, lr=cfg.lr, batch_size=cfg.batch_size,
-                temperature=cfg.temperature, paper_compat=paper_compat, seed=cfg.seed, device=cfg.device)
+    return CLfD(
+        encoder=encoder,
+        method=method,
+        width=width,
+        lr=cfg.lr,
+        batch_size=cfg.batch_size,
+        temperature=cfg.temperature,
+        paper_compat=paper_compat,
+        seed=cfg.seed,
+        device=cfg.device,
+    )
 
 
 def _seen(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos]) -> tuple[list[str], list[str]]:
@@ -136,16 +170,29 @@ def _seen(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos]) -> tuple[lis
     return list(data["train"].cameras), []
 
 
-def train_model(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], encoder: str, method: str,
-                paper_compat: bool = False) -> CLfD:
+def train_model(
+    cfg: ClfdChapterConfig,
+    data: dict[str, MultiViewVideos],
+    encoder: str,
+    method: str,
+    paper_compat: bool = False,
+) -> CLfD:
     """Train one encoder on the seen cameras of the training split, keeping the best validation checkpoint."""
     model = build_model(cfg, encoder, method, paper_compat)
-    model.fit(data["train"], epochs=cfg.epochs, cameras=_seen(cfg, data)[0], val=data["val"],
-              eval_every=cfg.eval_every, progress=cfg.progress)
+    model.fit(
+        data["train"],
+        epochs=cfg.epochs,
+        cameras=_seen(cfg, data)[0],
+        val=data["val"],
+        eval_every=cfg.eval_every,
+        progress=cfg.progress,
+    )
     return model
 
 
-def _ae_row(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLfD) -> dict[str, float]:
+def _ae_row(
+    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLfD
+) -> dict[str, float]:
     seen_cams, unseen_cams = _seen(cfg, data)
     seen = _pairs_of(seen_cams)
     unseen = [(a, b) for a in seen_cams for b in unseen_cams]
@@ -153,12 +200,15 @@ def _ae_row(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLf
     return {
         "alignment_error_pct": mean_alignment_error(model, data["test"], seen),
         "val_best_pct": float(h["val_alignment_error"].min()) if len(h) else np.nan,
-        "test_seen_unseen_pct": mean_alignment_error(model, data["test"], unseen) if unseen else np.nan,
+        "test_seen_unseen_pct": mean_alignment_error(model, data["test"], unseen)
+        if unseen
+        else np.nan,
     }
 
 
-def run_table_4_1(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos],
-                  dataset: str = "PickPlace") -> tuple[pd.DataFrame, dict, pd.DataFrame]:
+def run_table_4_1(
+    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], dataset: str = "PickPlace"
+) -> tuple[pd.DataFrame, dict, pd.DataFrame]:
     """Train every encoder × method and measure the alignment error (Table 4.1).
 
     Returns:
@@ -173,26 +223,53 @@ def run_table_4_1(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos],
     rows, models, hist = [], {}, []
     for enc in cfg.encoders:
         untrained = build_model(cfg, enc, "clfd")
-        rows.append({"dataset": dataset, "encoder": ENCODER_LABELS[enc], "method": "untrained",
-                     **_ae_row(cfg, data, untrained)})
+        rows.append(
+            {
+                "dataset": dataset,
+                "encoder": ENCODER_LABELS[enc],
+                "method": "untrained",
+                **_ae_row(cfg, data, untrained),
+            }
+        )
         for m in cfg.methods:
             compat = cfg.paper_compat and m == "clfd"
             model = train_model(cfg, data, enc, m, compat)
             models[(enc, m)] = model
-            rows.append({"dataset": dataset, "encoder": ENCODER_LABELS[enc], "method": METHOD_LABELS[m],
-                         **_ae_row(cfg, data, model)})
-            hist.append(model.history.assign(dataset=dataset, encoder=ENCODER_LABELS[enc], method=METHOD_LABELS[m]))
-    return pd.DataFrame(rows), models, pd.concat(hist, ignore_index=True) if hist else pd.DataFrame()
+            rows.append(
+                {
+                    "dataset": dataset,
+                    "encoder": ENCODER_LABELS[enc],
+                    "method": METHOD_LABELS[m],
+                    **_ae_row(cfg, data, model),
+                }
+            )
+            hist.append(
+                model.history.assign(
+                    dataset=dataset, encoder=ENCODER_LABELS[enc], method=METHOD_LABELS[m]
+                )
+            )
+    return (
+        pd.DataFrame(rows),
+        models,
+        pd.concat(hist, ignore_index=True) if hist else pd.DataFrame(),
+    )
 
 
 def thesis_table_4_1(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
     """Table 4.1 beside the thesis (the Pouring rows are 'not run' unless ``pouring_dir`` was given)."""
     ours = table[table["method"] != "untrained"]
-    return compare_with_paper("4.1", ours, on=["dataset", "encoder", "method"], value="alignment_error_pct",
-                              differs=differs)
+    return compare_with_paper(
+        "4.1",
+        ours,
+        on=["dataset", "encoder", "method"],
+        value="alignment_error_pct",
+        differs=differs,
+    )
 
 
-def run_paper_compat(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models: dict) -> pd.DataFrame:
+def run_paper_compat(
+    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models: dict
+) -> pd.DataFrame:
     """CLfD trained with and without the authors' bug (anchor view never in the loss), same seed.
 
     Models already trained for Table 4.1 are reused.
@@ -202,11 +279,19 @@ def run_paper_compat(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], m
         for compat in (False, True):
             model = models.get((enc, "clfd")) if compat == cfg.paper_compat else None
             model = model or train_model(cfg, data, enc, "clfd", compat)
-            rows.append({"encoder": ENCODER_LABELS[enc], "paper_compat": compat, **_ae_row(cfg, data, model)})
+            rows.append(
+                {
+                    "encoder": ENCODER_LABELS[enc],
+                    "paper_compat": compat,
+                    **_ae_row(cfg, data, model),
+                }
+            )
     return pd.DataFrame(rows)
 
 
-def _features(model: CLfD, data: MultiViewVideos, cameras: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def _features(
+    model: CLfD, data: MultiViewVideos, cameras: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
     idx = data.camera_index(cameras)
     feats, labels = [], []
     for v, s in zip(data.videos, data.stages):
@@ -216,7 +301,9 @@ def _features(model: CLfD, data: MultiViewVideos, cameras: list[str]) -> tuple[n
     return np.concatenate(feats), np.concatenate(labels)
 
 
-def run_table_4_2(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLfD) -> pd.DataFrame:
+def run_table_4_2(
+    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLfD
+) -> pd.DataFrame:
     """Stage classification from frozen features (Table 4.2).
 
     For each viewpoint set (seen, seen + unseen, unseen) an MLP with two layers is trained on the
@@ -224,8 +311,11 @@ def run_table_4_2(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], mode
     tested on the test demonstrations' frames from the same cameras (balanced).
     """
     rng = np.random.default_rng(cfg.seed)
-    sets = {"Seen": cfg.seen_cameras, "Seen + Unseen": cfg.seen_cameras + cfg.unseen_cameras,
-            "Unseen": cfg.unseen_cameras}
+    sets = {
+        "Seen": cfg.seen_cameras,
+        "Seen + Unseen": cfg.seen_cameras + cfg.unseen_cameras,
+        "Unseen": cfg.unseen_cameras,
+    }
     rows = []
     for name, cams in sets.items():
         if not cams:
@@ -234,17 +324,28 @@ def run_table_4_2(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], mode
         xte, yte = _features(model, data["test"], cams)
         itr, ite = balanced_indices(ytr, rng), balanced_indices(yte, rng, per_class=100)
         mlp = train_stage_classifier(xtr[itr], ytr[itr], epochs=cfg.mlp_epochs, seed=cfg.seed)
-        rows.append({"viewpoints": name, "accuracy_pct": classifier_accuracy(mlp, xte[ite], yte[ite]),
-                     "train_accuracy_pct": classifier_accuracy(mlp, xtr[itr], ytr[itr]),
-                     "n_train": len(itr), "n_test": len(ite), "cameras": ", ".join(cams)})
+        rows.append(
+            {
+                "viewpoints": name,
+                "accuracy_pct": classifier_accuracy(mlp, xte[ite], yte[ite]),
+                "train_accuracy_pct": classifier_accuracy(mlp, xtr[itr], ytr[itr]),
+                "n_train": len(itr),
+                "n_test": len(ite),
+                "cameras": ", ".join(cams),
+            }
+        )
     return pd.DataFrame(rows)
 
 
 def thesis_table_4_2(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
-    return compare_with_paper("4.2", table, on=["viewpoints"], value="accuracy_pct", differs=differs)
+    return compare_with_paper(
+        "4.2", table, on=["viewpoints"], value="accuracy_pct", differs=differs
+    )
 
 
-def run_fig_4_4(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models: dict) -> pd.DataFrame:
+def run_fig_4_4(
+    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models: dict
+) -> pd.DataFrame:
     """DDPG on the pick stage with each encoder's features and Eq 4.2 reward (Fig 4.4); one row per episode.
 
     The guiding demonstration is a fresh one (not in the data set), as in the thesis.
@@ -255,9 +356,18 @@ def run_fig_4_4(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models
     out = []
     for m in cfg.rl_methods:
         model = models.get((cfg.rl_encoder, m)) or train_model(cfg, data, cfg.rl_encoder, m)
-        ep = train_embedding_agent(model, demo_seed, episodes=cfg.rl_episodes, stage="pick", camera=cfg.rl_camera,
-                                   image_size=cfg.image_size, max_episode_steps=cfg.rl_steps, her=cfg.rl_her,
-                                   seed=cfg.seed, progress=cfg.progress)
+        ep = train_embedding_agent(
+            model,
+            demo_seed,
+            episodes=cfg.rl_episodes,
+            stage="pick",
+            camera=cfg.rl_camera,
+            image_size=cfg.image_size,
+            max_episode_steps=cfg.rl_steps,
+            her=cfg.rl_her,
+            seed=cfg.seed,
+            progress=cfg.progress,
+        )
         out.append(ep.assign(encoder=METHOD_LABELS[m]))
     return pd.concat(out, ignore_index=True)
 
@@ -271,7 +381,9 @@ def plot_example_frames(seed: int = 0, image_size: int = 120, n_times: int = 3):
     demo = run_demonstration(env, seed, render=True)
     env.close()
     times = np.linspace(0, len(demo.stages) - 1, n_times).round().astype(int)
-    fig, axes = plt.subplots(n_times, len(CAMERAS), figsize=(2.2 * len(CAMERAS), 2.3 * n_times), squeeze=False)
+    fig, axes = plt.subplots(
+        n_times, len(CAMERAS), figsize=(2.2 * len(CAMERAS), 2.3 * n_times), squeeze=False
+    )
     for r, t in enumerate(times):
         for c, cam in enumerate(CAMERAS):
             ax = axes[r, c]
@@ -298,7 +410,11 @@ def plot_training_curves(histories: pd.DataFrame):
         v = g.dropna(subset=["val_alignment_error"])
         axes[1].plot(v["epoch"], v["val_alignment_error"], marker="o", label=label)
     axes[0].set(xlabel="epoch", ylabel="training loss (each method its own)", title="loss")
-    axes[1].set(xlabel="epoch", ylabel="alignment error [%]", title="validation alignment error (seen pairs)")
+    axes[1].set(
+        xlabel="epoch",
+        ylabel="alignment error [%]",
+        title="validation alignment error (seen pairs)",
+    )
     axes[1].axhline(100 / 3, ls=":", color="grey", label="chance (~33%)")
     axes[1].legend(fontsize=7)
     fig.tight_layout()
@@ -312,19 +428,28 @@ def plot_rl_curves(episodes: pd.DataFrame):
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
     for i, (enc, g) in enumerate(episodes.groupby("encoder", sort=False)):
-        line, = axes[0].plot(g["episode"], g["return"], marker=".", label=enc)
+        (line,) = axes[0].plot(g["episode"], g["return"], marker=".", label=enc)
         if "expert_return" in g:
-            axes[0].axhline(g["expert_return"].iloc[0], ls="--", lw=1, color=line.get_color(),
-                            label=f"{enc}: the demonstration" if i == 0 else None)
+            axes[0].axhline(
+                g["expert_return"].iloc[0],
+                ls="--",
+                lw=1,
+                color=line.get_color(),
+                label=f"{enc}: the demonstration" if i == 0 else None,
+            )
         axes[1].plot(g["episode"], g["final_grip_box_distance"], marker=".", label=enc)
     axes[0].set(xlabel="episode", ylabel="accumulated reward (Eq 4.2)", title="Fig 4.4: pick stage")
-    axes[1].set(xlabel="episode", ylabel="gripper-box distance at the end [m]", title="task progress")
+    axes[1].set(
+        xlabel="episode", ylabel="gripper-box distance at the end [m]", title="task progress"
+    )
     axes[0].legend()
     fig.tight_layout()
     return fig
 
 
-def plot_embedding_pca(model: CLfD, video: np.ndarray, cameras: tuple[str, ...], cam_names: list[str]):
+def plot_embedding_pca(
+    model: CLfD, video: np.ndarray, cameras: tuple[str, ...], cam_names: list[str]
+):
     """PCA of one video's features from two cameras, coloured by time (same-time points should meet)."""
     import matplotlib.pyplot as plt
 
@@ -334,7 +459,16 @@ def plot_embedding_pca(model: CLfD, video: np.ndarray, cameras: tuple[str, ...],
     t = np.arange(len(video))
     fig, ax = plt.subplots(figsize=(5.2, 4.2))
     for p, name, marker in zip(pts, cam_names, ["o", "^", "s"]):
-        sc = ax.scatter(p[:, 0], p[:, 1], c=t, cmap="viridis", marker=marker, label=name, edgecolors="k", linewidths=0.3)
+        sc = ax.scatter(
+            p[:, 0],
+            p[:, 1],
+            c=t,
+            cmap="viridis",
+            marker=marker,
+            label=name,
+            edgecolors="k",
+            linewidths=0.3,
+        )
         ax.plot(p[:, 0], p[:, 1], lw=0.5, color="grey")
     fig.colorbar(sc, ax=ax, label="time step")
     ax.set(xlabel="PC 1", ylabel="PC 2")

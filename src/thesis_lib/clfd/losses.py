@@ -10,6 +10,7 @@
 
 Used in: CLfD (thesis 4.2), chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 import torch
@@ -33,19 +34,27 @@ def nt_xent(z_a: torch.Tensor, z_p: torch.Tensor, temperature: float = 0.5) -> t
     0.2395
     """
     if z_a.shape != z_p.shape or z_a.ndim != 2:
-        raise ValueError(f"nt_xent expects two (N, D) tensors of the same shape, got {tuple(z_a.shape)} and "
-                         f"{tuple(z_p.shape)}.")
+        raise ValueError(
+            f"nt_xent expects two (N, D) tensors of the same shape, got {tuple(z_a.shape)} and "
+            f"{tuple(z_p.shape)}."
+        )
     n = z_a.shape[0]
     if n < 2:
-        raise ValueError(f"nt_xent needs at least 2 pairs per batch (negatives come from the batch), got {n}.")
+        raise ValueError(
+            f"nt_xent needs at least 2 pairs per batch (negatives come from the batch), got {n}."
+        )
     z = F.normalize(torch.cat([z_a, z_p], dim=0), dim=1)  # (2N, D)
     sim = z @ z.T / temperature  # (2N, 2N) cosine similarities / τ
-    sim = sim.masked_fill(torch.eye(2 * n, dtype=torch.bool, device=z.device), float("-inf"))  # k ≠ i
+    sim = sim.masked_fill(
+        torch.eye(2 * n, dtype=torch.bool, device=z.device), float("-inf")
+    )  # k ≠ i
     target = torch.cat([torch.arange(n, 2 * n), torch.arange(0, n)]).to(z.device)  # i's positive
     return F.cross_entropy(sim, target)
 
 
-def triplet_loss(anchor: torch.Tensor, positive: torch.Tensor, negative: torch.Tensor, margin: float = 0.2) -> torch.Tensor:
+def triplet_loss(
+    anchor: torch.Tensor, positive: torch.Tensor, negative: torch.Tensor, margin: float = 0.2
+) -> torch.Tensor:
     """TCN's triplet loss on L2-normalised embeddings: mean of max(0, |a-p|² - |a-n|² + margin).
 
     >>> a = torch.tensor([[1.0, 0.0]]); n = torch.tensor([[0.0, 1.0]])
@@ -68,8 +77,10 @@ def cmc_loss(z_a: torch.Tensor, z_p: torch.Tensor, temperature: float = 0.07) ->
     True
     """
     if z_a.shape != z_p.shape or z_a.ndim != 2:
-        raise ValueError(f"cmc_loss expects two (N, D) tensors of the same shape, got {tuple(z_a.shape)} and "
-                         f"{tuple(z_p.shape)}.")
+        raise ValueError(
+            f"cmc_loss expects two (N, D) tensors of the same shape, got {tuple(z_a.shape)} and "
+            f"{tuple(z_p.shape)}."
+        )
     a, p = F.normalize(z_a, dim=1), F.normalize(z_p, dim=1)
     logits = a @ p.T / temperature  # (N, N)
     target = torch.arange(a.shape[0], device=a.device)

@@ -2,6 +2,7 @@
 
 Used in: CLfD (thesis 4.2), chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -31,8 +32,10 @@ def alignment_error(emb1: np.ndarray, emb2: np.ndarray) -> float:
     """
     a, b = np.asarray(emb1, dtype=float), np.asarray(emb2, dtype=float)
     if a.ndim != 2 or b.ndim != 2 or a.shape != b.shape:
-        raise ValueError(f"alignment_error expects two (N, D) arrays of the same shape (synchronised videos), "
-                         f"got {a.shape} and {b.shape}.")
+        raise ValueError(
+            f"alignment_error expects two (N, D) arrays of the same shape (synchronised videos), "
+            f"got {a.shape} and {b.shape}."
+        )
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         raise ValueError("alignment_error: embeddings contain NaN or infinite values.")
     n = len(a)
@@ -52,7 +55,9 @@ def alignment_distance(emb1: np.ndarray, emb2: np.ndarray) -> float:
     return float(d.min(axis=1).mean())
 
 
-def balanced_indices(labels: np.ndarray, rng: np.random.Generator, per_class: int | None = None) -> np.ndarray:
+def balanced_indices(
+    labels: np.ndarray, rng: np.random.Generator, per_class: int | None = None
+) -> np.ndarray:
     """Indices with the same number of examples of every class (the smallest class's count, or ``per_class``)."""
     labels = np.asarray(labels)
     classes = np.unique(labels)
@@ -78,9 +83,13 @@ def train_stage_classifier(
     x = torch.as_tensor(np.asarray(features), dtype=torch.float32)
     y = torch.as_tensor(np.asarray(labels), dtype=torch.long)
     if x.ndim != 2 or len(x) != len(y):
-        raise ValueError(f"Expected features (N, D) and labels (N,), got {tuple(x.shape)} and {tuple(y.shape)}.")
+        raise ValueError(
+            f"Expected features (N, D) and labels (N,), got {tuple(x.shape)} and {tuple(y.shape)}."
+        )
     torch.manual_seed(seed)
-    mlp = nn.Sequential(nn.Linear(x.shape[1], hidden), nn.ReLU(), nn.Linear(hidden, int(y.max()) + 1))
+    mlp = nn.Sequential(
+        nn.Linear(x.shape[1], hidden), nn.ReLU(), nn.Linear(hidden, int(y.max()) + 1)
+    )
     mean, std = x.mean(0), x.std(0) + 1e-6
     mlp.register_buffer("mean", mean)
     mlp.register_buffer("std", std)

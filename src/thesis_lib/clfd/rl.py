@@ -14,6 +14,7 @@ embedding at the same step).
 
 Used in: CLfD (thesis 4.2), chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -54,10 +55,14 @@ class EmbeddingRewardEnv(gym.Env):
             raise ValueError(f"Unknown stage {stage!r}. Valid: {', '.join(STAGES)}.")
         check_cameras([camera])
         self.encoder, self.demo_seed, self.stage, self.camera = encoder, demo_seed, stage, camera
-        self.env = MultiViewPickPlace(image_size=image_size, max_episode_steps=10_000, render_camera=camera)
+        self.env = MultiViewPickPlace(
+            image_size=image_size, max_episode_steps=10_000, render_camera=camera
+        )
         demo = run_demonstration(self.env, demo_seed, render=True, cameras=(camera,))
         if not demo.success:
-            raise RuntimeError(f"The demonstration with seed {demo_seed} failed; pick another seed.")
+            raise RuntimeError(
+                f"The demonstration with seed {demo_seed} failed; pick another seed."
+            )
         s = STAGES.index(stage)
         last = int(np.flatnonzero(demo.stages == s)[-1])
         self.goal_frame = demo.frames[last, 0]
@@ -78,22 +83,30 @@ class EmbeddingRewardEnv(gym.Env):
 
     def _obs(self) -> dict[str, np.ndarray]:
         emb = np.asarray(self.encoder.embed(self.env.render()[None])[0], dtype=np.float32)
-        robot = np.concatenate([self.env.joint_angles, self.env.joint_velocities, [self.env.gripper_opening]])
+        robot = np.concatenate(
+            [self.env.joint_angles, self.env.joint_velocities, [self.env.gripper_opening]]
+        )
         return {
             "observation": np.concatenate([emb, robot]).astype(np.float32),
             "achieved_goal": emb,
             "desired_goal": self.goal_embedding.copy(),
         }
 
-    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any) -> np.ndarray:
+    def compute_reward(
+        self, achieved_goal: np.ndarray, desired_goal: np.ndarray, info: Any
+    ) -> np.ndarray:
         """Eq 4.2, vectorised for HER: ``-||achieved - desired||`` along the last axis."""
-        return -np.linalg.norm(np.asarray(achieved_goal) - np.asarray(desired_goal), axis=-1).astype(np.float32)
+        return -np.linalg.norm(
+            np.asarray(achieved_goal) - np.asarray(desired_goal), axis=-1
+        ).astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
         info = self.env._info()
-        return {"grip_box_distance": float(np.linalg.norm(self.env.box_pos - self.env.grip_pos)),
-                "box_lifted": info["box_lifted"], "is_success": info["box_lifted"] if self.stage == "pick"
-                else info["is_success"]}
+        return {
+            "grip_box_distance": float(np.linalg.norm(self.env.box_pos - self.env.grip_pos)),
+            "box_lifted": info["box_lifted"],
+            "is_success": info["box_lifted"] if self.stage == "pick" else info["is_success"],
+        }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
@@ -124,7 +137,11 @@ class EmbeddingRewardEnv(gym.Env):
         total = 0.0
         for t in range(self.max_episode_steps):
             step = self._start_step + t if self.stage == "place" else t
-            a = self._demo_actions[step] if step <= self._end_step else np.array([0.0, 0.0, 0.0, 1.0])
+            a = (
+                self._demo_actions[step]
+                if step <= self._end_step
+                else np.array([0.0, 0.0, 0.0, 1.0])
+            )
             total += self.step(a)[1]
         return total
 
@@ -164,8 +181,10 @@ def train_embedding_agent(
     expert = env.expert_return()
     extra: dict[str, Any] = {}
     if her:
-        extra = {"replay_buffer_class": HerReplayBuffer,
-                 "replay_buffer_kwargs": {"n_sampled_goal": 4, "goal_selection_strategy": "future"}}
+        extra = {
+            "replay_buffer_class": HerReplayBuffer,
+            "replay_buffer_kwargs": {"n_sampled_goal": 4, "goal_selection_strategy": "future"},
+        }
     cfg = RLConfig(
         algo="DDPG", env_id=None, total_timesteps=episodes * max_episode_steps, seed=seed,
         learning_starts=max_episode_steps * 2, net_arch=list(net_arch or [64, 64]), learning_rate=learning_rate,

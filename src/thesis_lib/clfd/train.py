@@ -16,6 +16,7 @@ Example:
 
 Used in: CLfD (thesis 4.2), chapter 02_clfd.
 """
+
 from __future__ import annotations
 
 import copy
@@ -109,13 +110,21 @@ class CLfD:
         if method not in METHODS:
             raise ValueError(f"Unknown method {method!r}. Valid: {', '.join(METHODS)}.")
         if paper_compat and method != "clfd":
-            raise ValueError("paper_compat reproduces a bug of the CLfD model; it applies to method='clfd' only.")
+            raise ValueError(
+                "paper_compat reproduces a bug of the CLfD model; it applies to method='clfd' only."
+            )
         if batch_size < 2:
-            raise ValueError(f"batch_size must be >= 2 (the other pairs are the negatives), got {batch_size}.")
+            raise ValueError(
+                f"batch_size must be >= 2 (the other pairs are the negatives), got {batch_size}."
+            )
         if temperature <= 0 or cmc_temperature <= 0:
             raise ValueError(f"Temperatures must be > 0, got {temperature} and {cmc_temperature}.")
         self.encoder_name, self.method = encoder, method
-        self.feature_dim, self.temperature, self.cmc_temperature = feature_dim, temperature, cmc_temperature
+        self.feature_dim, self.temperature, self.cmc_temperature = (
+            feature_dim,
+            temperature,
+            cmc_temperature,
+        )
         self.lr, self.batch_size, self.paper_compat = lr, batch_size, paper_compat
         self.triplet_margin, self.negative_gap, self.seed = triplet_margin, negative_gap, seed
         if device == "auto":
@@ -125,7 +134,9 @@ class CLfD:
         self.encoder = make_encoder(encoder, feature_dim, width).to(self.device)
         if weights is not None:
             if not isinstance(self.encoder, ResNet18):
-                raise ValueError("weights= loads a torchvision resnet18 state dict; use encoder='resnet18'.")
+                raise ValueError(
+                    "weights= loads a torchvision resnet18 state dict; use encoder='resnet18'."
+                )
             self.encoder.load_imagenet(weights)
         self.projection = ProjectionHead(feature_dim, feature_dim, proj_dim).to(self.device)
         self.history = pd.DataFrame()
@@ -139,7 +150,10 @@ class CLfD:
         x = to_tensor(frames)
         was = self.encoder.training
         self.encoder.eval()
-        out = [self.encoder(x[i : i + batch_size].to(self.device)).cpu() for i in range(0, len(x), batch_size)]
+        out = [
+            self.encoder(x[i : i + batch_size].to(self.device)).cpu()
+            for i in range(0, len(x), batch_size)
+        ]
         self.encoder.train(was)
         return torch.cat(out).numpy().reshape(*lead, self.feature_dim)
 
@@ -148,7 +162,9 @@ class CLfD:
         return -float(np.linalg.norm(self.embed(frame[None])[0] - goal_embedding))
 
     # -- training ------------------------------------------------------------------------------
-    def _sample_epoch(self, data: MultiViewVideos, cams: list[int], rng: np.random.Generator) -> np.ndarray:
+    def _sample_epoch(
+        self, data: MultiViewVideos, cams: list[int], rng: np.random.Generator
+    ) -> np.ndarray:
         """One epoch of anchor-positive pairs: every (video, t) once, two distinct cameras, shuffled.
 
         Returns int rows (video, t, cam_anchor, cam_positive, t_negative).
@@ -179,7 +195,9 @@ class CLfD:
             # The authors' model returned (h_a, h_a, z_p, z_p): the loss saw the positive view twice.
             z_p = self.projection(self.encoder(frames(1, 3)))
             return nt_xent(z_p, z_p, self.temperature)
-        h = self.encoder(torch.cat([frames(1, 2), frames(1, 3)]))  # one pass: BatchNorm sees both views
+        h = self.encoder(
+            torch.cat([frames(1, 2), frames(1, 3)])
+        )  # one pass: BatchNorm sees both views
         z_a, z_p = self.projection(h).chunk(2)
         if self.method == "cmc":
             return cmc_loss(z_a, z_p, self.cmc_temperature)
@@ -225,7 +243,9 @@ class CLfD:
         params = list(self.encoder.parameters()) + list(self.projection.parameters())
         opt = torch.optim.Adam(params, lr=self.lr)
         rows, best, best_state = [], np.inf, None
-        bar = tqdm(range(1, epochs + 1), desc=f"{self.method}/{self.encoder_name}", disable=not progress)
+        bar = tqdm(
+            range(1, epochs + 1), desc=f"{self.method}/{self.encoder_name}", disable=not progress
+        )
         for epoch in bar:
             self.encoder.train()
             self.projection.train()
@@ -245,7 +265,9 @@ class CLfD:
                 ae = mean_alignment_error(self, val, eval_pairs)
                 if keep_best and ae < best:
                     best = ae
-                    best_state = copy.deepcopy((self.encoder.state_dict(), self.projection.state_dict()))
+                    best_state = copy.deepcopy(
+                        (self.encoder.state_dict(), self.projection.state_dict())
+                    )
             rows.append({"epoch": epoch, "loss": float(np.mean(losses)), "val_alignment_error": ae})
             bar.set_postfix(loss=f"{rows[-1]['loss']:.3f}")
         if best_state is not None:
@@ -258,7 +280,9 @@ class CLfD:
     def save(self, path: str | Path) -> Path:
         """Save the encoder and projection head weights (``torch.save``)."""
         path = Path(path)
-        torch.save({"encoder": self.encoder.state_dict(), "projection": self.projection.state_dict()}, path)
+        torch.save(
+            {"encoder": self.encoder.state_dict(), "projection": self.projection.state_dict()}, path
+        )
         return path
 
     def load(self, path: str | Path) -> CLfD:

@@ -13,8 +13,8 @@ Used by HDT 5.2, Decision Mamba 5.3 (D4RL-recipe sets) and DEFENDER 4.3
 
 from .card import (
     QUALITY_TARGETS,
-    check_environments,
     cards_table,
+    check_environments,
     data_card,
     expert_quality,
     format_card,

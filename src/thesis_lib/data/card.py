@@ -9,7 +9,8 @@ issue's quality targets.
 from __future__ import annotations
 
 import json
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -288,7 +289,7 @@ def check_environments(n_steps: int = 50, tasks: Sequence[str] | None = None) ->
                     env.reset()
             env.close()
             rows.append({"task": t, "env_id": spec.env_id, "ok": True, "steps": n, "error": ""})
-        except Exception as e:  # noqa: BLE001 - recorded, not hidden
+        except Exception as e:
             rows.append(
                 {"task": t, "env_id": spec.env_id, "ok": False, "steps": 0, "error": repr(e)}
             )

@@ -56,7 +56,7 @@ class LinearPolicy:
         z = np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + _EPS), -_CLIP_OBS, _CLIP_OBS)
         return np.clip(z @ self.weights.T, self.low, self.high)
 
-    def perturbed(self, rng: np.random.Generator, std: float) -> "LinearPolicy":
+    def perturbed(self, rng: np.random.Generator, std: float) -> LinearPolicy:
         """A copy with Gaussian noise of ``std`` on the weights (ARS's exploration)."""
         w = self.weights + std * rng.standard_normal(self.weights.shape)
         return LinearPolicy(w, self.obs_mean, self.obs_var, self.low, self.high)
@@ -285,15 +285,36 @@ def train_experts(
     n_threads = torch.get_num_threads()
     torch.set_num_threads(1)  # tiny linear policy: threads only add overhead
     try:
-        return _train(task, spec, cfg, out, n_eval_episodes, n_ckpt_eval_episodes,
-                      n_select_episodes, eval_seed, medium_fraction, max_wall_s, log)
+        return _train(
+            task,
+            spec,
+            cfg,
+            out,
+            n_eval_episodes,
+            n_ckpt_eval_episodes,
+            n_select_episodes,
+            eval_seed,
+            medium_fraction,
+            max_wall_s,
+            log,
+        )
     finally:
         torch.set_num_threads(n_threads)
 
 
-def _train(task: str, spec: Any, cfg: ARSConfig, out: Path, n_eval_episodes: int,
-           n_ckpt_eval_episodes: int, n_select_episodes: int, eval_seed: int,
-           medium_fraction: float, max_wall_s: float | None, log: Any) -> PolicyRecord:
+def _train(
+    task: str,
+    spec: Any,
+    cfg: ARSConfig,
+    out: Path,
+    n_eval_episodes: int,
+    n_ckpt_eval_episodes: int,
+    n_select_episodes: int,
+    eval_seed: int,
+    medium_fraction: float,
+    max_wall_s: float | None,
+    log: Any,
+) -> PolicyRecord:
     import gymnasium as gym
     import sb3_contrib
     import stable_baselines3
@@ -341,11 +362,10 @@ def _train(task: str, spec: Any, cfg: ARSConfig, out: Path, n_eval_episodes: int
     tail = max(1, len(rets) // 4)
     cand = list(range(len(rets) - tail, len(rets)))
     sel = {
-        i: evaluate(LinearPolicy(ws[i], ms[i], vs[i], low, high), task, n_select_episodes, 0)
-        .mean()
+        i: evaluate(LinearPolicy(ws[i], ms[i], vs[i], low, high), task, n_select_episodes, 0).mean()
         for i in cand
     }
-    log(f"{task}: expert candidates {({steps[i]: round(float(r), 1) for i, r in sel.items()})}")
+    log(f"{task}: expert candidates { ({steps[i]: round(float(r), 1) for i, r in sel.items()}) }")
     i_exp = max(cand, key=lambda i: sel[i])
     exp_pol = LinearPolicy(ws[i_exp], ms[i_exp], vs[i_exp], low, high)
     exp_r = evaluate(exp_pol, task, n_eval_episodes, eval_seed)

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import time
 import warnings
-from typing import Callable, Literal
+from collections.abc import Callable
+from typing import Literal
 
 import numpy as np
 
@@ -125,7 +126,7 @@ def rollout(
             on_reset(env)
         obs_l, dg_l, ag_l, act_l, rew_l, term_l, trunc_l = [], [], [], [], [], [], []
 
-        def keep(o: object) -> None:
+        def keep(o: object, obs_l=obs_l, dg_l=dg_l, ag_l=ag_l) -> None:
             if isinstance(o, dict):
                 obs_l.append(o["observation"])
                 dg_l.append(o["desired_goal"])
@@ -368,4 +369,3 @@ def get_dataset(
 
 
 __all__ = ["generate", "get_dataset", "make_env", "make_episodes", "rollout", "PROFILE_SIZES"]
-

@@ -12,7 +12,8 @@ batch of windows with array indexing only (no Python loop per sample):
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple, Sequence
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -152,8 +153,7 @@ class SequenceDataset:
         self.prev_actions = prev
         self.rewards = np.concatenate([e.rewards for e in episodes]).astype(np.float32)
         self.returns_to_go = (
-            np.concatenate([discounted_cumsum(e.rewards, gamma) for e in episodes])
-            / self.rtg_scale
+            np.concatenate([discounted_cumsum(e.rewards, gamma) for e in episodes]) / self.rtg_scale
         ).astype(np.float32)
         self.timesteps = np.concatenate([np.arange(t) for t in self.lengths]).astype(np.int64)
         self.subgoals: np.ndarray | None = None

@@ -37,15 +37,16 @@ Used in: DEFENDER chapter (thesis 4.3), ``notebooks/03_defender.ipynb``.
 >>> len(METHODS), len(STRATEGIES), METHODS[:3]
 (24, 576, ('MinFull', 'MinSame', 'MinDemoW5'))
 """
+
 from __future__ import annotations
 
 from thesis_lib.defender.compare import BACKENDS, GroupCost, WindowedCosts, cost_curves
 from thesis_lib.defender.demos import (
     TRAJECTORIES,
-    DemoRun,
-    EpisodeRecorder,
-    DemoSet,
     Demonstration,
+    DemoRun,
+    DemoSet,
+    EpisodeRecorder,
     as_demonstration,
     collect_demonstrations,
     expert_demonstrations,

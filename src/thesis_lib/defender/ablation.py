@@ -15,6 +15,7 @@ after which all 576 first-fire steps are a single array comparison. Episodes are
 
 Used in: DEFENDER (thesis 4.3.2).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -25,7 +26,13 @@ import pandas as pd
 
 from thesis_lib import dtw as _dtw
 from thesis_lib.defender.compare import Backend, cost_curves
-from thesis_lib.defender.demos import DemoSet, Demonstration, EpisodeRecorder, Trajectory, trajectory_features
+from thesis_lib.defender.demos import (
+    Demonstration,
+    DemoSet,
+    EpisodeRecorder,
+    Trajectory,
+    trajectory_features,
+)
 from thesis_lib.defender.methods import METHODS
 
 __all__ = [
@@ -59,14 +66,20 @@ def first_fire_steps(
     Entry = number of real steps taken before firing (0 = at the first decision); ``T`` (the
     episode's length) when it never fires. Methods are in :data:`~thesis_lib.defender.METHODS` order.
     """
-    cs = cost_curves(trajectory, safe, metric=metric, max_trajectory=max_trajectory, backend=backend)
-    cu = cost_curves(trajectory, unsafe, metric=metric, max_trajectory=max_trajectory, backend=backend)
+    cs = cost_curves(
+        trajectory, safe, metric=metric, max_trajectory=max_trajectory, backend=backend
+    )
+    cu = cost_curves(
+        trajectory, unsafe, metric=metric, max_trajectory=max_trajectory, backend=backend
+    )
     c_safe = np.stack([cs[m] for m in METHODS])  # (24, T)
     c_unsafe = np.stack([cu[m] for m in METHODS])  # (24, T)
     if paper_compat:
         fire = c_safe[:, None, :] > c_unsafe[None, :, :]  # (24, 24, T) the authors' code
     else:
-        fire = ~(c_safe[:, None, :] < c_unsafe[None, :, :])  # Algorithm 2: steps only if Safe < Unsafe
+        fire = ~(
+            c_safe[:, None, :] < c_unsafe[None, :, :]
+        )  # Algorithm 2: steps only if Safe < Unsafe
     any_fire = fire.any(axis=2)
     return np.where(any_fire, fire.argmax(axis=2), trajectory.shape[0])
 
@@ -117,12 +130,18 @@ def strategy_ablation(
     trajs = [trajectory_features(e, trajectory) for e in episodes]
     lengths = np.array([len(t) for t in trajs])
     crashed = np.array([e.terminated and (horizon is None or e.length < horizon) for e in episodes])
-    kw = dict(metric="l1" if paper_compat else metric, max_trajectory=max_trajectory, backend=backend,
-              paper_compat=paper_compat)
+    kw = dict(
+        metric="l1" if paper_compat else metric,
+        max_trajectory=max_trajectory,
+        backend=backend,
+        paper_compat=paper_compat,
+    )
     n_chunks = max(1, min(len(trajs), 4 * (abs(n_jobs) if n_jobs > 0 else 8)))
     order = np.argsort(-lengths)  # longest first, dealt round-robin: balanced chunks
     chunks = [[int(i) for i in order[k::n_chunks]] for k in range(n_chunks)]
-    parts = Parallel(n_jobs=n_jobs)(delayed(_fire_chunk)([trajs[i] for i in c], safe, unsafe, kw) for c in chunks)
+    parts = Parallel(n_jobs=n_jobs)(
+        delayed(_fire_chunk)([trajs[i] for i in c], safe, unsafe, kw) for c in chunks
+    )
     fires = np.empty((len(trajs), len(METHODS), len(METHODS)), dtype=np.int64)
     for c, part in zip(chunks, parts):
         for i, f in zip(c, part):
@@ -135,13 +154,25 @@ def strategy_ablation(
     rows = []
     for i, s in enumerate(METHODS):
         for j, u in enumerate(METHODS):
-            rows.append({"safe": s, "unsafe": u, "strategy": f"{s}/{u}", "score": kept[i, j] * stopped[i, j],
-                         "kept_fraction": kept[i, j], "crashes_stopped": stopped[i, j],
-                         "safe_episodes_cut": cut[i, j], "n_episodes": len(trajs), "n_crashed": n_crashed})
+            rows.append(
+                {
+                    "safe": s,
+                    "unsafe": u,
+                    "strategy": f"{s}/{u}",
+                    "score": kept[i, j] * stopped[i, j],
+                    "kept_fraction": kept[i, j],
+                    "crashes_stopped": stopped[i, j],
+                    "safe_episodes_cut": cut[i, j],
+                    "n_episodes": len(trajs),
+                    "n_crashed": n_crashed,
+                }
+            )
     return pd.DataFrame(rows, columns=list(ABLATION_COLUMNS))
 
 
-def rank_strategies(scores: pd.DataFrame, top: int = 5, by: Sequence[str] = ("trajectory",)) -> pd.DataFrame:
+def rank_strategies(
+    scores: pd.DataFrame, top: int = 5, by: Sequence[str] = ("trajectory",)
+) -> pd.DataFrame:
     """Average the score over tasks (and any other rows) and keep the ``top`` per group.
 
     Args:
@@ -161,7 +192,9 @@ def rank_strategies(scores: pd.DataFrame, top: int = 5, by: Sequence[str] = ("tr
     mean = mean.sort_values([*by, "score", "strategy"], ascending=[True] * len(by) + [False, True])
     ranked = mean.groupby(by).head(top) if by else mean.head(top)
     ranked = ranked.copy()
-    ranked.insert(len(by), "rank", ranked.groupby(by).cumcount() + 1 if by else np.arange(1, len(ranked) + 1))
+    ranked.insert(
+        len(by), "rank", ranked.groupby(by).cumcount() + 1 if by else np.arange(1, len(ranked) + 1)
+    )
     return ranked.reset_index(drop=True)
 
 

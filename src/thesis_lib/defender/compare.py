@@ -13,6 +13,7 @@ back-ends:
 
 Used in: DEFENDER (thesis 4.3).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -63,24 +64,32 @@ class WindowedCosts:
         radius: int = 1,
     ) -> None:
         _check_backend(backend)
-        if max_trajectory is not None and (isinstance(max_trajectory, bool) or int(max_trajectory) < 1):
-            raise ValueError(f"max_trajectory must be a positive int or None, got {max_trajectory!r}.")
+        if max_trajectory is not None and (
+            isinstance(max_trajectory, bool) or int(max_trajectory) < 1
+        ):
+            raise ValueError(
+                f"max_trajectory must be a positive int or None, got {max_trajectory!r}."
+            )
         self.method = parse_method(method)
         self.references = references
         self.metric = metric
         self.max_trajectory = None if max_trajectory is None else int(max_trajectory)
         self.backend = backend
         self.radius = radius
-        self.incremental = backend == "exact" and self.method.incremental and self.max_trajectory is None
+        self.incremental = (
+            backend == "exact" and self.method.incremental and self.max_trajectory is None
+        )
         n_features = references.n_features
         if self.incremental:
-            self._inc = _dtw.IncrementalDTW(references, metric=metric, y_window=self.method.y_window(0))
+            self._inc = _dtw.IncrementalDTW(
+                references, metric=metric, y_window=self.method.y_window(0)
+            )
         else:
             # Keep at most max_trajectory steps, in a buffer that slides only when full.
             self._buffer = np.empty((max(64, 2 * (self.max_trajectory or 0)), n_features))
             if backend == "fastdtw":
                 self._demos = [
-                    references.data[references.offsets[k]:references.offsets[k + 1]]
+                    references.data[references.offsets[k] : references.offsets[k + 1]]
                     for k in range(references.n_sequences)
                 ]
         self._costs = np.full(references.n_sequences, np.inf)
@@ -108,17 +117,19 @@ class WindowedCosts:
     def query(self) -> np.ndarray:
         """The trajectory steps currently compared (after the ``max_trajectory`` cap), (L, F)."""
         if self.incremental:
-            raise RuntimeError("An incremental comparison keeps no trajectory; use backend='exact' with a cap.")
-        return self._buffer[self._start:self._end]
+            raise RuntimeError(
+                "An incremental comparison keeps no trajectory; use backend='exact' with a cap."
+            )
+        return self._buffer[self._start : self._end]
 
     def _push(self, step: np.ndarray) -> None:
         if self._end == len(self._buffer):
             kept = self._end - self._start
             if self.max_trajectory is not None and kept >= self.max_trajectory:
                 kept = self.max_trajectory - 1
-                self._buffer[:kept] = self._buffer[self._end - kept:self._end]
+                self._buffer[:kept] = self._buffer[self._end - kept : self._end]
             elif self._start > 0:
-                self._buffer[:kept] = self._buffer[self._start:self._end]
+                self._buffer[:kept] = self._buffer[self._start : self._end]
             else:
                 grown = np.empty((2 * len(self._buffer), self._buffer.shape[1]))
                 grown[:kept] = self._buffer[:kept]
@@ -144,13 +155,15 @@ class WindowedCosts:
             self._costs = self._inc.append(step)
             return self._costs
         self._push(step)
-        x = self._buffer[self._start:self._end]
+        x = self._buffer[self._start : self._end]
         m = self.method
         yw = m.y_window(len(x))
         if self.backend == "exact":
-            self._costs = _dtw.dtw_batch(x, self.references, metric=self.metric, x_window=m.x_window, y_window=yw)
+            self._costs = _dtw.dtw_batch(
+                x, self.references, metric=self.metric, x_window=m.x_window, y_window=yw
+            )
         else:
-            xq = x[-m.x_window:] if m.x_window else x
+            xq = x[-m.x_window :] if m.x_window else x
             for k, demo in enumerate(self._demos):
                 self._costs[k] = _dtw.fastdtw_cost(
                     xq, demo[-yw:] if yw else demo, radius=self.radius, metric=self.metric
@@ -184,9 +197,18 @@ class GroupCost:
         radius: int = 1,
     ) -> None:
         self.method = parse_method(method)
-        packed = references if isinstance(references, _dtw.PackedReferences) else _dtw.pack_references(references)
+        packed = (
+            references
+            if isinstance(references, _dtw.PackedReferences)
+            else _dtw.pack_references(references)
+        )
         self._windowed = WindowedCosts(
-            packed, self.method, metric=metric, max_trajectory=max_trajectory, backend=backend, radius=radius
+            packed,
+            self.method,
+            metric=metric,
+            max_trajectory=max_trajectory,
+            backend=backend,
+            radius=radius,
         )
         self._agg = {"Min": np.min, "Max": np.max, "Mean": np.mean}[self.method.aggregation]
 
@@ -235,18 +257,27 @@ def cost_curves(
     from thesis_lib.defender.methods import METHODS
 
     x = as_sequence(trajectory, "trajectory")
-    packed = references if isinstance(references, _dtw.PackedReferences) else _dtw.pack_references(references)
+    packed = (
+        references
+        if isinstance(references, _dtw.PackedReferences)
+        else _dtw.pack_references(references)
+    )
     wanted = [parse_method(m) for m in (methods or METHODS)]
     by_window: dict[str, list[Method]] = {}
     for m in wanted:
         by_window.setdefault(m.windowing_name, []).append(m)
     out: dict[str, np.ndarray] = {}
     for group in by_window.values():
-        wc = WindowedCosts(packed, group[0], metric=metric, max_trajectory=max_trajectory, backend=backend)
+        wc = WindowedCosts(
+            packed, group[0], metric=metric, max_trajectory=max_trajectory, backend=backend
+        )
         per_demo = np.empty((len(x), packed.n_sequences))
         for t, step in enumerate(x):
             per_demo[t] = wc.append(step)
         for m in group:
-            out[m.name] = {"Min": per_demo.min(1), "Max": per_demo.max(1), "Mean": per_demo.mean(1)}[m.aggregation]
+            out[m.name] = {
+                "Min": per_demo.min(1),
+                "Max": per_demo.max(1),
+                "Mean": per_demo.mean(1),
+            }[m.aggregation]
     return {m.name: out[m.name] for m in wanted}
-

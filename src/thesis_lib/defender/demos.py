@@ -18,6 +18,7 @@ does not give. :func:`save_demonstrations` /
 
 Used in: DEFENDER (thesis 4.3).
 """
+
 from __future__ import annotations
 
 import json
@@ -106,7 +107,7 @@ class DemoRun(NamedTuple):
         out = {}
         for group in ("safe", "unsafe"):
             pool = getattr(self.pool, group)
-            policy_ids = {id(d) for d in pool[self.n_sac.get(group, len(pool)):]}
+            policy_ids = {id(d) for d in pool[self.n_sac.get(group, len(pool)) :]}
             kept = getattr(demos, group)
             n_policy = sum(id(d) in policy_ids for d in kept)
             out[group] = (len(kept) - n_policy, n_policy)
@@ -127,7 +128,12 @@ def as_demonstration(item: Any, name: str = "demonstration") -> Demonstration:
     obs = np.asarray(obs, dtype=np.float64)
     actions = np.asarray(actions, dtype=np.float64)
     rewards = np.asarray(rewards, dtype=np.float64).reshape(-1)
-    if obs.ndim != 2 or actions.ndim != 2 or len(obs) != len(actions) + 1 or len(rewards) != len(actions):
+    if (
+        obs.ndim != 2
+        or actions.ndim != 2
+        or len(obs) != len(actions) + 1
+        or len(rewards) != len(actions)
+    ):
         raise ValueError(
             f"{name} needs observations (T+1, obs_dim), actions (T, act_dim) and rewards (T,), got "
             f"shapes {obs.shape}, {actions.shape} and {rewards.shape}."
@@ -183,12 +189,21 @@ class EpisodeRecorder(gym.Wrapper):
         self._act.append(np.asarray(action, dtype=np.float64).reshape(-1))
         self._rew.append(float(reward))
         if terminated or truncated:
-            self.episodes.append(Demonstration(np.stack(self._obs), np.stack(self._act), np.asarray(self._rew),
-                                               bool(terminated), bool(truncated and not terminated)))
+            self.episodes.append(
+                Demonstration(
+                    np.stack(self._obs),
+                    np.stack(self._act),
+                    np.asarray(self._rew),
+                    bool(terminated),
+                    bool(truncated and not terminated),
+                )
+            )
         return obs, reward, terminated, truncated, info
 
 
-def rollout(model: Any, env: gym.Env, *, seed: int | None = None, deterministic: bool = True) -> Demonstration:
+def rollout(
+    model: Any, env: gym.Env, *, seed: int | None = None, deterministic: bool = True
+) -> Demonstration:
     """Run one episode of ``model.predict`` in ``env`` and record it as a :class:`Demonstration`."""
     obs, _ = env.reset(seed=seed)
     observations, actions, rewards = [np.asarray(obs, dtype=np.float64)], [], []
@@ -199,12 +214,21 @@ def rollout(model: Any, env: gym.Env, *, seed: int | None = None, deterministic:
         observations.append(np.asarray(obs, dtype=np.float64))
         actions.append(np.asarray(action, dtype=np.float64).reshape(-1))
         rewards.append(float(reward))
-    return Demonstration(np.stack(observations), np.stack(actions), np.asarray(rewards), bool(terminated),
-                         bool(truncated and not terminated))
+    return Demonstration(
+        np.stack(observations),
+        np.stack(actions),
+        np.asarray(rewards),
+        bool(terminated),
+        bool(truncated and not terminated),
+    )
 
 
 def select_diverse(
-    demos: Sequence[Demonstration], n: int, *, trajectory: Trajectory = "state", metric: _dtw.Metric = "l1"
+    demos: Sequence[Demonstration],
+    n: int,
+    *,
+    trajectory: Trajectory = "state",
+    metric: _dtw.Metric = "l1",
 ) -> list[Demonstration]:
     """Keep ``n`` demonstrations spread out under DTW (greedy farthest-point selection).
 
@@ -277,8 +301,11 @@ def collect_demonstrations(
 
     from thesis_lib.rl import RLConfig, config_from_params, train
 
-    make = (lambda: gym.make(env_id, max_episode_steps=max_episode_steps)) if max_episode_steps else (
-        lambda: gym.make(env_id))
+    make = (
+        (lambda: gym.make(env_id, max_episode_steps=max_episode_steps))
+        if max_episode_steps
+        else (lambda: gym.make(env_id))
+    )
     demo_env = make()
     demo_env.action_space.seed(seed)
     found: list[Demonstration] = []
@@ -293,12 +320,23 @@ def collect_demonstrations(
                 if done:
                     self.n_done += 1
                     if self.n_done % every == 0:
-                        found.append(rollout(self.model, demo_env, seed=seed + 10_000 + len(found),
-                                             deterministic=deterministic))
+                        found.append(
+                            rollout(
+                                self.model,
+                                demo_env,
+                                seed=seed + 10_000 + len(found),
+                                deterministic=deterministic,
+                            )
+                        )
             return True
 
-    params = {"algo": "SAC", "env_id": None, "total_timesteps": int(total_timesteps), "seed": seed,
-              **dict(rl_overrides or {})}
+    params = {
+        "algo": "SAC",
+        "env_id": None,
+        "total_timesteps": int(total_timesteps),
+        "seed": seed,
+        **dict(rl_overrides or {}),
+    }
     config: RLConfig = config_from_params(params)
     recorder = EpisodeRecorder(make())
     result = train(config, env=recorder, callbacks=[_Roll()], progress=progress)
@@ -311,14 +349,28 @@ def collect_demonstrations(
             "Train longer (total_timesteps), roll out more often (every), lower max_episode_steps, "
             "or fill the missing group with expert_demonstrations(...)."
         )
-    demoset = DemoSet(select_diverse(safe, n_safe) if safe else [],
-                      select_diverse(unsafe, n_unsafe) if unsafe else [], env_id)
-    return DemoRun(demoset, DemoSet(safe, unsafe, env_id), recorder.episodes, result,
-                   {"safe": len(safe), "unsafe": len(unsafe)})
+    demoset = DemoSet(
+        select_diverse(safe, n_safe) if safe else [],
+        select_diverse(unsafe, n_unsafe) if unsafe else [],
+        env_id,
+    )
+    return DemoRun(
+        demoset,
+        DemoSet(safe, unsafe, env_id),
+        recorder.episodes,
+        result,
+        {"safe": len(safe), "unsafe": len(unsafe)},
+    )
 
 
 def _policy_rollout(
-    policy: Any, env: gym.Env, rng: np.random.Generator, *, seed: int, noise: float, switch_at: int | None,
+    policy: Any,
+    env: gym.Env,
+    rng: np.random.Generator,
+    *,
+    seed: int,
+    noise: float,
+    switch_at: int | None,
     switch_noise: float,
 ) -> Demonstration:
     """One episode of ``policy(obs)`` with Gaussian action noise (std as a fraction of the half-range).
@@ -342,8 +394,13 @@ def _policy_rollout(
         actions.append(action)
         rewards.append(float(reward))
         t += 1
-    return Demonstration(np.stack(observations), np.stack(actions), np.asarray(rewards), bool(terminated),
-                         bool(truncated and not terminated))
+    return Demonstration(
+        np.stack(observations),
+        np.stack(actions),
+        np.asarray(rewards),
+        bool(terminated),
+        bool(truncated and not terminated),
+    )
 
 
 def policy_demonstrations(
@@ -386,9 +443,17 @@ def policy_demonstrations(
     Used in: DEFENDER (thesis 4.3).
     """
     if n_safe < 0 or n_unsafe < 0:
-        raise ValueError(f"policy_demonstrations needs n_safe, n_unsafe >= 0, got {n_safe}, {n_unsafe}.")
-    env = gym.make(env_id, max_episode_steps=max_episode_steps) if max_episode_steps else gym.make(env_id)
-    horizon = env.spec.max_episode_steps if env.spec is not None and env.spec.max_episode_steps else 1000
+        raise ValueError(
+            f"policy_demonstrations needs n_safe, n_unsafe >= 0, got {n_safe}, {n_unsafe}."
+        )
+    env = (
+        gym.make(env_id, max_episode_steps=max_episode_steps)
+        if max_episode_steps
+        else gym.make(env_id)
+    )
+    horizon = (
+        env.spec.max_episode_steps if env.spec is not None and env.spec.max_episode_steps else 1000
+    )
     rng = np.random.default_rng(seed)
     out: dict[str, list[Demonstration]] = {"safe": [], "unsafe": []}
     for group, n in (("safe", n_safe), ("unsafe", n_unsafe)):
@@ -398,13 +463,23 @@ def policy_demonstrations(
                 raise RuntimeError(
                     f"policy_demonstrations made only {len(out[group])} of {n} {group} demonstrations of "
                     f"{env_id} in {tries} attempts (horizon {horizon}); "
-                    + ("the policy does not reach the horizon: lower safe_noise or use a better policy."
-                       if group == "safe" else "the policy does not fall: raise unsafe_noise.")
+                    + (
+                        "the policy does not reach the horizon: lower safe_noise or use a better policy."
+                        if group == "safe"
+                        else "the policy does not fall: raise unsafe_noise."
+                    )
                 )
             ep_seed = seed + 20_000 + 1_000 * (group == "unsafe") * max_tries + tries
             switch = None if group == "safe" else int(rng.integers(0, max(1, horizon // 2)))
-            d = _policy_rollout(policy, env, rng, seed=ep_seed, noise=safe_noise, switch_at=switch,
-                                switch_noise=unsafe_noise)
+            d = _policy_rollout(
+                policy,
+                env,
+                rng,
+                seed=ep_seed,
+                noise=safe_noise,
+                switch_at=switch,
+                switch_noise=unsafe_noise,
+            )
             tries += 1
             if (group == "safe" and d.truncated) or (group == "unsafe" and d.terminated):
                 out[group].append(d)
@@ -412,8 +487,15 @@ def policy_demonstrations(
     return DemoSet(out["safe"], out["unsafe"], env_id)
 
 
-def expert_demonstrations(env_id: str, *, n_safe: int, n_unsafe: int, seed: int = 0,
-                          max_episode_steps: int | None = None, **kwargs: Any) -> DemoSet:
+def expert_demonstrations(
+    env_id: str,
+    *,
+    n_safe: int,
+    n_unsafe: int,
+    seed: int = 0,
+    max_episode_steps: int | None = None,
+    **kwargs: Any,
+) -> DemoSet:
     """:func:`policy_demonstrations` with the ARS expert shipped in :mod:`thesis_lib.data`.
 
     Experts ship for Hopper, Walker2d, HalfCheetah, Ant and InvertedDoublePendulum (v5); their
@@ -430,9 +512,18 @@ def expert_demonstrations(env_id: str, *, n_safe: int, n_unsafe: int, seed: int 
     names = [name for name, spec in TASKS.items() if spec.env_id == env_id and has_policies(name)]
     if not names:
         have = sorted(spec.env_id for name, spec in TASKS.items() if has_policies(name))
-        raise ValueError(f"No shipped expert policy for {env_id!r}; experts ship for: {', '.join(have)}.")
-    return policy_demonstrations(env_id, load_policy(names[0], "expert"), n_safe=n_safe, n_unsafe=n_unsafe,
-                                 seed=seed, max_episode_steps=max_episode_steps, **kwargs)
+        raise ValueError(
+            f"No shipped expert policy for {env_id!r}; experts ship for: {', '.join(have)}."
+        )
+    return policy_demonstrations(
+        env_id,
+        load_policy(names[0], "expert"),
+        n_safe=n_safe,
+        n_unsafe=n_unsafe,
+        seed=seed,
+        max_episode_steps=max_episode_steps,
+        **kwargs,
+    )
 
 
 def save_demonstrations(demoset: DemoSet, path: str | Path) -> Path:
@@ -476,8 +567,11 @@ def load_demonstrations(path: str | Path) -> DemoSet:
         for group, n in (("safe", meta["n_safe"]), ("unsafe", meta["n_unsafe"])):
             groups[group] = [
                 Demonstration(
-                    data[f"{group}/{i}/observations"], data[f"{group}/{i}/actions"], data[f"{group}/{i}/rewards"],
-                    bool(data[f"{group}/{i}/flags"][0]), bool(data[f"{group}/{i}/flags"][1]),
+                    data[f"{group}/{i}/observations"],
+                    data[f"{group}/{i}/actions"],
+                    data[f"{group}/{i}/rewards"],
+                    bool(data[f"{group}/{i}/flags"][0]),
+                    bool(data[f"{group}/{i}/flags"][1]),
                 )
                 for i in range(n)
             ]
@@ -513,7 +607,10 @@ class _DataDir:
 
 
 def save_demonstrations_minari(
-    demoset: DemoSet, *, name: str | None = None, root: str | Path | None = None,
+    demoset: DemoSet,
+    *,
+    name: str | None = None,
+    root: str | Path | None = None,
     info: Mapping[str, Any] | None = None,
 ) -> dict[str, str]:
     """Write a :class:`DemoSet` as two Minari data sets, one per group.
@@ -534,19 +631,36 @@ def save_demonstrations_minari(
     for group, dataset_id in ids.items():
         demos = getattr(demoset, group)
         if not demos:
-            raise ValueError(f"The {group} group is empty; a Minari data set needs at least one episode.")
+            raise ValueError(
+                f"The {group} group is empty; a Minari data set needs at least one episode."
+            )
         episodes = []
         for i, d in enumerate(demos):
-            terminations, truncations = np.zeros(d.length, dtype=bool), np.zeros(d.length, dtype=bool)
-            terminations[-1], truncations[-1] = d.terminated, d.truncated  # the flags of the last step
-            episodes.append(Episode(i, d.observations, d.actions, d.rewards, terminations, truncations))
-        write_dataset(dataset_id, episodes, demoset.env_id, description=f"DEFENDER {group} demonstrations",
-                      info={"group": group, **dict(info or {})},
-                      root=Path(root) if root is not None else None)
+            terminations, truncations = (
+                np.zeros(d.length, dtype=bool),
+                np.zeros(d.length, dtype=bool),
+            )
+            terminations[-1], truncations[-1] = (
+                d.terminated,
+                d.truncated,
+            )  # the flags of the last step
+            episodes.append(
+                Episode(i, d.observations, d.actions, d.rewards, terminations, truncations)
+            )
+        write_dataset(
+            dataset_id,
+            episodes,
+            demoset.env_id,
+            description=f"DEFENDER {group} demonstrations",
+            info={"group": group, **dict(info or {})},
+            root=Path(root) if root is not None else None,
+        )
     return ids
 
 
-def load_demonstrations_minari(env_id: str, *, name: str | None = None, root: str | Path | None = None) -> DemoSet:
+def load_demonstrations_minari(
+    env_id: str, *, name: str | None = None, root: str | Path | None = None
+) -> DemoSet:
     """Read what :func:`save_demonstrations_minari` wrote for ``env_id``.
 
     Raises:
@@ -560,11 +674,15 @@ def load_demonstrations_minari(env_id: str, *, name: str | None = None, root: st
     with _DataDir(root):
         for group, dataset_id in _minari_ids(env_id, name).items():
             data = load(dataset_id)
-            groups[group] = [as_demonstration(e, f"{group} episode {e.id} of {dataset_id}") for e in data.episodes]
+            groups[group] = [
+                as_demonstration(e, f"{group} episode {e.id} of {dataset_id}")
+                for e in data.episodes
+            ]
     return DemoSet(groups["safe"], groups["unsafe"], env_id)
 
 
 def _features_list(demos: Sequence[Any], trajectory: Trajectory, group: str) -> list[np.ndarray]:
-    return [trajectory_features(as_demonstration(d, f"{group} demonstration {i}"), trajectory)
-            for i, d in enumerate(demos)]
-
+    return [
+        trajectory_features(as_demonstration(d, f"{group} demonstration {i}"), trajectory)
+        for i, d in enumerate(demos)
+    ]

@@ -8,6 +8,7 @@ default: 4, for speed). Filtered (predicted) transitions never enter its trainin
 
 Used in: DEFENDER (thesis 4.3).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -50,7 +51,9 @@ class DynamicsModel:
         seed: int = 0,
     ) -> None:
         if obs_dim < 1 or act_dim < 1:
-            raise ValueError(f"DynamicsModel needs obs_dim and act_dim >= 1, got {obs_dim} and {act_dim}.")
+            raise ValueError(
+                f"DynamicsModel needs obs_dim and act_dim >= 1, got {obs_dim} and {act_dim}."
+            )
         if train_every < 1 or batch_size < 1 or buffer_size < 1:
             raise ValueError(
                 f"DynamicsModel needs positive train_every, batch_size and buffer_size, got "
@@ -102,7 +105,9 @@ class DynamicsModel:
     def train_step(self) -> float:
         """One Adam step on a minibatch of stored transitions (MSE); returns the loss."""
         if self._size == 0:
-            raise RuntimeError("DynamicsModel.train_step needs at least one stored transition; call add first.")
+            raise RuntimeError(
+                "DynamicsModel.train_step needs at least one stored transition; call add first."
+            )
         idx = self._rng.integers(0, self._size, size=min(self.batch_size, self._size))
         x = torch.from_numpy(self._inputs[idx])  # (B, obs_dim + act_dim)
         y = torch.from_numpy(self._targets[idx])  # (B, obs_dim)
@@ -126,6 +131,8 @@ class DynamicsModel:
         """Predicted next state (obs_dim,) float32 for one (s, a); with no training yet, s itself."""
         obs = np.asarray(obs, dtype=np.float32).reshape(-1)
         if self.n_updates == 0:
-            return obs.copy()  # an untrained net's output is noise; "nothing happens" is the safer guess
+            return (
+                obs.copy()
+            )  # an untrained net's output is noise; "nothing happens" is the safer guess
         x = np.concatenate([obs, np.asarray(action, dtype=np.float32).reshape(-1)])
         return self.net(torch.from_numpy(x)[None]).numpy()[0]

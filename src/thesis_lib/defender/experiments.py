@@ -13,6 +13,7 @@
 
 Used in: DEFENDER chapter (thesis 4.3).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -98,7 +99,9 @@ class DefenderConfig:
     """Seed of the demonstration run (and the chapter's other draws)."""
     seeds: list[int] = field(default_factory=lambda: [0])
     """Seeds of every training run in Tables 4.3-4.5 (the thesis: 3)."""
-    tasks: list[str] = field(default_factory=lambda: ["Hopper-v5", "InvertedDoublePendulum-v5", "Walker2d-v5"])
+    tasks: list[str] = field(
+        default_factory=lambda: ["Hopper-v5", "InvertedDoublePendulum-v5", "Walker2d-v5"]
+    )
     """Gymnasium tasks (the thesis: Hopper, InvertedDoublePendulum, Walker2d)."""
     max_episode_steps: int | None = 100
     """Episode horizon; None = the task's own (1000, the thesis's)."""
@@ -152,25 +155,40 @@ class DefenderConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"DefenderConfig.{name} must be a positive int, got {value!r}.")
-        for name in ("max_episode_steps", "train_episodes", "max_trajectory", "dynamics_train_every"):
+        for name in (
+            "max_episode_steps",
+            "train_episodes",
+            "max_trajectory",
+            "dynamics_train_every",
+        ):
             value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-                raise ValueError(f"DefenderConfig.{name} must be a positive int or None, got {value!r}.")
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int) or value < 1
+            ):
+                raise ValueError(
+                    f"DefenderConfig.{name} must be a positive int or None, got {value!r}."
+                )
         if not self.seeds or not self.tasks or not self.algos:
             raise ValueError("DefenderConfig needs at least one seed, one task and one algo.")
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
-            raise ValueError(f"Unknown algo {bad[0]!r} in DefenderConfig.algos. Valid: {', '.join(ALGOS)}.")
+            raise ValueError(
+                f"Unknown algo {bad[0]!r} in DefenderConfig.algos. Valid: {', '.join(ALGOS)}."
+            )
         if not self.n_demos_list or any(int(n) < 1 for n in self.n_demos_list):
             raise ValueError(f"n_demos_list must list positive counts, got {self.n_demos_list!r}.")
         for s in [*self.state_strategies, *self.state_action_strategies]:
             parse_strategy(s)  # raises with the valid names
         if self.demo_source not in DEMO_SOURCES:
-            raise ValueError(f"Unknown demo_source {self.demo_source!r}. Valid: {', '.join(DEMO_SOURCES)}.")
+            raise ValueError(
+                f"Unknown demo_source {self.demo_source!r}. Valid: {', '.join(DEMO_SOURCES)}."
+            )
         if self.paper_compat_tasks is not None:
             bad = [t for t in self.paper_compat_tasks if t not in self.tasks]
             if bad:
-                raise ValueError(f"paper_compat_tasks lists {bad[0]!r}, which is not in tasks {self.tasks}.")
+                raise ValueError(
+                    f"paper_compat_tasks lists {bad[0]!r}, which is not in tasks {self.tasks}."
+                )
 
 
 # --------------------------------------------------------------------------- demonstrations
@@ -202,27 +220,52 @@ def make_demonstrations(cfg: DefenderConfig, progress: bool = False) -> dict[str
     out = {}
     for task in cfg.tasks:
         run = collect_demonstrations(
-            task, n_safe=n, n_unsafe=n, total_timesteps=cfg.demo_timesteps, every=cfg.demo_every,
-            seed=cfg.seed, max_episode_steps=cfg.max_episode_steps, deterministic=cfg.demo_deterministic,
-            rl_overrides=_rl_overrides(cfg), progress=progress, allow_missing=cfg.demo_source != "sac",
+            task,
+            n_safe=n,
+            n_unsafe=n,
+            total_timesteps=cfg.demo_timesteps,
+            every=cfg.demo_every,
+            seed=cfg.seed,
+            max_episode_steps=cfg.max_episode_steps,
+            deterministic=cfg.demo_deterministic,
+            rl_overrides=_rl_overrides(cfg),
+            progress=progress,
+            allow_missing=cfg.demo_source != "sac",
         )
         if cfg.demo_source == "sac":
             out[task] = run
             continue
-        sac = {"safe": run.pool.safe, "unsafe": run.pool.unsafe} if cfg.demo_source == "auto" else {
-            "safe": [], "unsafe": []}
+        sac = (
+            {"safe": run.pool.safe, "unsafe": run.pool.unsafe}
+            if cfg.demo_source == "auto"
+            else {"safe": [], "unsafe": []}
+        )
         need = {g: max(0, n - len(sac[g])) for g in sac}
-        extra = expert_demonstrations(task, n_safe=need["safe"], n_unsafe=need["unsafe"], seed=cfg.seed,
-                                      max_episode_steps=cfg.max_episode_steps)
+        extra = expert_demonstrations(
+            task,
+            n_safe=need["safe"],
+            n_unsafe=need["unsafe"],
+            seed=cfg.seed,
+            max_episode_steps=cfg.max_episode_steps,
+        )
         pool = DemoSet([*sac["safe"], *extra.safe], [*sac["unsafe"], *extra.unsafe], task)
         demos = DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), task)
-        out[task] = DemoRun(demos, pool, run.episodes, run.result,
-                            {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])})
+        out[task] = DemoRun(
+            demos,
+            pool,
+            run.episodes,
+            run.result,
+            {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])},
+        )
     return out
 
 
 def _rl_overrides(cfg: DefenderConfig) -> dict[str, Any]:
-    return {"net_arch": list(cfg.net_arch), "learning_rate": cfg.learning_rate, "batch_size": cfg.batch_size}
+    return {
+        "net_arch": list(cfg.net_arch),
+        "learning_rate": cfg.learning_rate,
+        "batch_size": cfg.batch_size,
+    }
 
 
 def demo_table(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) -> pd.DataFrame:
@@ -236,13 +279,21 @@ def demo_table(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) -> pd.DataFra
         for group in ("safe", "unsafe"):
             kept = getattr(run.demos, group)
             n_seen = run.n_sac.get(group, len(getattr(run.pool, group)))
-            rows.append({
-                "task": task, "group": group, "SAC roll-outs seen": n_seen, "kept": len(kept),
-                "kept from SAC roll-outs": src[group][0], "kept from ARS expert": src[group][1],
-                "recipe": _recipe(src[group]),
-                "mean length": float(np.mean([d.length for d in kept])) if kept else np.nan,
-                "lowest step reward": min(float(d.rewards.min()) for d in kept) if kept else np.nan,
-            })
+            rows.append(
+                {
+                    "task": task,
+                    "group": group,
+                    "SAC roll-outs seen": n_seen,
+                    "kept": len(kept),
+                    "kept from SAC roll-outs": src[group][0],
+                    "kept from ARS expert": src[group][1],
+                    "recipe": _recipe(src[group]),
+                    "mean length": float(np.mean([d.length for d in kept])) if kept else np.nan,
+                    "lowest step reward": min(float(d.rewards.min()) for d in kept)
+                    if kept
+                    else np.nan,
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -269,14 +320,20 @@ def describe_demonstrations(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) 
             seen = run.n_sac.get(group, len(getattr(run.pool, group)))
             n_sac, n_exp = src[group]
             if n_exp == 0:
-                parts.append(f"{group}: {n_sac} SAC roll-outs (the thesis's recipe; {seen} of them {what})")
+                parts.append(
+                    f"{group}: {n_sac} SAC roll-outs (the thesis's recipe; {seen} of them {what})"
+                )
             elif cfg.demo_source == "expert":
-                parts.append(f"{group}: {n_exp} from the ARS expert with noise (demo_source='expert')")
+                parts.append(
+                    f"{group}: {n_exp} from the ARS expert with noise (demo_source='expert')"
+                )
             else:
                 got = f"only {seen} SAC roll-out(s) {what}" if seen else f"no SAC roll-out {what}"
-                parts.append(f"{group}: {got} in {cfg.demo_timesteps} training steps, "
-                             f"fewer than the {n} needed, so {n_exp} came from the shipped ARS expert "
-                             f"({'small' if group == 'safe' else 'heavy'} action noise)")
+                parts.append(
+                    f"{group}: {got} in {cfg.demo_timesteps} training steps, "
+                    f"fewer than the {n} needed, so {n_exp} came from the shipped ARS expert "
+                    f"({'small' if group == 'safe' else 'heavy'} action noise)"
+                )
         lines.append(f"{thesis_env_name(task)}: " + "; ".join(parts) + ".")
     return lines
 
@@ -301,9 +358,14 @@ def run_ablation(cfg: DefenderConfig, runs: dict[str, DemoRun]) -> pd.DataFrame:
     for task, run in runs.items():
         demos = demos_subset(run, cfg.n_demos)
         for trajectory in ("state", "state_action"):
-            scores = strategy_ablation(run.episodes, demos, trajectory=trajectory, horizon=cfg.max_episode_steps
-                                       or _make_env(task, None).spec.max_episode_steps,
-                                       max_trajectory=cfg.max_trajectory, n_jobs=cfg.n_jobs)
+            scores = strategy_ablation(
+                run.episodes,
+                demos,
+                trajectory=trajectory,
+                horizon=cfg.max_episode_steps or _make_env(task, None).spec.max_episode_steps,
+                max_trajectory=cfg.max_trajectory,
+                n_jobs=cfg.n_jobs,
+            )
             scores.insert(0, "trajectory", trajectory)
             scores.insert(0, "task", task)
             frames.append(scores)
@@ -328,11 +390,16 @@ def rank_thesis_strategies(scores: pd.DataFrame) -> pd.DataFrame:
     mean = scores.groupby(["trajectory", "strategy"])[cols].mean()
     mean["our rank"] = mean.groupby(level=0)["score"].rank(ascending=False, method="min")
     rows = []
-    for kind, printed in (("state", THESIS_STATE_STRATEGIES), ("state_action", THESIS_STATE_ACTION_STRATEGIES)):
+    for kind, printed in (
+        ("state", THESIS_STATE_STRATEGIES),
+        ("state_action", THESIS_STATE_ACTION_STRATEGIES),
+    ):
         for label in printed:
             key = (kind, parse_strategy(label).name)
             if key in mean.index:
-                rows.append({"trajectory": kind, "thesis strategy": label, **mean.loc[key].to_dict()})
+                rows.append(
+                    {"trajectory": kind, "thesis strategy": label, **mean.loc[key].to_dict()}
+                )
     out = pd.DataFrame(rows, columns=["trajectory", "thesis strategy", *cols, "our rank"])
     out["our rank"] = out["our rank"].astype(int)
     return out
@@ -366,34 +433,67 @@ def train_run(
     safe_s = unsafe_s = None
     if demos is not None and strategy is not None:
         safe_s, unsafe_s = strategy.split("/")
-        env = DefenderWrapper(env, demos.safe, demos.unsafe, safe_method=safe_s, unsafe_method=unsafe_s,
-                              trajectory=trajectory, max_trajectory=cfg.max_trajectory, paper_compat=paper_compat,
-                              seed=seed, dynamics_train_every=cfg.dynamics_train_every,
-                              # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
-                              dynamics_kwargs={"hidden": list(cfg.net_arch), "learning_rate": cfg.learning_rate,
-                                               "batch_size": cfg.batch_size})
+        env = DefenderWrapper(
+            env,
+            demos.safe,
+            demos.unsafe,
+            safe_method=safe_s,
+            unsafe_method=unsafe_s,
+            trajectory=trajectory,
+            max_trajectory=cfg.max_trajectory,
+            paper_compat=paper_compat,
+            seed=seed,
+            dynamics_train_every=cfg.dynamics_train_every,
+            # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
+            dynamics_kwargs={
+                "hidden": list(cfg.net_arch),
+                "learning_rate": cfg.learning_rate,
+                "batch_size": cfg.batch_size,
+            },
+        )
     callbacks = []
     steps = cfg.train_timesteps
     if cfg.train_episodes:
         horizon = cfg.max_episode_steps or env.spec.max_episode_steps or 1000
-        steps = cfg.train_episodes * horizon  # an upper bound; the callback stops at the episode count
+        steps = (
+            cfg.train_episodes * horizon
+        )  # an upper bound; the callback stops at the episode count
         callbacks.append(StopTrainingOnMaxEpisodes(cfg.train_episodes))
-    rl = config_from_params({"algo": algo, "env_id": None, "total_timesteps": int(steps), "seed": int(seed),
-                             **_rl_overrides(cfg)})
-    res = train(rl, env=env, callbacks=callbacks, progress=False, info_keys=["filtered", "filter_step"])
+    rl = config_from_params(
+        {
+            "algo": algo,
+            "env_id": None,
+            "total_timesteps": int(steps),
+            "seed": int(seed),
+            **_rl_overrides(cfg),
+        }
+    )
+    res = train(
+        rl, env=env, callbacks=callbacks, progress=False, info_keys=["filtered", "filter_step"]
+    )
     ep = res.episodes
     ep["filtered"] = ep["filtered"].astype("boolean").fillna(False).astype(bool)
     ep["crashed"] = ep["crashed"] & ~ep["filtered"]  # a filtered episode is not a crash (4.3.3)
-    keys = {"task": task, "algo": algo, "trajectory": trajectory if strategy else "none",
-            "strategy": strategy or "none", "safe_strategy": safe_s, "unsafe_strategy": unsafe_s,
-            "n_demos": len(demos.safe) if demos is not None and strategy else 0,
-            "paper_compat": bool(paper_compat), "seed": int(seed)}
-    row = {**keys,
-           "acc_reward": float(ep["return"].max()) if len(ep) else np.nan,
-           "crash_pct": 100 * float(ep["crashed"].mean()) if len(ep) else np.nan,
-           "filtered_pct": 100 * float(ep["filtered"].mean()) if len(ep) else np.nan,
-           "mean_last_100": float(ep["return"].tail(100).mean()) if len(ep) else np.nan,
-           "n_episodes": len(ep), "wall_time_s": res.wall_time_s}
+    keys = {
+        "task": task,
+        "algo": algo,
+        "trajectory": trajectory if strategy else "none",
+        "strategy": strategy or "none",
+        "safe_strategy": safe_s,
+        "unsafe_strategy": unsafe_s,
+        "n_demos": len(demos.safe) if demos is not None and strategy else 0,
+        "paper_compat": bool(paper_compat),
+        "seed": int(seed),
+    }
+    row = {
+        **keys,
+        "acc_reward": float(ep["return"].max()) if len(ep) else np.nan,
+        "crash_pct": 100 * float(ep["crashed"].mean()) if len(ep) else np.nan,
+        "filtered_pct": 100 * float(ep["filtered"].mean()) if len(ep) else np.nan,
+        "mean_last_100": float(ep["return"].tail(100).mean()) if len(ep) else np.nan,
+        "n_episodes": len(ep),
+        "wall_time_s": res.wall_time_s,
+    }
     for k, v in reversed(keys.items()):
         ep.insert(0, k, v)
     return row, ep
@@ -408,7 +508,9 @@ class TableRuns(NamedTuple):
     """Every training episode, with the run's keys."""
 
 
-def _run_all(specs: list[dict[str, Any]], cfg: DefenderConfig, demos_for: Any, progress: bool) -> TableRuns:
+def _run_all(
+    specs: list[dict[str, Any]], cfg: DefenderConfig, demos_for: Any, progress: bool
+) -> TableRuns:
     from tqdm.auto import tqdm
 
     rows, eps = [], []
@@ -417,10 +519,14 @@ def _run_all(specs: list[dict[str, Any]], cfg: DefenderConfig, demos_for: Any, p
         row, ep = train_run(cfg=cfg, demos=demos, **spec)
         rows.append(row)
         eps.append(ep)
-    return TableRuns(pd.DataFrame(rows, columns=list(RUN_COLUMNS)), pd.concat(eps, ignore_index=True))
+    return TableRuns(
+        pd.DataFrame(rows, columns=list(RUN_COLUMNS)), pd.concat(eps, ignore_index=True)
+    )
 
 
-def run_tables_4_3_4_4(cfg: DefenderConfig, demo_runs: dict[str, DemoRun], progress: bool = True) -> TableRuns:
+def run_tables_4_3_4_4(
+    cfg: DefenderConfig, demo_runs: dict[str, DemoRun], progress: bool = True
+) -> TableRuns:
     """SAC and TD3 with and without DEFENDER on every task and seed (Tables 4.3 and 4.4).
 
     Runs each algorithm plain, with each of ``state_strategies`` on state trajectories, with
@@ -434,14 +540,36 @@ def run_tables_4_3_4_4(cfg: DefenderConfig, demo_runs: dict[str, DemoRun], progr
         for seed in cfg.seeds:
             for algo in cfg.algos:
                 specs.append({"task": task, "algo": algo, "seed": seed})
-                specs += [{"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state"}
-                          for s in cfg.state_strategies]
-                specs += [{"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state_action"}
-                          for s in cfg.state_action_strategies]
-            if cfg.paper_compat_check and cfg.state_strategies and "SAC" in cfg.algos and (
-                    cfg.paper_compat_tasks is None or task in cfg.paper_compat_tasks):
-                specs.append({"task": task, "algo": "SAC", "seed": seed, "strategy": cfg.state_strategies[0],
-                              "trajectory": "state", "paper_compat": True})
+                specs += [
+                    {"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state"}
+                    for s in cfg.state_strategies
+                ]
+                specs += [
+                    {
+                        "task": task,
+                        "algo": algo,
+                        "seed": seed,
+                        "strategy": s,
+                        "trajectory": "state_action",
+                    }
+                    for s in cfg.state_action_strategies
+                ]
+            if (
+                cfg.paper_compat_check
+                and cfg.state_strategies
+                and "SAC" in cfg.algos
+                and (cfg.paper_compat_tasks is None or task in cfg.paper_compat_tasks)
+            ):
+                specs.append(
+                    {
+                        "task": task,
+                        "algo": "SAC",
+                        "seed": seed,
+                        "strategy": cfg.state_strategies[0],
+                        "trajectory": "state",
+                        "paper_compat": True,
+                    }
+                )
     subsets = {task: demos_subset(run, cfg.n_demos) for task, run in demo_runs.items()}
     return _run_all(specs, cfg, lambda spec: subsets[spec["task"]], progress)
 
@@ -466,19 +594,44 @@ def run_table_4_5(
         available = min(len(demo_runs[task].pool.safe), len(demo_runs[task].pool.unsafe))
         for n in cfg.n_demos_list:
             for seed in cfg.seeds:
-                m = (done.task == task) & (done.seed == seed) & (done.algo == "SAC") & (done.strategy == strategy) \
-                    & (done.trajectory == "state") & (done.n_demos == min(n, available)) & ~done.paper_compat.astype(bool)
+                m = (
+                    (done.task == task)
+                    & (done.seed == seed)
+                    & (done.algo == "SAC")
+                    & (done.strategy == strategy)
+                    & (done.trajectory == "state")
+                    & (done.n_demos == min(n, available))
+                    & ~done.paper_compat.astype(bool)
+                )
                 if m.any():
                     kept.append(done[m].iloc[[0]])
                 else:
-                    specs.append({"task": task, "algo": "SAC", "seed": seed, "strategy": strategy,
-                                  "trajectory": "state", "_n": n})
+                    specs.append(
+                        {
+                            "task": task,
+                            "algo": "SAC",
+                            "seed": seed,
+                            "strategy": strategy,
+                            "trajectory": "state",
+                            "_n": n,
+                        }
+                    )
     ns = {id(s): s.pop("_n") for s in specs}
-    new = _run_all(specs, cfg, lambda spec: demos_subset(demo_runs[spec["task"]], ns[id(spec)]), progress)
+    new = _run_all(
+        specs, cfg, lambda spec: demos_subset(demo_runs[spec["task"]], ns[id(spec)]), progress
+    )
     runs = pd.concat([*kept, new.runs], ignore_index=True) if kept else new.runs
     eps = new.episodes
     if reuse is not None and kept:
-        on = ["task", "algo", "trajectory", "seed", "strategy", "n_demos", "paper_compat"]  # the reused runs only
+        on = [
+            "task",
+            "algo",
+            "trajectory",
+            "seed",
+            "strategy",
+            "n_demos",
+            "paper_compat",
+        ]  # the reused runs only
         eps = pd.concat([eps, reuse.episodes.merge(pd.concat(kept)[on], on=on)], ignore_index=True)
     return TableRuns(runs.sort_values(["task", "n_demos", "seed"]).reset_index(drop=True), eps)
 
@@ -499,12 +652,27 @@ def summarise(runs: pd.DataFrame) -> pd.DataFrame:
     base = r[r.strategy == "none"].set_index(["task", "algo", "seed"])["wall_time_s"]
     idx = pd.MultiIndex.from_frame(r[["task", "algo", "seed"]])
     r["time_pct"] = 100 * r["wall_time_s"].to_numpy() / base.reindex(idx).to_numpy()
-    keys = ["task", "algo", "trajectory", "strategy", "safe_strategy", "unsafe_strategy", "n_demos", "paper_compat"]
+    keys = [
+        "task",
+        "algo",
+        "trajectory",
+        "strategy",
+        "safe_strategy",
+        "unsafe_strategy",
+        "n_demos",
+        "paper_compat",
+    ]
     g = r.groupby(keys, dropna=False, sort=False)
-    out = g.agg(acc_reward_mean=("acc_reward", "mean"), acc_reward_std=("acc_reward", "std"),
-                crash_pct_mean=("crash_pct", "mean"), crash_pct_std=("crash_pct", "std"),
-                filtered_pct=("filtered_pct", "mean"), mean_last_100=("mean_last_100", "mean"),
-                time_pct=("time_pct", "mean"), n_seeds=("seed", "nunique")).reset_index()
+    out = g.agg(
+        acc_reward_mean=("acc_reward", "mean"),
+        acc_reward_std=("acc_reward", "std"),
+        crash_pct_mean=("crash_pct", "mean"),
+        crash_pct_std=("crash_pct", "std"),
+        filtered_pct=("filtered_pct", "mean"),
+        mean_last_100=("mean_last_100", "mean"),
+        time_pct=("time_pct", "mean"),
+        n_seeds=("seed", "nunique"),
+    ).reset_index()
     return out
 
 
@@ -526,11 +694,20 @@ def compare_tables(summary: pd.DataFrame, differs: dict[str, str] | None = None)
         part = s[s.trajectory.isin(["none", kind])].copy()
         for col in ("safe_strategy", "unsafe_strategy"):
             part[col] = part[col].where(part.strategy != "none", np.nan)
-        for metric, ours, paper in (("Acc Reward", "acc_reward_mean", "acc_reward_mean"),
-                                    ("% Crash", "crash_pct_mean", "crash_pct_mean"),
-                                    ("% Time", "time_pct", "time_pct")):
-            cmp = compare_with_paper("4_3_4_4", part, on=["algorithm", "safe_strategy", "unsafe_strategy", "env"],
-                                     value=ours, paper_value=paper, differs=differs, where={"table": table})
+        for metric, ours, paper in (
+            ("Acc Reward", "acc_reward_mean", "acc_reward_mean"),
+            ("% Crash", "crash_pct_mean", "crash_pct_mean"),
+            ("% Time", "time_pct", "time_pct"),
+        ):
+            cmp = compare_with_paper(
+                "4_3_4_4",
+                part,
+                on=["algorithm", "safe_strategy", "unsafe_strategy", "env"],
+                value=ours,
+                paper_value=paper,
+                differs=differs,
+                where={"table": table},
+            )
             cmp.insert(0, "metric", metric)
             cmp.insert(0, "table", table)
             frames.append(cmp)
@@ -580,13 +757,19 @@ def describe_effects(summary: pd.DataFrame) -> list[str]:
             f"{b.crash_pct_mean:.0f}% -> {r.crash_pct_mean:.0f}%, {r.filtered_pct:.0f}% of episodes ended by "
             f"the filter, best return {b.acc_reward_mean:.0f} -> {r.acc_reward_mean:.0f}, "
             f"time {r.time_pct:.0f}% of the plain run."
-            + (" The filter never fired, so the agent saw exactly the plain run's episodes (same seed); "
-               "only the time differs." if r.filtered_pct == 0 else "")
+            + (
+                " The filter never fired, so the agent saw exactly the plain run's episodes (same seed); "
+                "only the time differs."
+                if r.filtered_pct == 0
+                else ""
+            )
         )
     return lines
 
 
-def crash_curves(episodes: pd.DataFrame, keys: Sequence[str] = ("task", "algo", "trajectory", "strategy", "seed")) -> pd.DataFrame:
+def crash_curves(
+    episodes: pd.DataFrame, keys: Sequence[str] = ("task", "algo", "trajectory", "strategy", "seed")
+) -> pd.DataFrame:
     """Cumulative crash rate (%) and filter rate (%) after each training episode, per run."""
     e = episodes.copy()
     g = e.groupby(list(keys), sort=False)
@@ -609,8 +792,9 @@ def plot_curves(episodes: pd.DataFrame, window: int = 10) -> Any:
     e = crash_curves(episodes)
     e = e[~e.paper_compat.astype(bool)] if "paper_compat" in e else e
     tasks, algos = list(dict.fromkeys(e.task)), list(dict.fromkeys(e.algo))
-    fig, axes = plt.subplots(2 * len(tasks), len(algos), figsize=(5.5 * len(algos), 3.2 * 2 * len(tasks)),
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        2 * len(tasks), len(algos), figsize=(5.5 * len(algos), 3.2 * 2 * len(tasks)), squeeze=False
+    )
     for i, task in enumerate(tasks):
         for col, algo in enumerate(algos):
             ax_r, ax_c = axes[2 * i, col], axes[2 * i + 1, col]
@@ -620,7 +804,12 @@ def plot_curves(episodes: pd.DataFrame, window: int = 10) -> Any:
                 style = {"color": "black", "lw": 2} if strat == "none" else {}
                 for seed, one in run.groupby("seed"):
                     lab = label if seed == run.seed.min() else None
-                    ax_r.plot(one.timestep, one["return"].rolling(window, min_periods=1).mean(), label=lab, **style)
+                    ax_r.plot(
+                        one.timestep,
+                        one["return"].rolling(window, min_periods=1).mean(),
+                        label=lab,
+                        **style,
+                    )
                     ax_c.plot(one.timestep, one.crash_rate_pct, label=lab, **style)
             ax_r.set_title(f"{thesis_env_name(task)}, {algo}")
             ax_r.set_ylabel(f"return (rolling {window})")

@@ -32,6 +32,7 @@ Method(aggregation='Mean', windowing='Demo', window=5)
 >>> parse_method("MeanDemoW5").name, len(METHODS), len(STRATEGIES)
 ('MeanDemoW5', 24, 576)
 """
+
 from __future__ import annotations
 
 import difflib
@@ -61,7 +62,16 @@ Aggregation = Literal["Min", "Max", "Mean"]
 AGGREGATIONS: tuple[str, ...] = ("Min", "Max", "Mean")
 """How the K per-demonstration costs become one number."""
 
-WINDOWINGS: tuple[str, ...] = ("Full", "Same", "DemoW5", "DemoW10", "TrajW5", "TrajW10", "BothW5", "BothW10")
+WINDOWINGS: tuple[str, ...] = (
+    "Full",
+    "Same",
+    "DemoW5",
+    "DemoW10",
+    "TrajW5",
+    "TrajW10",
+    "BothW5",
+    "BothW10",
+)
 """The 8 windowings in the thesis's order (4.3.2)."""
 
 ALIASES: dict[str, str] = {"Both": "Same"}
@@ -134,7 +144,7 @@ def parse_method(name: str | Method) -> Method:
         raise _unknown("method", name, METHODS)
     for agg in AGGREGATIONS:
         if name.startswith(agg):
-            rest = ALIASES.get(name[len(agg):], name[len(agg):])
+            rest = ALIASES.get(name[len(agg) :], name[len(agg) :])
             if rest in WINDOWINGS:
                 if rest in ("Full", "Same"):
                     return Method(agg, rest, None)
@@ -222,5 +232,7 @@ def method_cost(
     x = np.asarray(trajectory, dtype=np.float64)
     if max_trajectory:
         x = x[-max_trajectory:]
-    costs = _dtw.dtw_batch(x, demos, metric=metric, x_window=m.x_window, y_window=m.y_window(len(x)))
+    costs = _dtw.dtw_batch(
+        x, demos, metric=metric, x_window=m.x_window, y_window=m.y_window(len(x))
+    )
     return aggregate(costs, m.aggregation)

@@ -10,6 +10,7 @@ default, every step with ``paper_compat=True`` or ``dynamics_train_every=1``).
 
 Used in: DEFENDER (thesis 4.3).
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
@@ -21,7 +22,12 @@ import pandas as pd
 
 from thesis_lib import dtw as _dtw
 from thesis_lib.defender.compare import GroupCost
-from thesis_lib.defender.demos import TRAJECTORIES, Trajectory, as_demonstration, trajectory_features
+from thesis_lib.defender.demos import (
+    TRAJECTORIES,
+    Trajectory,
+    as_demonstration,
+    trajectory_features,
+)
 from thesis_lib.defender.dynamics import DynamicsModel
 from thesis_lib.defender.methods import parse_method
 from thesis_lib.rl.callbacks import find_horizon, is_crash
@@ -110,7 +116,9 @@ class DefenderWrapper(gym.Wrapper):
     ) -> None:
         super().__init__(env)
         if trajectory not in TRAJECTORIES:
-            raise ValueError(f"Unknown trajectory {trajectory!r}. Valid: {', '.join(TRAJECTORIES)}.")
+            raise ValueError(
+                f"Unknown trajectory {trajectory!r}. Valid: {', '.join(TRAJECTORIES)}."
+            )
         obs_space, act_space = env.observation_space, env.action_space
         for name, space in (("observation", obs_space), ("action", act_space)):
             if not isinstance(space, gym.spaces.Box) or len(space.shape) != 1:
@@ -140,7 +148,9 @@ class DefenderWrapper(gym.Wrapper):
                     "the trajectory with both groups; make them with "
                     "thesis_lib.defender.collect_demonstrations or expert_demonstrations."
                 )
-            parsed = [as_demonstration(d, f"{group} demonstration {i}") for i, d in enumerate(demos)]
+            parsed = [
+                as_demonstration(d, f"{group} demonstration {i}") for i, d in enumerate(demos)
+            ]
             for i, d in enumerate(parsed):
                 if d.observations.shape[1] != self.obs_dim or d.actions.shape[1] != self.act_dim:
                     raise ValueError(
@@ -161,10 +171,14 @@ class DefenderWrapper(gym.Wrapper):
         if dynamics is None:
             kwargs = dict(dynamics_kwargs or {})
             if dynamics_train_every is not None and "train_every" in kwargs:
-                raise ValueError("Give the dynamics update rate once: dynamics_train_every or "
-                                 "dynamics_kwargs['train_every'], not both.")
+                raise ValueError(
+                    "Give the dynamics update rate once: dynamics_train_every or "
+                    "dynamics_kwargs['train_every'], not both."
+                )
             if "train_every" not in kwargs:
-                kwargs["train_every"] = dynamics_train_every or (1 if self.paper_compat else DYNAMICS_TRAIN_EVERY)
+                kwargs["train_every"] = dynamics_train_every or (
+                    1 if self.paper_compat else DYNAMICS_TRAIN_EVERY
+                )
             dynamics = DynamicsModel(self.obs_dim, self.act_dim, seed=seed, **kwargs)
         self.dynamics = dynamics
         self.horizon = find_horizon(env)
@@ -177,7 +191,9 @@ class DefenderWrapper(gym.Wrapper):
         self.n_real_steps = 0
 
     # ------------------------------------------------------------------ gymnasium API
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict]:
         """Reset the real environment and clear the trajectory."""
         obs, info = self.env.reset(seed=seed, options=options)
         self._safe.reset()
@@ -192,7 +208,9 @@ class DefenderWrapper(gym.Wrapper):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """Filter, then step the real environment or answer with the dynamics model."""
         if self._obs is None or self._ended:
-            raise RuntimeError("DefenderWrapper.step called before reset() or after the episode ended; call reset().")
+            raise RuntimeError(
+                "DefenderWrapper.step called before reset() or after the episode ended; call reset()."
+            )
         action_arr = np.asarray(action, dtype=np.float64).reshape(-1)
         self._step[: self.obs_dim] = self._obs.reshape(-1)
         if self.trajectory == "state_action":
@@ -202,10 +220,16 @@ class DefenderWrapper(gym.Wrapper):
         # Algorithm 2: step only if Safe(tau) < Unsafe(tau); the authors' code filtered only on ">".
         fire = cost_safe > cost_unsafe if self.paper_compat else not cost_safe < cost_unsafe
         if fire:
-            next_obs = self.dynamics.predict(self._obs, action_arr).astype(self.observation_space.dtype)
+            next_obs = self.dynamics.predict(self._obs, action_arr).astype(
+                self.observation_space.dtype
+            )
             reward, terminated, truncated = self.filter_reward, True, False
-            info: dict[str, Any] = {"filtered": True, "filter_step": self._length,
-                                    "cost_safe": cost_safe, "cost_unsafe": cost_unsafe}
+            info: dict[str, Any] = {
+                "filtered": True,
+                "filter_step": self._length,
+                "cost_safe": cost_safe,
+                "cost_unsafe": cost_unsafe,
+            }
             self.n_filtered_steps += 1
         else:
             next_obs, reward, terminated, truncated, info = self.env.step(action)
@@ -224,11 +248,18 @@ class DefenderWrapper(gym.Wrapper):
     # ------------------------------------------------------------------ episode log
     def _log(self, terminated: bool, truncated: bool, filtered: bool) -> None:
         crashed = not filtered and is_crash(terminated, self._length, self.horizon)
-        self._rows.append({
-            "episode": len(self._rows), "return": self._return, "length": self._length,
-            "terminated": terminated, "truncated": truncated, "crashed": crashed, "filtered": filtered,
-            "filter_step": self._length - 1 if filtered else None,
-        })
+        self._rows.append(
+            {
+                "episode": len(self._rows),
+                "return": self._return,
+                "length": self._length,
+                "terminated": terminated,
+                "truncated": truncated,
+                "crashed": crashed,
+                "filtered": filtered,
+                "filter_step": self._length - 1 if filtered else None,
+            }
+        )
 
     @property
     def episodes(self) -> pd.DataFrame:
@@ -240,6 +271,8 @@ class DefenderWrapper(gym.Wrapper):
         return pd.DataFrame(self._rows, columns=list(EPISODE_LOG_COLUMNS))
 
     def __repr__(self) -> str:
-        return (f"DefenderWrapper({self.env}, safe={self.n_safe}x{self.safe_method}, "
-                f"unsafe={self.n_unsafe}x{self.unsafe_method}, trajectory={self.trajectory!r}, "
-                f"max_trajectory={self.max_trajectory}, paper_compat={self.paper_compat})")
+        return (
+            f"DefenderWrapper({self.env}, safe={self.n_safe}x{self.safe_method}, "
+            f"unsafe={self.n_unsafe}x{self.unsafe_method}, trajectory={self.trajectory!r}, "
+            f"max_trajectory={self.max_trajectory}, paper_compat={self.paper_compat})"
+        )

@@ -17,6 +17,7 @@ returns the square root of the total).
 >>> dtw([0.0, 1.0, 2.0], [0.0, 0.0, 1.0, 2.0], metric="l1")
 0.0
 """
+
 from __future__ import annotations
 
 from thesis_lib.dtw._validation import METRICS, Metric

@@ -11,6 +11,7 @@ The helpers are inlined at numba IR level (``inline="always"``): left as calls, 
 ``local_cost + min(up, diag, left)``, so the full matrix, the two-row and the
 incremental kernels give bit-identical costs.
 """
+
 from __future__ import annotations
 
 import numpy as np

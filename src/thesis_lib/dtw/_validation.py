@@ -1,4 +1,5 @@
 """Input checks shared by the DTW wrappers: every error says what was expected and what to do."""
+
 from __future__ import annotations
 
 import difflib
@@ -13,7 +14,11 @@ Metric = Literal["l1", "l2", "sqeuclidean"]
 """Local cost d(x_i, y_j): ``"l1"`` sum of |x_i - y_j| (cityblock), ``"l2"`` Euclidean norm,
 ``"sqeuclidean"`` squared Euclidean norm."""
 
-METRICS: dict[str, int] = {"l1": _kernels.L1, "l2": _kernels.L2, "sqeuclidean": _kernels.SQEUCLIDEAN}
+METRICS: dict[str, int] = {
+    "l1": _kernels.L1,
+    "l2": _kernels.L2,
+    "sqeuclidean": _kernels.SQEUCLIDEAN,
+}
 
 _SCIPY_NAMES = {"cityblock": "l1", "manhattan": "l1", "euclidean": "l2", "minkowski": "l2"}
 
@@ -25,7 +30,11 @@ def metric_code(metric: str) -> int:
     except (KeyError, TypeError):
         valid = ", ".join(repr(m) for m in METRICS)
         name = str(metric).lower()
-        hint = [_SCIPY_NAMES[name]] if name in _SCIPY_NAMES else difflib.get_close_matches(name, list(METRICS), n=1, cutoff=0.5)
+        hint = (
+            [_SCIPY_NAMES[name]]
+            if name in _SCIPY_NAMES
+            else difflib.get_close_matches(name, list(METRICS), n=1, cutoff=0.5)
+        )
         did_you_mean = f" Did you mean {hint[0]!r}?" if hint else ""
         raise ValueError(f"Unknown metric {metric!r}.{did_you_mean} Valid: {valid}.") from None
 
@@ -34,7 +43,11 @@ def window_size(window: Any, name: str) -> int:
     """A window as the kernels take it: 0 for None (whole sequence), else a positive int."""
     if window is None:
         return 0
-    if isinstance(window, (bool, np.bool_)) or not isinstance(window, (int, np.integer)) or window < 1:
+    if (
+        isinstance(window, (bool, np.bool_))
+        or not isinstance(window, (int, np.integer))
+        or window < 1
+    ):
         raise ValueError(
             f"{name} must be a positive int (keep the last {name} steps) or None (whole sequence), "
             f"got {window!r}."
@@ -107,8 +120,12 @@ def pack(sequences: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
         if sequences.ndim == 3:
             k, m, f = sequences.shape
             if k == 0:
-                raise ValueError(f"{name} is empty (shape {sequences.shape}); pass at least one sequence.")
-            as_sequence(sequences[0], f"{name}[0]", check_finite=False)  # raises if non-numeric or empty
+                raise ValueError(
+                    f"{name} is empty (shape {sequences.shape}); pass at least one sequence."
+                )
+            as_sequence(
+                sequences[0], f"{name}[0]", check_finite=False
+            )  # raises if non-numeric or empty
             data = np.ascontiguousarray(sequences.reshape(k * m, f), dtype=np.float64)
             offsets = np.arange(0, k * m + 1, m, dtype=np.int64)
             check_all_finite(data, name, offsets)

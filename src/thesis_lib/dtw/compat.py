@@ -14,6 +14,7 @@ The thesis (2.4) says "in practice we use FastDTW"; the DEFENDER code calls
 - On cost ties it prefers (i-1, j), then (i, j-1), then the diagonal, so its path can differ
   from :func:`~thesis_lib.dtw.dtw_path` at equal cost.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -59,7 +60,9 @@ def fastdtw_cost(x: ArrayLike, y: ArrayLike, *, radius: int = 1, metric: Metric 
     try:
         from fastdtw import fastdtw
     except ImportError as err:  # pragma: no cover - depends on the environment
-        raise ImportError("fastdtw_cost needs the fastdtw package: pip install fastdtw==0.3.4") from err
+        raise ImportError(
+            "fastdtw_cost needs the fastdtw package: pip install fastdtw==0.3.4"
+        ) from err
     dist = {0: 1, 1: 2, 2: _sqeuclidean}[code]
     cost, _ = fastdtw(xs, ys, radius=int(radius), dist=dist)
     return float(cost)

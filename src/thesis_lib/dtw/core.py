@@ -4,6 +4,7 @@ The recursion is the thesis's: D is (N+1) x (M+1), D[0, :] = D[:, 0] = inf, D[0,
 D[i, j] = d(x_i, y_j) + min(D[i-1, j], D[i-1, j-1], D[i, j-1]), and the cost is D[N, M].
 No step weights, no normalisation by path length, no band (dtw-python's ``symmetric1``).
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence

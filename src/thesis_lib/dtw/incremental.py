@@ -1,4 +1,5 @@
 """DTW of a growing query against fixed references, one step at a time (DEFENDER, thesis 4.3)."""
+
 from __future__ import annotations
 
 from collections.abc import Sequence

@@ -1,5 +1,6 @@
 """Music-to-dance translation (thesis chapter 6): audio features, poses -> UR3 joint angles,
 AIST++/PhantomDance readers, the default offline data set, MDLT-T and MDLT-M."""
+
 from __future__ import annotations
 
 # --- data side (audio, angles, readers, sync, default data set) ---
@@ -13,8 +14,8 @@ from .angles import (
     pose_to_ur3_angles,
 )
 from .audio import (
-    N_FEATURES,
     FEATURE_SLICES,
+    N_FEATURES,
     AudioError,
     FeatureScaler,
     audio_features,
@@ -22,16 +23,6 @@ from .audio import (
     fit_feature_scaler,
     load_audio,
 )
-from .readers import (
-    AIST_GENRES,
-    DanceSequence,
-    DatasetLayoutError,
-    load_aist,
-    load_dance_dataset,
-    load_phantomdance,
-)
-from .sync import nearest_pose_indices, synchronize
-from .synth import GENRES, default_dataset
 
 # --- model side (models, metrics, training, dance command) ---
 from .dance import DanceResult, animate_arm, dance, plot_angles, ur3_joint_positions
@@ -56,4 +47,14 @@ from .metrics import (
     mae_degrees,
 )
 from .models import MDLTConfig, MDLTMamba, MDLTTransformer, build_model
+from .readers import (
+    AIST_GENRES,
+    DanceSequence,
+    DatasetLayoutError,
+    load_aist,
+    load_dance_dataset,
+    load_phantomdance,
+)
+from .sync import nearest_pose_indices, synchronize
+from .synth import GENRES, default_dataset
 from .train import DanceWindows, MDLTTrainer, load_checkpoint, save_checkpoint

@@ -40,6 +40,7 @@ Deviations from the authors' code (kept behind ``paper_compat=True``):
   index 42); without the SMPL model files the skeleton's hand joint (23) is used.
   :func:`smplx_fingertip_joints` uses ``smplx`` when a user has the model files.
 """
+
 from __future__ import annotations
 
 from typing import NamedTuple
@@ -139,11 +140,15 @@ def forward_kinematics(
     if poses.ndim == 2 and poses.shape[1] == 72:
         poses = poses.reshape(-1, 24, 3)
     if poses.ndim != 3 or poses.shape[1:] != (24, 3):
-        raise ValueError(f"forward_kinematics expects poses of shape (T, 72) or (T, 24, 3), got {poses.shape}.")
+        raise ValueError(
+            f"forward_kinematics expects poses of shape (T, 72) or (T, 24, 3), got {poses.shape}."
+        )
     T = poses.shape[0]
     rest = REST_JOINTS if rest_joints is None else np.asarray(rest_joints, dtype=np.float64)
     offsets = rest - np.vstack([np.zeros(3), rest[list(PARENTS[1:])]])
-    glob = world_rotations(Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3))
+    glob = world_rotations(
+        Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3)
+    )
     pos = np.empty((T, 24, 3))
     pos[:, 0] = offsets[0]
     for j in range(1, 24):
@@ -241,7 +246,9 @@ def pose_to_ur3_angles(
     [[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, -90.0, 0.0]]
     """
     joints = _check_joints(joints)
-    hand_pt = joints[:, R_HAND] if hand is None else np.asarray(hand, dtype=np.float64).reshape(-1, 3)
+    hand_pt = (
+        joints[:, R_HAND] if hand is None else np.asarray(hand, dtype=np.float64).reshape(-1, 3)
+    )
     if hand_pt.shape[0] != joints.shape[0]:
         raise ValueError(f"hand must have shape ({joints.shape[0]}, 3), got {np.shape(hand)}.")
     if paper_compat:
@@ -252,7 +259,12 @@ def pose_to_ur3_angles(
     def body(p: np.ndarray) -> np.ndarray:
         return np.einsum("tij,tj->ti", R, p - mid)
 
-    sh, el, wr, hd = body(joints[:, R_SHOULDER]), body(joints[:, R_ELBOW]), body(joints[:, R_WRIST]), body(hand_pt)
+    sh, el, wr, hd = (
+        body(joints[:, R_SHOULDER]),
+        body(joints[:, R_ELBOW]),
+        body(joints[:, R_WRIST]),
+        body(hand_pt),
+    )
     u = _unit(el - sh, "upper arm")
     f = _unit(wr - el, "forearm")
     h = _unit(hd - wr, "hand")
@@ -305,12 +317,20 @@ def _paper_angles(joints: np.ndarray, hand: np.ndarray) -> np.ndarray:
                 return np.arccos(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b)))
 
             yz = np.array([u[1], u[2]])
-            out[t] = [ang(yz, np.array([-1.0, 0])), -ang(yz, np.array([0, -1.0])), -ang(u, f), -ang(f, h)]
+            out[t] = [
+                ang(yz, np.array([-1.0, 0])),
+                -ang(yz, np.array([0, -1.0])),
+                -ang(u, f),
+                -ang(f, h),
+            ]
     return out.astype(np.float32)
 
 
 def smplx_fingertip_joints(
-    model_path: str, poses: np.ndarray, trans: np.ndarray | None = None, scaling: float = 1.0,
+    model_path: str,
+    poses: np.ndarray,
+    trans: np.ndarray | None = None,
+    scaling: float = 1.0,
     gender: str = "male",
 ) -> np.ndarray:  # pragma: no cover - needs the SMPL model files, which cannot be shipped
     """(T, 45, 3) SMPL joints with fingertips from the real SMPL model (needs ``smplx`` + files).
@@ -322,7 +342,9 @@ def smplx_fingertip_joints(
         import smplx
         import torch
     except ImportError as e:
-        raise ImportError("smplx_fingertip_joints needs 'pip install smplx' and the SMPL model files.") from e
+        raise ImportError(
+            "smplx_fingertip_joints needs 'pip install smplx' and the SMPL model files."
+        ) from e
     poses = torch.as_tensor(np.asarray(poses, dtype=np.float32).reshape(-1, 72))
     model = smplx.SMPL(model_path=model_path, gender=gender.upper(), batch_size=poses.shape[0])
     out = model(global_orient=poses[:, :3], body_pose=poses[:, 3:],
@@ -375,7 +397,9 @@ def plot_angle_extraction(joints_frame: np.ndarray, ax=None, title: bool = True)
                 seg = pts[[p, j]]
                 a.plot(seg[:, 0], seg[:, 2], seg[:, 1], color="0.6", lw=1.5)
         a.scatter(pts[:, 0], pts[:, 2], pts[:, 1], color="0.3", s=8)
-        for (i, k), n, c in zip(zip(arm[:-1], arm[1:]), names, ["tab:red", "tab:orange", "tab:green"]):
+        for (i, k), n, c in zip(
+            zip(arm[:-1], arm[1:]), names, ["tab:red", "tab:orange", "tab:green"]
+        ):
             seg = pts[[i, k]]
             a.plot(seg[:, 0], seg[:, 2], seg[:, 1], color=c, lw=3, label=n)
         sh = pts[[L_SHOULDER, R_SHOULDER]]

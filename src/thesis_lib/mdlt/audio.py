@@ -25,13 +25,14 @@ Speed: the harmonic/percussive separation uses the same median filters as
 bottleneck's running median, several times faster than ``scipy.ndimage.median_filter``;
 the STFT is shared by the mel spectrogram and the separation. Thesis chapter 6.
 """
+
 from __future__ import annotations
 
 import hashlib
 import os
 import tempfile
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -124,7 +125,9 @@ def _check_signal(y: np.ndarray, where: str) -> np.ndarray:
             "first (y.mean(axis=0) for librosa's (channels, n) layout)."
         )
     if not np.all(np.isfinite(y)):
-        raise AudioError(f"{where}: the signal holds {int((~np.isfinite(y)).sum())} NaN/inf samples.")
+        raise AudioError(
+            f"{where}: the signal holds {int((~np.isfinite(y)).sum())} NaN/inf samples."
+        )
     if y.size < N_FFT:
         raise AudioError(f"{where}: {y.size} samples is too short; at least {N_FFT} are needed.")
     peak = float(np.max(np.abs(y)))
@@ -145,7 +148,9 @@ def _rolling_median(x: np.ndarray, axis: int, width: int = _HPSS_KERNEL) -> np.n
     """
     half = width // 2
     a = np.moveaxis(x, axis, -1)  # median along the last axis
-    padded = np.pad(a, [(0, 0)] * (a.ndim - 1) + [(half, half)], mode="symmetric")  # == scipy 'reflect'
+    padded = np.pad(
+        a, [(0, 0)] * (a.ndim - 1) + [(half, half)], mode="symmetric"
+    )  # == scipy 'reflect'
     try:
         import bottleneck as bn
 
@@ -153,7 +158,13 @@ def _rolling_median(x: np.ndarray, axis: int, width: int = _HPSS_KERNEL) -> np.n
     except ImportError:  # pragma: no cover - bottleneck is in requirements.txt
         import pandas as pd
 
-        med = pd.DataFrame(padded.T).rolling(width, center=True).median().to_numpy().T[..., half:-half]
+        med = (
+            pd.DataFrame(padded.T)
+            .rolling(width, center=True)
+            .median()
+            .to_numpy()
+            .T[..., half:-half]
+        )
     return np.moveaxis(med.astype(x.dtype, copy=False), -1, axis)
 
 
@@ -206,7 +217,9 @@ def audio_features(
 
     hop = HOP_LENGTH
     D = librosa.stft(y, n_fft=N_FFT, hop_length=hop)  # (1025, T) complex
-    mel = librosa.feature.melspectrogram(S=np.abs(D) ** 2, sr=target_sr, n_fft=N_FFT, hop_length=hop)
+    mel = librosa.feature.melspectrogram(
+        S=np.abs(D) ** 2, sr=target_sr, n_fft=N_FFT, hop_length=hop
+    )
     mfcc = librosa.feature.mfcc(S=librosa.power_to_db(mel, ref=np.max), n_mfcc=20)
     mfcc_delta = librosa.feature.delta(mfcc, width=3)
 
@@ -293,7 +306,9 @@ def check_feature_groups(groups: Iterable[str], where: str) -> None:
     """Raise ``ValueError`` naming ``where`` if a group is not a :data:`FEATURE_SLICES` name."""
     unknown = [g for g in groups if g not in FEATURE_SLICES]
     if unknown:
-        raise ValueError(f"Unknown feature group(s) {unknown} {where}. Valid: {', '.join(FEATURE_SLICES)}.")
+        raise ValueError(
+            f"Unknown feature group(s) {unknown} {where}. Valid: {', '.join(FEATURE_SLICES)}."
+        )
 
 
 class FeatureScaler:
@@ -310,7 +325,9 @@ class FeatureScaler:
     [[0.5, 0.1]]
     """
 
-    def __init__(self, low: float = 0.1, high: float = 0.9, clip: bool = False, mute: Sequence[str] = ()):
+    def __init__(
+        self, low: float = 0.1, high: float = 0.9, clip: bool = False, mute: Sequence[str] = ()
+    ):
         if not low < high:
             raise ValueError(f"FeatureScaler needs low < high, got low={low}, high={high}.")
         check_feature_groups(mute, "to mute")
@@ -321,7 +338,7 @@ class FeatureScaler:
         self.min_: np.ndarray | None = None
         self.max_: np.ndarray | None = None
 
-    def fit(self, features: Sequence[np.ndarray] | np.ndarray) -> "FeatureScaler":
+    def fit(self, features: Sequence[np.ndarray] | np.ndarray) -> FeatureScaler:
         """Fit the per-dimension minimum and maximum over a list of (T_i, D) arrays."""
         arrays = [features] if isinstance(features, np.ndarray) else list(features)
         if not arrays:
@@ -371,12 +388,19 @@ class FeatureScaler:
         }
 
     @classmethod
-    def from_state_dict(cls, state: dict) -> "FeatureScaler":
-        s = cls(low=state["low"], high=state["high"], clip=state.get("clip", False), mute=state.get("mute", ()))
+    def from_state_dict(cls, state: dict) -> FeatureScaler:
+        s = cls(
+            low=state["low"],
+            high=state["high"],
+            clip=state.get("clip", False),
+            mute=state.get("mute", ()),
+        )
         s.min_ = np.asarray(state["min"], dtype=np.float64)
         s.max_ = np.asarray(state["max"], dtype=np.float64)
         if s.min_.shape != s.max_.shape or s.min_.ndim != 1:
-            raise ValueError("FeatureScaler state: 'min' and 'max' must be 1-D lists of one length.")
+            raise ValueError(
+                "FeatureScaler state: 'min' and 'max' must be 1-D lists of one length."
+            )
         return s
 
 

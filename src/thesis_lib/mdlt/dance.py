@@ -10,6 +10,7 @@ values) with the last two joints at zero.
 
 Used in: MDLT chapter (thesis 6.5); ``thesis mdlt dance``.
 """
+
 from __future__ import annotations
 
 import os
@@ -19,7 +20,14 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-__all__ = ["JOINT_COLUMNS", "DanceResult", "animate_arm", "dance", "plot_angles", "ur3_joint_positions"]
+__all__ = [
+    "JOINT_COLUMNS",
+    "DanceResult",
+    "animate_arm",
+    "dance",
+    "plot_angles",
+    "ur3_joint_positions",
+]
 
 JOINT_COLUMNS = ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1")
 """The UR3 joints the four angles drive (radians)."""
@@ -41,10 +49,17 @@ class DanceResult(NamedTuple):
     """``time_s`` and one column per joint (what the CSV holds)."""
 
 
-def dance(audio: str | os.PathLike, checkpoint: str | os.PathLike, out: str | os.PathLike | None = None,
-          plot: str | os.PathLike | None = None, animation: str | os.PathLike | None = None,
-          device: str = "cpu", progress: bool = False, animation_fps: int = 15,
-          max_animation_s: float | None = 30.0) -> DanceResult:
+def dance(
+    audio: str | os.PathLike,
+    checkpoint: str | os.PathLike,
+    out: str | os.PathLike | None = None,
+    plot: str | os.PathLike | None = None,
+    animation: str | os.PathLike | None = None,
+    device: str = "cpu",
+    progress: bool = False,
+    animation_fps: int = 15,
+    max_animation_s: float | None = 30.0,
+) -> DanceResult:
     """Translate the music in ``audio`` into UR3 joint angles with a trained MDLT checkpoint.
 
     Used in: MDLT chapter (thesis 6.5); ``thesis mdlt dance``.
@@ -77,7 +92,9 @@ def dance(audio: str | os.PathLike, checkpoint: str | os.PathLike, out: str | os
     feats = scaler.transform(audio_features(audio, fps=fps))
     angles = np.asarray(model.generate(feats, progress=progress), dtype=np.float64)
     times = np.arange(len(angles)) / fps
-    frame = pd.DataFrame({"time_s": times, **{c: angles[:, j] for j, c in enumerate(JOINT_COLUMNS)}})
+    frame = pd.DataFrame(
+        {"time_s": times, **{c: angles[:, j] for j, c in enumerate(JOINT_COLUMNS)}}
+    )
     if out is not None:
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         frame.to_csv(out, index=False, float_format="%.6f")
@@ -88,11 +105,19 @@ def dance(audio: str | os.PathLike, checkpoint: str | os.PathLike, out: str | os
         fig.savefig(plot, dpi=110, bbox_inches="tight")
         plt.close(fig)
     if animation is not None:
-        animate_arm(angles, fps=fps, path=animation, animation_fps=animation_fps, max_seconds=max_animation_s)
+        animate_arm(
+            angles,
+            fps=fps,
+            path=animation,
+            animation_fps=animation_fps,
+            max_seconds=max_animation_s,
+        )
     return DanceResult(angles, times, frame)
 
 
-def plot_angles(angles: np.ndarray, fps: int = 60, true: np.ndarray | None = None, title: str = "", axes=None):
+def plot_angles(
+    angles: np.ndarray, fps: int = 60, true: np.ndarray | None = None, title: str = "", axes=None
+):
     """Four stacked curves of joint angle (rad) against time; ``true`` drawn dashed beside.
 
     Used in: MDLT chapter (thesis 6.5).
@@ -102,7 +127,9 @@ def plot_angles(angles: np.ndarray, fps: int = 60, true: np.ndarray | None = Non
     angles = np.asarray(angles)
     t = np.arange(len(angles)) / fps
     if axes is None:
-        fig, axes = plt.subplots(angles.shape[1], 1, figsize=(8, 1.6 * angles.shape[1]), sharex=True)
+        fig, axes = plt.subplots(
+            angles.shape[1], 1, figsize=(8, 1.6 * angles.shape[1]), sharex=True
+        )
     else:
         fig = np.ravel(axes)[0].figure
     for j, ax in enumerate(np.ravel(axes)):
@@ -131,15 +158,25 @@ def ur3_joint_positions(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     lead = q.shape[:-1]
     full = np.zeros(lead + (6,))
-    full[..., :q.shape[-1]] = q[..., :6]
+    full[..., : q.shape[-1]] = q[..., :6]
     T = np.broadcast_to(np.eye(4), lead + (4, 4)).copy()
     points = [T[..., :3, 3].copy()]
     for i in range(6):
         ct, st = np.cos(full[..., i]), np.sin(full[..., i])
         ca, sa = np.cos(_UR3_ALPHA[i]), np.sin(_UR3_ALPHA[i])
         A = np.zeros(lead + (4, 4))
-        A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = ct, -st * ca, st * sa, _UR3_A[i] * ct
-        A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = st, ct * ca, -ct * sa, _UR3_A[i] * st
+        A[..., 0, 0], A[..., 0, 1], A[..., 0, 2], A[..., 0, 3] = (
+            ct,
+            -st * ca,
+            st * sa,
+            _UR3_A[i] * ct,
+        )
+        A[..., 1, 0], A[..., 1, 1], A[..., 1, 2], A[..., 1, 3] = (
+            st,
+            ct * ca,
+            -ct * sa,
+            _UR3_A[i] * st,
+        )
         A[..., 2, 1], A[..., 2, 2], A[..., 2, 3] = sa, ca, _UR3_D[i]
         A[..., 3, 3] = 1.0
         T = T @ A
@@ -147,8 +184,14 @@ def ur3_joint_positions(q: np.ndarray) -> np.ndarray:
     return np.stack(points, axis=-2)
 
 
-def animate_arm(angles: np.ndarray, fps: int = 60, path: str | os.PathLike | None = None, animation_fps: int = 15,
-                max_seconds: float | None = 30.0, true: np.ndarray | None = None):
+def animate_arm(
+    angles: np.ndarray,
+    fps: int = 60,
+    path: str | os.PathLike | None = None,
+    animation_fps: int = 15,
+    max_seconds: float | None = 30.0,
+    true: np.ndarray | None = None,
+):
     """A matplotlib animation of the UR3 arm following ``angles (T, 4)``; saved when ``path`` is
     given (``.gif`` with Pillow, ``.html`` as a self-contained HTML5/JS player).
 
@@ -169,10 +212,20 @@ def animate_arm(angles: np.ndarray, fps: int = 60, path: str | os.PathLike | Non
     fig = plt.figure(figsize=(4.2, 4.2))
     ax = fig.add_subplot(projection="3d")
     reach = 0.55
-    ax.set(xlim=(-reach, reach), ylim=(-reach, reach), zlim=(0, 2 * reach), xlabel="x (m)", ylabel="y (m)",
-           zlabel="z (m)")
+    ax.set(
+        xlim=(-reach, reach),
+        ylim=(-reach, reach),
+        zlim=(0, 2 * reach),
+        xlabel="x (m)",
+        ylabel="y (m)",
+        zlabel="z (m)",
+    )
     ax.view_init(elev=20, azim=-60)
-    ghost = ax.plot([], [], [], "o-", color="0.6", lw=3, alpha=0.6, label="true")[0] if true is not None else None
+    ghost = (
+        ax.plot([], [], [], "o-", color="0.6", lw=3, alpha=0.6, label="true")[0]
+        if true is not None
+        else None
+    )
     (line,) = ax.plot([], [], [], "o-", color="tab:blue", lw=4, label="predicted")
     label = ax.text2D(0.02, 0.95, "", transform=ax.transAxes)
     if ghost is not None:

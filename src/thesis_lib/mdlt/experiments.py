@@ -15,14 +15,16 @@ seen during training; we report the final model's (and the best over training as
 
 Used in: MDLT chapter (thesis 6.5).
 """
+
 from __future__ import annotations
 
 import dataclasses
 import io
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, Sequence
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -52,9 +54,15 @@ __all__ = [
     "train_model",
 ]
 
-VARIANT_LABELS = {"transformer": "MDLT-T", "mamba": "MDLT-M", "mamba_audio": "MDLT-M (audio only)",
-                  "mean_pose": "mean pose",
-                  "last_pose": "last pose", "random": "random", "genre_mean": "genre mean pose (oracle)"}
+VARIANT_LABELS = {
+    "transformer": "MDLT-T",
+    "mamba": "MDLT-M",
+    "mamba_audio": "MDLT-M (audio only)",
+    "mean_pose": "mean pose",
+    "last_pose": "last pose",
+    "random": "random",
+    "genre_mean": "genre mean pose (oracle)",
+}
 """Method names as the tables print them."""
 BEAT_COLUMN = 53
 """Index of the beat one-hot in the raw 438-d features (MFCC 20 + delta 20 + chroma 12 + onset 1)."""
@@ -80,8 +88,16 @@ def table_6_1() -> pd.DataFrame:
     Used in: MDLT chapter (thesis 6.3.2).
     """
     df = pd.read_csv(io.StringIO(_TABLE_6_1), sep="\t", dtype=str, keep_default_na=False)
-    mdlt = {"Method": "MDLT (ours, 438-d)", "Chromagram": "x", "MFCC": "x", "MFCC Delta": "x",
-            "Mel Spectrogram": "", "Onset Strength": "x", "Tempogram": "x", "Others": "x"}
+    mdlt = {
+        "Method": "MDLT (ours, 438-d)",
+        "Chromagram": "x",
+        "MFCC": "x",
+        "MFCC Delta": "x",
+        "Mel Spectrogram": "",
+        "Onset Strength": "x",
+        "Tempogram": "x",
+        "Others": "x",
+    }
     return pd.concat([df, pd.DataFrame([mdlt])], ignore_index=True)
 
 
@@ -166,12 +182,16 @@ class MDLTExperimentConfig:
             raise ValueError(f"Unknown data_size {self.data_size!r}. Valid: smoke, full.")
         unknown = [v for v in self.variants if v not in ("transformer", "mamba", "mamba_audio")]
         if unknown or not self.variants:
-            raise ValueError(f"Unknown variant(s) {unknown or self.variants!r}. Valid: transformer, mamba, mamba_audio.")
+            raise ValueError(
+                f"Unknown variant(s) {unknown or self.variants!r}. Valid: transformer, mamba, mamba_audio."
+            )
         from thesis_lib.mdlt.audio import check_feature_groups
 
         check_feature_groups(self.mute_features, "in mute_features")
         if not 1 <= self.n_folds <= 6:
-            raise ValueError(f"Expect 1 <= n_folds <= 6 (leave one of 6 pieces out), actually: {self.n_folds!r}.")
+            raise ValueError(
+                f"Expect 1 <= n_folds <= 6 (leave one of 6 pieces out), actually: {self.n_folds!r}."
+            )
         if not 1 <= self.pd_folds <= 10:
             raise ValueError(f"Expect 1 <= pd_folds <= 10, actually: {self.pd_folds!r}.")
         for name in ("iterations", "batch_size", "warmup_steps", "K_transformer", "K_mamba"):
@@ -182,8 +202,13 @@ class MDLTExperimentConfig:
         """The :class:`MDLTConfig` of ``variant`` under these parameters."""
         mamba = variant in ("mamba", "mamba_audio")
         return MDLTConfig(
-            variant="mamba" if mamba else "transformer", K=self.K_mamba if mamba else self.K_transformer,
-            d_model=self.d_model, n_layers=self.n_layers, n_heads=self.n_heads, d_ff=self.d_ff, dropout=self.dropout,
+            variant="mamba" if mamba else "transformer",
+            K=self.K_mamba if mamba else self.K_transformer,
+            d_model=self.d_model,
+            n_layers=self.n_layers,
+            n_heads=self.n_heads,
+            d_ff=self.d_ff,
+            dropout=self.dropout,
             max_timestep=max_timestep,
             pose_input=variant == "mamba" and not self.paper_compat,
         )
@@ -191,10 +216,19 @@ class MDLTExperimentConfig:
     def train_config(self, checkpoint_path: str | None = None) -> TrainConfig:
         """The :class:`TrainConfig` of every model."""
         return TrainConfig(
-            iterations=self.iterations, batch_size=self.batch_size, lr=self.lr, weight_decay=self.weight_decay,
-            warmup_steps=self.warmup_steps, grad_clip=self.grad_clip, eval_every=self.eval_every,
-            checkpoint_path=checkpoint_path, checkpoint_every=max(self.eval_every, 1000), resume=True,
-            seed=self.seed, device=self.device, progress=self.progress,
+            iterations=self.iterations,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            weight_decay=self.weight_decay,
+            warmup_steps=self.warmup_steps,
+            grad_clip=self.grad_clip,
+            eval_every=self.eval_every,
+            checkpoint_path=checkpoint_path,
+            checkpoint_every=max(self.eval_every, 1000),
+            resume=True,
+            seed=self.seed,
+            device=self.device,
+            progress=self.progress,
         )
 
 
@@ -217,8 +251,12 @@ def genre_label(genre: str) -> str:
     return g
 
 
-def load_sequences(layout: Literal["aist", "phantomdance"], root: str | None = None, size: str = "full",
-                   seed: int = 0) -> list:
+def load_sequences(
+    layout: Literal["aist", "phantomdance"],
+    root: str | None = None,
+    size: str = "full",
+    seed: int = 0,
+) -> list:
     """Music-dance pairs of ``layout``: read ``root``, or make the default data set first.
 
     Used in: MDLT chapter (thesis 6.3).
@@ -248,11 +286,15 @@ def aist_folds(sequences: Sequence, genre: str | None, n_folds: int = 6) -> list
     if genre is not None:
         label = genre_label(genre)
         if label not in by_genre:
-            raise ValueError(f"No sequences of genre {genre!r}. Genres present: {', '.join(sorted(by_genre))}.")
+            raise ValueError(
+                f"No sequences of genre {genre!r}. Genres present: {', '.join(sorted(by_genre))}."
+            )
         by_genre = {label: by_genre[label]}
     n_min = min(len(v) for v in by_genre.values())
     if n_min < 2:
-        raise ValueError(f"Leave-one-music-out needs >= 2 pieces per genre; some genre has {n_min}.")
+        raise ValueError(
+            f"Leave-one-music-out needs >= 2 pieces per genre; some genre has {n_min}."
+        )
     folds = []
     for i in range(min(n_folds, n_min)):
         val = [v[i] for v in by_genre.values()]
@@ -261,7 +303,9 @@ def aist_folds(sequences: Sequence, genre: str | None, n_folds: int = 6) -> list
     return folds
 
 
-def phantomdance_folds(sequences: Sequence, n_folds: int = 10, run: int | None = None) -> list[tuple[list, list]]:
+def phantomdance_folds(
+    sequences: Sequence, n_folds: int = 10, run: int | None = None
+) -> list[tuple[list, list]]:
     """Thesis 6.5.3: songs sorted by name, fold ``i`` validates on the ``i``-th tenth.
 
     ``run``: only the first ``run`` folds (default all).
@@ -272,8 +316,8 @@ def phantomdance_folds(sequences: Sequence, n_folds: int = 10, run: int | None =
     bounds = np.linspace(0, len(seqs), n_folds + 1).round().astype(int)
     folds = []
     for i in range(n_folds if run is None else min(run, n_folds)):
-        val = seqs[bounds[i]:bounds[i + 1]]
-        train = seqs[:bounds[i]] + seqs[bounds[i + 1]:]
+        val = seqs[bounds[i] : bounds[i + 1]]
+        train = seqs[: bounds[i]] + seqs[bounds[i + 1] :]
         folds.append((train, val))
     return folds
 
@@ -281,23 +325,38 @@ def phantomdance_folds(sequences: Sequence, n_folds: int = 10, run: int | None =
 def _fit_scaler(train: Sequence, val: Sequence, paper_compat: bool, mute: Sequence[str] = ()):
     from thesis_lib.mdlt.audio import fit_feature_scaler
 
-    return fit_feature_scaler([s.features for s in train], [s.features for s in val], paper_compat=paper_compat,
-                              mute=tuple(mute))
+    return fit_feature_scaler(
+        [s.features for s in train],
+        [s.features for s in val],
+        paper_compat=paper_compat,
+        mute=tuple(mute),
+    )
 
 
 # ----------------------------------------------------------------------------------------------
 # one model, one fold
 
 
-def train_model(variant: str, train: Sequence, val: Sequence, cfg: MDLTExperimentConfig, scaler: Any = None,
-                checkpoint_path: str | None = None, seed_offset: int = 0) -> tuple[torch.nn.Module, pd.DataFrame, Any]:
+def train_model(
+    variant: str,
+    train: Sequence,
+    val: Sequence,
+    cfg: MDLTExperimentConfig,
+    scaler: Any = None,
+    checkpoint_path: str | None = None,
+    seed_offset: int = 0,
+) -> tuple[torch.nn.Module, pd.DataFrame, Any]:
     """Train one MDLT model on ``train`` (validating on ``val`` every ``cfg.eval_every`` steps).
 
     Returns ``(model in eval mode, training history, scaler)``.
 
     Used in: MDLT chapter (thesis 6.5).
     """
-    scaler = scaler if scaler is not None else _fit_scaler(train, val, cfg.paper_compat, cfg.mute_features)
+    scaler = (
+        scaler
+        if scaler is not None
+        else _fit_scaler(train, val, cfg.paper_compat, cfg.mute_features)
+    )
     feats = [scaler.transform(s.features).astype(np.float32) for s in train]
     angles = [np.asarray(s.angles, np.float32) for s in train]
     val_feats = [scaler.transform(s.features).astype(np.float32) for s in val]
@@ -310,8 +369,15 @@ def train_model(variant: str, train: Sequence, val: Sequence, cfg: MDLTExperimen
         model = build_model(mcfg)
         if cfg.init_mean_pose:
             init_output_at(model, np.concatenate(angles).mean(0))
-    windows = DanceWindows(feats, angles, K=mcfg.K, variant=mcfg.variant, seed=seed,
-                           single_frame=cfg.paper_compat and mcfg.variant == "mamba", pose_noise=cfg.pose_noise)
+    windows = DanceWindows(
+        feats,
+        angles,
+        K=mcfg.K,
+        variant=mcfg.variant,
+        seed=seed,
+        single_frame=cfg.paper_compat and mcfg.variant == "mamba",
+        pose_noise=cfg.pose_noise,
+    )
 
     def eval_fn(m):  # mean AJE over the validation songs (logged as the trainer's eval_return)
         preds = m.generate(val_feats)
@@ -319,9 +385,15 @@ def train_model(variant: str, train: Sequence, val: Sequence, cfg: MDLTExperimen
 
     tcfg = cfg.train_config(checkpoint_path)
     tcfg.seed = seed
-    meta = {"variant": variant, "fps": 60, "train_songs": [str(s.name) for s in train],
-            "val_songs": [str(s.name) for s in val]}
-    trainer = MDLTTrainer(model, windows, tcfg, eval_fn=eval_fn if cfg.eval_every else None, scaler=scaler, meta=meta)
+    meta = {
+        "variant": variant,
+        "fps": 60,
+        "train_songs": [str(s.name) for s in train],
+        "val_songs": [str(s.name) for s in val],
+    }
+    trainer = MDLTTrainer(
+        model, windows, tcfg, eval_fn=eval_fn if cfg.eval_every else None, scaler=scaler, meta=meta
+    )
     history = trainer.train()
     model.eval()
     return model, history, scaler
@@ -338,8 +410,14 @@ class FoldResult(NamedTuple):
     """Variant -> training history."""
 
 
-def run_fold(train: Sequence, val: Sequence, cfg: MDLTExperimentConfig, experiment: str = "", fold: int = 0,
-             checkpoint_prefix: str | None = None) -> FoldResult:
+def run_fold(
+    train: Sequence,
+    val: Sequence,
+    cfg: MDLTExperimentConfig,
+    experiment: str = "",
+    fold: int = 0,
+    checkpoint_prefix: str | None = None,
+) -> FoldResult:
     """Train every variant on one split, translate the validation songs, score them and the
     baselines. Rows: ``experiment, fold, method, song, aje, mae_deg, fid, beat_align, aje_best,
     train_s``.
@@ -356,22 +434,41 @@ def run_fold(train: Sequence, val: Sequence, cfg: MDLTExperimentConfig, experime
     for k, variant in enumerate(cfg.variants):
         ckpt = f"{checkpoint_prefix}_{variant}.pt" if checkpoint_prefix else None
         t0 = time.perf_counter()
-        model, history, _ = train_model(variant, train, val, cfg, scaler=scaler, checkpoint_path=ckpt,
-                                        seed_offset=1000 * fold + k)
+        model, history, _ = train_model(
+            variant,
+            train,
+            val,
+            cfg,
+            scaler=scaler,
+            checkpoint_path=ckpt,
+            seed_offset=1000 * fold + k,
+        )
         train_s = time.perf_counter() - t0
-        preds[variant] = model.generate([scaler.transform(s.features).astype(np.float32) for s in val])
-        best = history["eval_return"].min() if "eval_return" in history and history["eval_return"].notna().any() else np.nan
+        preds[variant] = model.generate(
+            [scaler.transform(s.features).astype(np.float32) for s in val]
+        )
+        best = (
+            history["eval_return"].min()
+            if "eval_return" in history and history["eval_return"].notna().any()
+            else np.nan
+        )
         extra[variant] = {"aje_best": float(best), "train_s": train_s}
         histories[variant] = history
     for name, fn in BASELINES.items():
-        preds[name] = fn([np.asarray(s.angles) for s in train], [len(t) for t in true], seed=cfg.seed + fold)
+        preds[name] = fn(
+            [np.asarray(s.angles) for s in train], [len(t) for t in true], seed=cfg.seed + fold
+        )
     # an oracle reference, not a method: the mean training pose of the validation song's genre
     # (told the genre, which a translator must hear); equal to the mean pose in per-genre rows
     by_genre: dict[str, list[np.ndarray]] = {}
     for s in train:
         by_genre.setdefault(genre_label(s.genre), []).append(np.asarray(s.angles))
-    preds["genre_mean"] = [mean_pose_baseline(by_genre.get(genre_label(s.genre), [np.asarray(x.angles) for x in train]),
-                                              [len(t)])[0] for s, t in zip(val, true)]
+    preds["genre_mean"] = [
+        mean_pose_baseline(
+            by_genre.get(genre_label(s.genre), [np.asarray(x.angles) for x in train]), [len(t)]
+        )[0]
+        for s, t in zip(val, true)
+    ]
     frames = []
     for method, p in preds.items():
         df = evaluate_songs(p, true, names, beats)
@@ -399,7 +496,9 @@ class TableRun(NamedTuple):
     sequences), ``predictions`` (method -> list of arrays), ``histories``."""
 
 
-def _run_experiments(splits: list[tuple[str, int, list, list]], cfg: MDLTExperimentConfig) -> TableRun:
+def _run_experiments(
+    splits: list[tuple[str, int, list, list]], cfg: MDLTExperimentConfig
+) -> TableRun:
     frames, examples = [], {}
     bar = tqdm(splits, desc="folds", disable=not cfg.progress)
     for experiment, fold, train, val in bar:
@@ -410,8 +509,12 @@ def _run_experiments(splits: list[tuple[str, int, list, list]], cfg: MDLTExperim
         result = run_fold(train, val, cfg, experiment, fold, checkpoint_prefix=prefix)
         frames.append(result.rows)
         if fold == 0:
-            examples = {"experiment": experiment, "songs": val, "predictions": result.predictions,
-                        "histories": result.histories}
+            examples = {
+                "experiment": experiment,
+                "songs": val,
+                "predictions": result.predictions,
+                "histories": result.histories,
+            }
     return TableRun(pd.concat(frames, ignore_index=True), examples)
 
 
@@ -440,8 +543,13 @@ def run_table_6_3(cfg: MDLTExperimentConfig, sequences: Sequence | None = None) 
     Used in: MDLT chapter (thesis 6.5.3).
     """
     if sequences is None:
-        sequences = load_sequences("phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed)
-    splits = [("PhantomDance", i, tr, va) for i, (tr, va) in enumerate(phantomdance_folds(sequences, 10, cfg.pd_folds))]
+        sequences = load_sequences(
+            "phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed
+        )
+    splits = [
+        ("PhantomDance", i, tr, va)
+        for i, (tr, va) in enumerate(phantomdance_folds(sequences, 10, cfg.pd_folds))
+    ]
     return _run_experiments(splits, cfg)
 
 
@@ -454,15 +562,30 @@ def summarize(rows: pd.DataFrame) -> pd.DataFrame:
 
     Used in: MDLT chapter (thesis 6.5).
     """
-    per_fold = rows.groupby(["experiment", "method", "fold"], sort=False)[
-        ["aje", "fid", "mae_deg", "beat_align", "aje_best"]].mean().reset_index()
+    per_fold = (
+        rows.groupby(["experiment", "method", "fold"], sort=False)[
+            ["aje", "fid", "mae_deg", "beat_align", "aje_best"]
+        ]
+        .mean()
+        .reset_index()
+    )
     g = per_fold.groupby(["experiment", "method"], sort=False)
-    out = pd.DataFrame({
-        "aje_rad_mean": g["aje"].mean(), "aje_rad_std": g["aje"].std(ddof=0),
-        "fid_mean": g["fid"].mean(), "fid_std": g["fid"].std(ddof=0),
-        "mae_deg_mean": g["mae_deg"].mean(), "beat_align_mean": g["beat_align"].mean(),
-        "aje_best_mean": g["aje_best"].mean(), "n_folds": g["fold"].nunique(),
-    }).reset_index().rename(columns={"experiment": "genre", "method": "variant"})
+    out = (
+        pd.DataFrame(
+            {
+                "aje_rad_mean": g["aje"].mean(),
+                "aje_rad_std": g["aje"].std(ddof=0),
+                "fid_mean": g["fid"].mean(),
+                "fid_std": g["fid"].std(ddof=0),
+                "mae_deg_mean": g["mae_deg"].mean(),
+                "beat_align_mean": g["beat_align"].mean(),
+                "aje_best_mean": g["aje_best"].mean(),
+                "n_folds": g["fold"].nunique(),
+            }
+        )
+        .reset_index()
+        .rename(columns={"experiment": "genre", "method": "variant"})
+    )
     return out
 
 
@@ -496,14 +619,23 @@ class MDLTChapterConfig(MDLTExperimentConfig):
             raise ValueError(f"Expect 0 <= compat_folds <= 6, actually: {self.compat_folds!r}.")
         self.probe_config()  # checks the probe's groups and sizes
 
-    def probe_config(self) -> "MDLTExperimentConfig":
+    def probe_config(self) -> MDLTExperimentConfig:
         """The probe's experiment: "All Genres" only, MDLT-M (audio only), ``probe_mute`` muted,
         the probe's batch size, updates and clipping, checkpoints under ``checkpoint_dir/probe``;
         everything else as this config."""
-        return MDLTExperimentConfig(**{
-            **{f.name: getattr(self, f.name) for f in dataclasses.fields(MDLTExperimentConfig)},
-            "variants": ["mamba_audio"], "mute_features": list(self.probe_mute), "genres": [], "all_genres": True,
-            "batch_size": self.probe_batch_size, "iterations": self.probe_iterations,
-            "grad_clip": self.probe_grad_clip,
-            # its own folder: the main run's checkpoints of the same name must not be resumed
-            "checkpoint_dir": str(Path(self.checkpoint_dir) / "probe") if self.checkpoint_dir else None})
+        return MDLTExperimentConfig(
+            **{
+                **{f.name: getattr(self, f.name) for f in dataclasses.fields(MDLTExperimentConfig)},
+                "variants": ["mamba_audio"],
+                "mute_features": list(self.probe_mute),
+                "genres": [],
+                "all_genres": True,
+                "batch_size": self.probe_batch_size,
+                "iterations": self.probe_iterations,
+                "grad_clip": self.probe_grad_clip,
+                # its own folder: the main run's checkpoints of the same name must not be resumed
+                "checkpoint_dir": str(Path(self.checkpoint_dir) / "probe")
+                if self.checkpoint_dir
+                else None,
+            }
+        )

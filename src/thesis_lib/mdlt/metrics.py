@@ -15,10 +15,11 @@
 
 Used in: MDLT chapter (thesis 6.5).
 """
+
 from __future__ import annotations
 
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
@@ -42,8 +43,10 @@ __all__ = [
 def _pair(pred: np.ndarray, true: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pred, true = np.asarray(pred, dtype=np.float64), np.asarray(true, dtype=np.float64)
     if pred.shape != true.shape or pred.ndim != 2 or len(pred) == 0:
-        raise ValueError(f"Expect predicted and true angles of the same shape (T, J), T >= 1; got "
-                         f"{pred.shape} and {true.shape}.")
+        raise ValueError(
+            f"Expect predicted and true angles of the same shape (T, J), T >= 1; got "
+            f"{pred.shape} and {true.shape}."
+        )
     if not (np.isfinite(pred).all() and np.isfinite(true).all()):
         raise ValueError("Angles contain NaN or inf.")
     return pred, true
@@ -89,7 +92,9 @@ def frechet_distance(x: np.ndarray, y: np.ndarray, eps: float = 1e-6) -> float:
     """
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     if x.ndim != 2 or y.ndim != 2 or x.shape[1] != y.shape[1] or len(x) < 2 or len(y) < 2:
-        raise ValueError(f"Expect two arrays (T, J) with the same J and T >= 2, got {x.shape} and {y.shape}.")
+        raise ValueError(
+            f"Expect two arrays (T, J) with the same J and T >= 2, got {x.shape} and {y.shape}."
+        )
     mu_x, mu_y = x.mean(0), y.mean(0)
     s_x, s_y = np.atleast_2d(np.cov(x, rowvar=False)), np.atleast_2d(np.cov(y, rowvar=False))
     with warnings.catch_warnings():  # a singular product (constant prediction) is handled below
@@ -129,7 +134,12 @@ def beat_alignment(angles: np.ndarray, music_beats: np.ndarray, sigma: float = 3
     Used in: MDLT chapter (thesis 6.5).
     """
     beats = np.asarray(music_beats)
-    if beats.ndim == 1 and beats.dtype != np.int64 and len(beats) == len(angles) and set(np.unique(beats)) <= {0, 1}:
+    if (
+        beats.ndim == 1
+        and beats.dtype != np.int64
+        and len(beats) == len(angles)
+        and set(np.unique(beats)) <= {0, 1}
+    ):
         beats = np.flatnonzero(beats > 0.5)
     beats = beats.astype(np.int64)
     kin = kinematic_beats(angles)
@@ -139,21 +149,34 @@ def beat_alignment(angles: np.ndarray, music_beats: np.ndarray, sigma: float = 3
     return float(np.mean(np.exp(-(d.astype(np.float64) ** 2) / (2.0 * sigma**2))))
 
 
-def evaluate_songs(preds: Sequence[np.ndarray], trues: Sequence[np.ndarray], names: Sequence[str] | None = None,
-                   music_beats: Sequence[np.ndarray] | None = None) -> pd.DataFrame:
+def evaluate_songs(
+    preds: Sequence[np.ndarray],
+    trues: Sequence[np.ndarray],
+    names: Sequence[str] | None = None,
+    music_beats: Sequence[np.ndarray] | None = None,
+) -> pd.DataFrame:
     """One row per song: ``song, aje, mae_deg, fid, beat_align``; average the rows for the table.
 
     Used in: MDLT chapter (thesis 6.5).
     """
     if len(preds) != len(trues) or len(preds) == 0:
-        raise ValueError(f"Expect as many predicted as true sequences (>= 1), got {len(preds)} and {len(trues)}.")
+        raise ValueError(
+            f"Expect as many predicted as true sequences (>= 1), got {len(preds)} and {len(trues)}."
+        )
     names = list(names) if names is not None else [str(i) for i in range(len(preds))]
     rows = []
     for i, (p, t) in enumerate(zip(preds, trues)):
-        rows.append({
-            "song": names[i], "aje": aje(p, t), "mae_deg": mae_degrees(p, t), "fid": frechet_distance(p, t),
-            "beat_align": beat_alignment(p, music_beats[i]) if music_beats is not None else float("nan"),
-        })
+        rows.append(
+            {
+                "song": names[i],
+                "aje": aje(p, t),
+                "mae_deg": mae_degrees(p, t),
+                "fid": frechet_distance(p, t),
+                "beat_align": beat_alignment(p, music_beats[i])
+                if music_beats is not None
+                else float("nan"),
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -161,7 +184,9 @@ def evaluate_songs(preds: Sequence[np.ndarray], trues: Sequence[np.ndarray], nam
 # Baselines: each maps (training angles, song lengths, seed) to predictions per song
 
 
-def mean_pose_baseline(train_angles: Sequence[np.ndarray], lengths: Sequence[int], seed: int = 0) -> list[np.ndarray]:
+def mean_pose_baseline(
+    train_angles: Sequence[np.ndarray], lengths: Sequence[int], seed: int = 0
+) -> list[np.ndarray]:
     """Every frame = the mean training pose (the best constant under the L2 loss).
 
     Example:
@@ -172,18 +197,26 @@ def mean_pose_baseline(train_angles: Sequence[np.ndarray], lengths: Sequence[int
     return [np.tile(mean, (n, 1)).astype(np.float32) for n in lengths]
 
 
-def last_pose_baseline(train_angles: Sequence[np.ndarray], lengths: Sequence[int], seed: int = 0) -> list[np.ndarray]:
+def last_pose_baseline(
+    train_angles: Sequence[np.ndarray], lengths: Sequence[int], seed: int = 0
+) -> list[np.ndarray]:
     """Every frame = the last pose of the last training sequence (a robot that stops)."""
     last = np.asarray(train_angles[-1])[-1]
     return [np.tile(last, (n, 1)).astype(np.float32) for n in lengths]
 
 
-def random_baseline(train_angles: Sequence[np.ndarray], lengths: Sequence[int], seed: int = 0) -> list[np.ndarray]:
+def random_baseline(
+    train_angles: Sequence[np.ndarray], lengths: Sequence[int], seed: int = 0
+) -> list[np.ndarray]:
     """Angles drawn uniformly in [-pi, pi) each frame (the thesis's "random model", 6.5.3)."""
     rng = np.random.default_rng(seed)
     J = np.asarray(train_angles[0]).shape[1]
     return [rng.uniform(-np.pi, np.pi, size=(n, J)).astype(np.float32) for n in lengths]
 
 
-BASELINES = {"mean_pose": mean_pose_baseline, "last_pose": last_pose_baseline, "random": random_baseline}
+BASELINES = {
+    "mean_pose": mean_pose_baseline,
+    "last_pose": last_pose_baseline,
+    "random": random_baseline,
+}
 """Name -> baseline function ``(train_angles, lengths, seed) -> predictions``."""

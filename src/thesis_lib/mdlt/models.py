@@ -23,6 +23,7 @@ conversion happens in one place, :meth:`MDLTTransformer._encode`.
 
 Used in: MDLT chapter (thesis 6.4).
 """
+
 from __future__ import annotations
 
 import math
@@ -100,13 +101,27 @@ class MDLTConfig:
 
     def __post_init__(self) -> None:
         if self.variant not in MODEL_VARIANTS:
-            raise ValueError(f"Unknown MDLT variant {self.variant!r}. Valid: {', '.join(MODEL_VARIANTS)}.")
-        for name in ("state_dim", "act_dim", "K", "d_model", "n_layers", "n_heads", "d_ff", "max_timestep", "d_state"):
+            raise ValueError(
+                f"Unknown MDLT variant {self.variant!r}. Valid: {', '.join(MODEL_VARIANTS)}."
+            )
+        for name in (
+            "state_dim",
+            "act_dim",
+            "K",
+            "d_model",
+            "n_layers",
+            "n_heads",
+            "d_ff",
+            "max_timestep",
+            "d_state",
+        ):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value <= 0:
                 raise ValueError(f"Expect `{name}` to be a positive int, actually: {value!r}.")
         if self.variant == "transformer" and self.d_model % self.n_heads:
-            raise ValueError(f"Expect d_model ({self.d_model}) divisible by n_heads ({self.n_heads}).")
+            raise ValueError(
+                f"Expect d_model ({self.d_model}) divisible by n_heads ({self.n_heads})."
+            )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expect 0 <= dropout < 1, actually: {self.dropout!r}.")
 
@@ -116,13 +131,19 @@ def _check_batch(model: nn.Module, batch: Tensors) -> tuple[int, int]:
     cfg = model.config
     for key in ("audio", "poses_in", "mask"):
         if key not in batch:
-            raise ValueError(f"{type(model).__name__} needs batch['{key}'] (have: {sorted(batch)}).")
+            raise ValueError(
+                f"{type(model).__name__} needs batch['{key}'] (have: {sorted(batch)})."
+            )
     audio = batch["audio"]
     if audio.ndim != 3 or audio.shape[-1] != cfg.state_dim:
-        raise ValueError(f"Expect audio of shape (B, L, {cfg.state_dim}), got {tuple(audio.shape)}.")
+        raise ValueError(
+            f"Expect audio of shape (B, L, {cfg.state_dim}), got {tuple(audio.shape)}."
+        )
     B, L, _ = audio.shape
     if batch["poses_in"].shape != (B, L, cfg.act_dim):
-        raise ValueError(f"Expect poses_in of shape {(B, L, cfg.act_dim)}, got {tuple(batch['poses_in'].shape)}.")
+        raise ValueError(
+            f"Expect poses_in of shape {(B, L, cfg.act_dim)}, got {tuple(batch['poses_in'].shape)}."
+        )
     if batch["mask"].shape != (B, L):
         raise ValueError(f"Expect mask of shape {(B, L)}, got {tuple(batch['mask'].shape)}.")
     return B, L
@@ -142,13 +163,17 @@ def init_output_at(model: nn.Module, pose: np.ndarray) -> None:
     """
     pose = np.asarray(pose, dtype=np.float64).reshape(-1)
     if pose.shape != (model.config.act_dim,) or not np.isfinite(pose).all():
-        raise ValueError(f"Expect a finite pose of shape ({model.config.act_dim},), got {pose.shape}.")
+        raise ValueError(
+            f"Expect a finite pose of shape ({model.config.act_dim},), got {pose.shape}."
+        )
     with torch.no_grad():
         model.head.weight.mul_(0.1)  # small, not zero: the output still depends on the input
         model.head.bias.copy_(torch.as_tensor(np.arctanh(np.clip(pose / math.pi, -0.99, 0.99))))
 
 
-def _loss(pred: torch.Tensor, targets: Tensors | None, mask: torch.Tensor) -> tuple[torch.Tensor | None, dict | None]:
+def _loss(
+    pred: torch.Tensor, targets: Tensors | None, mask: torch.Tensor
+) -> tuple[torch.Tensor | None, dict | None]:
     if targets is None:
         return None, None
     loss = masked_mse(pred, targets["poses"], mask)  # L2 on real frames (thesis 6.4.1)
@@ -180,15 +205,22 @@ class MDLTTransformer(nn.Module):
     def __init__(self, config: MDLTConfig) -> None:
         super().__init__()
         if config.variant != "transformer":
-            raise ValueError(f"MDLTTransformer needs variant='transformer', got {config.variant!r}.")
+            raise ValueError(
+                f"MDLTTransformer needs variant='transformer', got {config.variant!r}."
+            )
         self.config = c = config
         self.audio_emb = nn.Linear(c.state_dim, c.d_model)
         self.pose_emb = nn.Linear(c.act_dim, c.d_model)
         # index 0 = padding, 1..max_timestep = frames 0..max_timestep-1 of a song
         self.time_emb = nn.Embedding(c.max_timestep + 1, c.d_model)
         self.transformer = nn.Transformer(
-            d_model=c.d_model, nhead=c.n_heads, num_encoder_layers=c.n_layers, num_decoder_layers=c.n_layers,
-            dim_feedforward=c.d_ff, dropout=c.dropout, batch_first=True,
+            d_model=c.d_model,
+            nhead=c.n_heads,
+            num_encoder_layers=c.n_layers,
+            num_decoder_layers=c.n_layers,
+            dim_feedforward=c.d_ff,
+            dropout=c.dropout,
+            batch_first=True,
         )
         # the nested-tensor fast path warns (prototype API) and changes nothing in the results
         self.transformer.encoder.use_nested_tensor = False
@@ -209,14 +241,28 @@ class MDLTTransformer(nn.Module):
         # nn.Transformer: key_padding_mask True = ignore, the opposite of our mask
         return self.transformer.encoder(src, src_key_padding_mask=~mask)
 
-    def _decode(self, memory: torch.Tensor, mem_mask: torch.Tensor, poses_in: torch.Tensor, times: torch.Tensor,
-                mask: torch.Tensor) -> torch.Tensor:
+    def _decode(
+        self,
+        memory: torch.Tensor,
+        mem_mask: torch.Tensor,
+        poses_in: torch.Tensor,
+        times: torch.Tensor,
+        mask: torch.Tensor,
+    ) -> torch.Tensor:
         L = poses_in.shape[1]
         scale = math.sqrt(self.config.d_model)
         tgt = self.pose_emb(poses_in) * scale + self.time_emb(times)  # (B, L, d)
-        causal = torch.ones(L, L, dtype=torch.bool, device=tgt.device).triu(1)  # True = may NOT attend (nn.Transformer)
-        h = self.transformer.decoder(tgt, memory, tgt_mask=causal, tgt_is_causal=True,
-                                     tgt_key_padding_mask=~mask, memory_key_padding_mask=~mem_mask)
+        causal = torch.ones(L, L, dtype=torch.bool, device=tgt.device).triu(
+            1
+        )  # True = may NOT attend (nn.Transformer)
+        h = self.transformer.decoder(
+            tgt,
+            memory,
+            tgt_mask=causal,
+            tgt_is_causal=True,
+            tgt_key_padding_mask=~mask,
+            memory_key_padding_mask=~mem_mask,
+        )
         return torch.tanh(self.head(h)) * math.pi  # (B, L, 4) in (-pi, pi)
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
@@ -227,15 +273,21 @@ class MDLTTransformer(nn.Module):
         mask = batch["mask"].bool()
         times = batch.get("timesteps")
         if times is None:
-            raise ValueError("MDLTTransformer needs batch['timesteps'] (frame index in the song + 1; 0 at padding).")
-        times = times.long().clamp(0, self.config.max_timestep)  # songs past the vocabulary share its last entry
+            raise ValueError(
+                "MDLTTransformer needs batch['timesteps'] (frame index in the song + 1; 0 at padding)."
+            )
+        times = times.long().clamp(
+            0, self.config.max_timestep
+        )  # songs past the vocabulary share its last entry
         memory = self._encode(batch["audio"], times, mask)
         pred = self._decode(memory, mask, batch["poses_in"], times, mask)
         loss, losses = _loss(pred, targets, mask)
         return SeqOutput(actions=pred, loss=loss, losses=losses)
 
     @torch.no_grad()
-    def generate(self, features: SongInput, chunk: int = 256, progress: bool = False) -> np.ndarray | list[np.ndarray]:
+    def generate(
+        self, features: SongInput, chunk: int = 256, progress: bool = False
+    ) -> np.ndarray | list[np.ndarray]:
         """Translate whole songs autoregressively: scaled ``features (T, 438)`` -> angles ``(T, 4)``.
 
         Frame ``t`` sees the audio frames ``max(0, t-K+1) .. t`` and the decoder input
@@ -250,30 +302,42 @@ class MDLTTransformer(nn.Module):
         K, d, n_songs = self.config.K, self.config.act_dim, len(songs)
         lengths = [len(x) for x in songs]
         T = max(lengths)
-        idx, valid = _window_index(T, K, device)  # (T, K) frame index of each window slot, (T, K) real?
+        idx, valid = _window_index(
+            T, K, device
+        )  # (T, K) frame index of each window slot, (T, K) real?
         times = torch.where(valid, self.timesteps(idx), torch.zeros_like(idx))
         x = torch.zeros(n_songs, T, self.config.state_dim, device=device)
         for i, song in enumerate(songs):
-            x[i, :lengths[i]] = song.to(device)
+            x[i, : lengths[i]] = song.to(device)
         preds = torch.zeros(n_songs, T, d, device=device)
         bar = tqdm(total=T, disable=not progress, desc="MDLT-T")
         for lo in range(0, T, chunk):  # encoder memories of `chunk` frames' windows at a time
             hi = min(T, lo + chunk)
             m = valid[lo:hi].repeat(n_songs, 1)  # (n_songs * c, K)
-            audio = (x[:, idx[lo:hi]] * valid[lo:hi, :, None]).flatten(0, 1)  # (n_songs * c, K, 438)
-            memory = self._encode(audio, times[lo:hi].repeat(n_songs, 1), m).unflatten(0, (n_songs, hi - lo))
+            audio = (x[:, idx[lo:hi]] * valid[lo:hi, :, None]).flatten(
+                0, 1
+            )  # (n_songs * c, K, 438)
+            memory = self._encode(audio, times[lo:hi].repeat(n_songs, 1), m).unflatten(
+                0, (n_songs, hi - lo)
+            )
             for t in range(lo, hi):
                 n = min(t + 1, K)  # frames in this window (the same for every song)
                 s = t - n + 1
                 poses_in = torch.zeros(n_songs, n, d, device=device)
                 if n > 1:
                     poses_in[:, 1:] = preds[:, s:t]
-                vm = valid[t:t + 1].expand(n_songs, K)
-                out = self._decode(memory[:, t - lo], vm, poses_in, times[t:t + 1, :n].expand(n_songs, n), vm[:, :n])
+                vm = valid[t : t + 1].expand(n_songs, K)
+                out = self._decode(
+                    memory[:, t - lo],
+                    vm,
+                    poses_in,
+                    times[t : t + 1, :n].expand(n_songs, n),
+                    vm[:, :n],
+                )
                 preds[:, t] = out[:, n - 1]
                 bar.update(1)
         bar.close()
-        out = [preds[i, :lengths[i]].cpu().numpy() for i in range(n_songs)]
+        out = [preds[i, : lengths[i]].cpu().numpy() for i in range(n_songs)]
         return out[0] if single else out
 
 
@@ -296,9 +360,13 @@ def _as_songs(features, dim: int) -> tuple[list[torch.Tensor], bool]:
     for x in items:
         x = torch.as_tensor(x if torch.is_tensor(x) else np.asarray(x, dtype=np.float32)).float()
         if x.ndim != 2 or x.shape[1] != dim or x.shape[0] == 0:
-            raise ValueError(f"Expect song features of shape (T, {dim}) with T >= 1, got {tuple(x.shape)}.")
+            raise ValueError(
+                f"Expect song features of shape (T, {dim}) with T >= 1, got {tuple(x.shape)}."
+            )
         if not torch.isfinite(x).all():
-            raise ValueError("Song features contain NaN or inf; check the audio file and the feature scaler.")
+            raise ValueError(
+                "Song features contain NaN or inf; check the audio file and the feature scaler."
+            )
         songs.append(x)
     return songs, single
 
@@ -331,8 +399,16 @@ class MDLTMamba(nn.Module):
         self.audio_emb = nn.Linear(c.state_dim, c.d_model)
         self.pose_emb = nn.Linear(c.act_dim, c.d_model) if c.pose_input else None
         self.drop = nn.Dropout(c.dropout)
-        self.backbone = Mamba(MambaConfig(d_model=c.d_model, n_layers=c.n_layers, d_state=c.d_state,
-                                          gated_mlp=c.gated_mlp, mlp_hidden=c.d_ff), scan_backend=scan_backend)
+        self.backbone = Mamba(
+            MambaConfig(
+                d_model=c.d_model,
+                n_layers=c.n_layers,
+                d_state=c.d_state,
+                gated_mlp=c.gated_mlp,
+                mlp_hidden=c.d_ff,
+            ),
+            scan_backend=scan_backend,
+        )
         self.head = _head(c.d_model, c.act_dim)
 
     def embed(self, audio: torch.Tensor, poses_in: torch.Tensor) -> torch.Tensor:
@@ -354,8 +430,12 @@ class MDLTMamba(nn.Module):
         return SeqOutput(actions=pred, loss=loss, losses=losses)
 
     @torch.no_grad()
-    def generate(self, features: SongInput, teacher_poses: np.ndarray | list[np.ndarray] | None = None,
-                 progress: bool = False) -> np.ndarray | list[np.ndarray]:
+    def generate(
+        self,
+        features: SongInput,
+        teacher_poses: np.ndarray | list[np.ndarray] | None = None,
+        progress: bool = False,
+    ) -> np.ndarray | list[np.ndarray]:
         """Translate whole songs with the recurrent step, O(1) per frame: ``(T, 438)`` -> ``(T, 4)``.
 
         Each frame feeds back the model's previous prediction (``teacher_poses (T, 4)``: feed
@@ -370,12 +450,15 @@ class MDLTMamba(nn.Module):
         d, n_songs = self.config.act_dim, len(songs)
         lengths = [len(x) for x in songs]
         if self.pose_emb is None:
-            out = [self._out(self.backbone(self.embed(x.to(device)[None], None)))[0].cpu().numpy() for x in songs]
+            out = [
+                self._out(self.backbone(self.embed(x.to(device)[None], None)))[0].cpu().numpy()
+                for x in songs
+            ]
             return out[0] if single else out
         T = max(lengths)
         x = torch.zeros(n_songs, T, self.config.state_dim, device=device)
         for i, song in enumerate(songs):
-            x[i, :lengths[i]] = song.to(device)
+            x[i, : lengths[i]] = song.to(device)
         tp = None
         if teacher_poses is not None:
             tps = [teacher_poses] if single else list(teacher_poses)
@@ -383,8 +466,10 @@ class MDLTMamba(nn.Module):
             for i, p in enumerate(tps):
                 p = torch.as_tensor(np.asarray(p, dtype=np.float32))
                 if p.shape != (lengths[i], d):
-                    raise ValueError(f"Expect teacher_poses of shape {(lengths[i], d)}, got {tuple(p.shape)}.")
-                tp[i, :lengths[i]] = p
+                    raise ValueError(
+                        f"Expect teacher_poses of shape {(lengths[i], d)}, got {tuple(p.shape)}."
+                    )
+                tp[i, : lengths[i]] = p
         state = self.backbone.allocate_state(n_songs, device=device, dtype=x.dtype)
         prev = torch.zeros(n_songs, d, device=device)  # the zero start pose
         preds = torch.zeros(n_songs, T, d, device=device)
@@ -392,7 +477,7 @@ class MDLTMamba(nn.Module):
             y, state = self.backbone.step(self.embed(x[:, t], prev), state)
             preds[:, t] = self._out(y)
             prev = preds[:, t] if tp is None else tp[:, t]
-        out = [preds[i, :lengths[i]].cpu().numpy() for i in range(n_songs)]
+        out = [preds[i, : lengths[i]].cpu().numpy() for i in range(n_songs)]
         return out[0] if single else out
 
 

@@ -39,19 +39,26 @@ expected; a sequence without its music raises (``skip_missing_audio=True`` skips
 warning); pose frames holding NaN are dropped before synchronisation, so their audio frames get
 the nearest valid pose (more than half missing raises). Thesis chapter 6.
 """
+
 from __future__ import annotations
 
 import json
 import pickle
 import re
 import warnings
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import numpy as np
 
-from .angles import JOINT_NAMES, forward_kinematics, local_rotations, pose_to_ur3_angles, world_rotations
+from .angles import (
+    JOINT_NAMES,
+    forward_kinematics,
+    local_rotations,
+    pose_to_ur3_angles,
+    world_rotations,
+)
 from .audio import cached_audio_features
 from .sync import synchronize
 
@@ -129,7 +136,9 @@ def _load_pickle(path: Path) -> dict:
 def _read_names(path: Path) -> list[str]:
     if not path.is_file():
         return []
-    return [ln.strip() for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    return [
+        ln.strip() for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")
+    ]
 
 
 def drop_missing_frames(
@@ -154,7 +163,10 @@ def drop_missing_frames(
             f"{max_missing:.0%} is too many to synchronise."
         )
     if n_bad:
-        warnings.warn(f"{name}: dropped {n_bad} pose frame(s) holding NaN; their audio frames use the nearest valid pose.")
+        warnings.warn(
+            f"{name}: dropped {n_bad} pose frame(s) holding NaN; their audio frames use the nearest valid pose.",
+            stacklevel=2,
+        )
     idx = np.flatnonzero(ok)
     return joints[idx], timestamps[idx], idx
 
@@ -263,11 +275,15 @@ def list_aist_sequences(root: str | Path, all_sequences: bool = False) -> list[s
                 kept.append(n)
         names = kept
     if not names:
-        raise DatasetLayoutError(f"No AIST++ sequences left under {root} after splits and ignore_list.txt.")
+        raise DatasetLayoutError(
+            f"No AIST++ sequences left under {root} after splits and ignore_list.txt."
+        )
     return names
 
 
-def read_aist_motion(root: str | Path, name: str, source: str = "smpl") -> tuple[np.ndarray, np.ndarray]:
+def read_aist_motion(
+    root: str | Path, name: str, source: str = "smpl"
+) -> tuple[np.ndarray, np.ndarray]:
     """Joint positions (N, 24, 3) and pose timestamps (N,) in microseconds of one sequence.
 
     Args:
@@ -279,7 +295,9 @@ def read_aist_motion(root: str | Path, name: str, source: str = "smpl") -> tuple
         m = _load_pickle(root / "motions" / f"{name}.pkl")
         missing = {"smpl_poses", "smpl_trans"} - set(m)
         if missing:
-            raise ValueError(f"{root / 'motions' / name}.pkl lacks {sorted(missing)}; keys are {sorted(m)}.")
+            raise ValueError(
+                f"{root / 'motions' / name}.pkl lacks {sorted(missing)}; keys are {sorted(m)}."
+            )
         poses = np.asarray(m["smpl_poses"], dtype=np.float64)
         if poses.ndim != 2 or poses.shape[1] != 72:
             raise ValueError(f"{name}: smpl_poses must be (N, 72), got {poses.shape}.")
@@ -292,7 +310,9 @@ def read_aist_motion(root: str | Path, name: str, source: str = "smpl") -> tuple
         k = _load_pickle(root / "keypoints3d" / f"{name}.pkl")
         key = "keypoints3d_optim" if "keypoints3d_optim" in k else "keypoints3d"
         if key not in k:
-            raise ValueError(f"{name}: keypoints3d pickle lacks 'keypoints3d'; keys are {sorted(k)}.")
+            raise ValueError(
+                f"{name}: keypoints3d pickle lacks 'keypoints3d'; keys are {sorted(k)}."
+            )
         joints = coco17_to_skeleton(k[key])
     else:
         raise ValueError(f"Unknown source '{source}'. Valid: 'smpl', 'keypoints3d'.")
@@ -303,7 +323,7 @@ def read_aist_motion(root: str | Path, name: str, source: str = "smpl") -> tuple
         if ts.shape[0] != n:
             raise ValueError(f"{name}: {n} pose frames but {ts.shape[0]} timestamps in {kp2d}.")
     else:
-        warnings.warn(f"{name}: no {kp2d}; assuming poses exactly at {AIST_FPS} fps.")
+        warnings.warn(f"{name}: no {kp2d}; assuming poses exactly at {AIST_FPS} fps.", stacklevel=2)
         ts = np.arange(n) * 1e6 / AIST_FPS
     return joints, ts
 
@@ -340,11 +360,18 @@ def load_aist(
     if genres is not None:
         unknown = set(genres) - set(AIST_GENRES)
         if unknown:
-            raise ValueError(f"Unknown genre(s) {sorted(unknown)}. Valid: {', '.join(AIST_GENRES)}.")
+            raise ValueError(
+                f"Unknown genre(s) {sorted(unknown)}. Valid: {', '.join(AIST_GENRES)}."
+            )
         names = [n for n in names if parse_aist_name(n)["genre"] in set(genres)]
     adir = _find_audio_dir(root, audio_dir)
-    names = _with_audio(names, lambda n: adir / f"{parse_aist_name(n)['music_id']}.wav", skip_missing_audio,
-                        "sequence(s)", " Pass audio_dir= or skip_missing_audio=True.")
+    names = _with_audio(
+        names,
+        lambda n: adir / f"{parse_aist_name(n)['music_id']}.wav",
+        skip_missing_audio,
+        "sequence(s)",
+        " Pass audio_dir= or skip_missing_audio=True.",
+    )
     out = []
     for name in _progress(names, len(names), "AIST++", progress):
         info = parse_aist_name(name)
@@ -355,18 +382,21 @@ def load_aist(
     return out
 
 
-def _with_audio(names: list[str], audio_of, skip_missing_audio: bool, what: str, hint: str) -> list[str]:
+def _with_audio(
+    names: list[str], audio_of, skip_missing_audio: bool, what: str, hint: str
+) -> list[str]:
     """``names`` whose music file ``audio_of(name)`` exists; raise for the others (``hint`` says
     how to go on), or drop them with a warning when ``skip_missing_audio``."""
     missing = [n for n in names if not audio_of(n).is_file()]
     if not missing:
         return names
     first = audio_of(missing[0])
-    msg = (f"{len(missing)} {what} have no music in {first.parent}, e.g. {first.name}"
-           + (f" for {missing[0]}." if first.stem != missing[0] else "."))
+    msg = f"{len(missing)} {what} have no music in {first.parent}, e.g. {first.name}" + (
+        f" for {missing[0]}." if first.stem != missing[0] else "."
+    )
     if not skip_missing_audio:
         raise FileNotFoundError(msg + hint)
-    warnings.warn(msg + " Skipped.")
+    warnings.warn(msg + " Skipped.", stacklevel=2)
     return [n for n in names if n not in set(missing)]
 
 
@@ -377,7 +407,9 @@ def _pair(name, music_id, genre, audio_path, joints, ts, unit, fps, cache_dir, p
     joints, ts, kept = joints[order], ts[order], kept[order]
     angles = pose_to_ur3_angles(joints, paper_compat=paper_compat)
     feats = cached_audio_features(audio_path, fps=fps, cache_dir=cache_dir)
-    feats, _, idx = synchronize(feats, angles, ts, fps=fps, timestamp_unit=unit, paper_compat=paper_compat)
+    feats, _, idx = synchronize(
+        feats, angles, ts, fps=fps, timestamp_unit=unit, paper_compat=paper_compat
+    )
     return DanceSequence(
         name=name, music_id=music_id, genre=genre, audio_path=Path(audio_path),
         features=feats.astype(np.float32), angles=angles[idx].astype(np.float32), fps=int(fps),
@@ -415,7 +447,9 @@ def smpl_to_phantom(poses: np.ndarray, root_positions: np.ndarray) -> tuple[np.n
 
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 24, 3)
     T = len(poses)
-    world = world_rotations(Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3))
+    world = world_rotations(
+        Rotation.from_rotvec(poses.reshape(-1, 3)).as_matrix().reshape(T, 24, 3, 3)
+    )
     unity = _UNITY_MIRROR @ world @ _UNITY_MIRROR
     q = Rotation.from_matrix(unity.reshape(-1, 3, 3)).as_quat().reshape(T, 24, 4)
     return q, np.asarray(root_positions, dtype=np.float64) @ _UNITY_MIRROR
@@ -456,7 +490,9 @@ def read_phantom_motion(path: str | Path, quaternion_order: str = "xyzw", rotati
         raise ValueError(f"Cannot read {path} as JSON ({type(e).__name__}: {e}).") from e
     need = {"bone_name", "root_positions", "rotations"}
     if not isinstance(d, dict) or need - set(d):
-        raise ValueError(f"{path}: a PhantomDance motion needs keys {sorted(need)}, got {sorted(d) if isinstance(d, dict) else type(d).__name__}.")
+        raise ValueError(
+            f"{path}: a PhantomDance motion needs keys {sorted(need)}, got {sorted(d) if isinstance(d, dict) else type(d).__name__}."
+        )
     names = [str(b).lower() for b in d["bone_name"]]
     index = {n: i for i, n in enumerate(names)}
     lacking = [b for b in PHANTOM_BONES if b.lower() not in index]
@@ -524,12 +560,21 @@ def load_phantomdance(
     names = [p.stem for p in sorted(mdir.glob("*.json")) if p.stem not in set(skip)]
     if not names:
         raise DatasetLayoutError(f"{mdir} holds no .json motion files.")
-    names = _with_audio(names, lambda n: adir / f"{n}.wav", skip_missing_audio, "motion(s)",
-                        " Pass skip_missing_audio=True to skip them.")
+    names = _with_audio(
+        names,
+        lambda n: adir / f"{n}.wav",
+        skip_missing_audio,
+        "motion(s)",
+        " Pass skip_missing_audio=True to skip them.",
+    )
     out = []
     for name in _progress(names, len(names), "PhantomDance", progress):
-        joints, meta = read_phantom_motion(mdir / f"{name}.json", quaternion_order=quaternion_order,
-                                           rotations=rotations, frame=frame)
+        joints, meta = read_phantom_motion(
+            mdir / f"{name}.json",
+            quaternion_order=quaternion_order,
+            rotations=rotations,
+            frame=frame,
+        )
         pose_fps = float(meta.get("fps", PHANTOM_FPS))
         ts = np.arange(joints.shape[0]) / pose_fps
         out.append(_pair(name, name, str(meta.get("genre", "")), adir / f"{name}.wav", joints, ts, 1.0,

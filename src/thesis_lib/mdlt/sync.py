@@ -4,6 +4,7 @@ Feature frame ``i`` is centred at ``i / fps`` seconds (librosa's centred frames)
 with the pose whose timestamp is nearest. The authors used ``(i + 1) / fps`` (one frame late, 17 ms
 at 60 fps): ``paper_compat=True``. Thesis chapter 6.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,7 +36,9 @@ def nearest_pose_indices(frame_t: np.ndarray, pose_t: np.ndarray) -> np.ndarray:
     frame_t = np.asarray(frame_t, dtype=np.float64)
     pose_t = np.asarray(pose_t, dtype=np.float64)
     if pose_t.ndim != 1 or pose_t.size == 0:
-        raise ValueError(f"pose timestamps must be a non-empty 1-D array, got shape {pose_t.shape}.")
+        raise ValueError(
+            f"pose timestamps must be a non-empty 1-D array, got shape {pose_t.shape}."
+        )
     if not np.all(np.isfinite(pose_t)):
         raise ValueError("pose timestamps hold NaN/inf.")
     if pose_t.size > 1 and np.any(np.diff(pose_t) <= 0):

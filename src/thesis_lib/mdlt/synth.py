@@ -36,6 +36,7 @@ from the same pipeline as for real data (forward kinematics -> :func:`angles.pos
 
 Everything is deterministic by seed. Thesis chapter 6.
 """
+
 from __future__ import annotations
 
 import json
@@ -165,7 +166,9 @@ def _snare(sr: int, rng: np.random.Generator, bright: float) -> np.ndarray:
     t = np.arange(int(0.18 * sr)) / sr
     noise = rng.standard_normal(len(t))
     noise = noise - (1 - bright) * np.convolve(noise, np.ones(4) / 4, mode="same")
-    return (0.5 * noise * np.exp(-t * 25) + 0.4 * np.sin(2 * np.pi * 185 * t) * np.exp(-t * 30)) * 0.6
+    return (
+        0.5 * noise * np.exp(-t * 25) + 0.4 * np.sin(2 * np.pi * 185 * t) * np.exp(-t * 30)
+    ) * 0.6
 
 
 def _hat(sr: int, rng: np.random.Generator, bright: float) -> np.ndarray:
@@ -203,7 +206,9 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
     out = np.zeros(n)
     key = int(rng.integers(0, 12))
     scale = _MINOR if g.minor else _MAJOR
-    degrees = rng.choice([0, 3, 4, 5, 1, 2, 6], size=n_bars, p=[0.25, 0.18, 0.2, 0.17, 0.08, 0.07, 0.05])
+    degrees = rng.choice(
+        [0, 3, 4, 5, 1, 2, 6], size=n_bars, p=[0.25, 0.18, 0.2, 0.17, 0.08, 0.07, 0.05]
+    )
     degrees[0] = 0
     roots = (key + np.array([scale[d] for d in degrees])) % 12
     chorus = (np.arange(n_bars) // 2) % 2 == 1  # sections of two bars: verse, chorus, verse ...
@@ -242,12 +247,22 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
         tb = np.arange(int(0.9 * spb * sr)) / sr
         for q in range(4):
             note = fb * (1.5 if (q == 2 and g.minor) else 1.0)
-            _add(out, bar_t + q * spb, 0.25 * gain * _osc(g.bass_wave, note, tb) * np.exp(-tb * 3), sr)
+            _add(
+                out,
+                bar_t + q * spb,
+                0.25 * gain * _osc(g.bass_wave, note, tb) * np.exp(-tb * 3),
+                sr,
+            )
         if chorus[b]:  # an arpeggio lead in the chorus: the section is audible in the timbre
             ta = np.arange(int(sixteenth * 2 * sr)) / sr
             for s in range(8):
                 m = (84 if g.arp else 72) + roots[b] + [0, third, 7, 12][s % 4]
-                _add(out, bar_t + s * 2 * sixteenth, 0.15 * np.sin(2 * np.pi * float(_midi_hz(m)) * ta) * np.exp(-ta * 8), sr)
+                _add(
+                    out,
+                    bar_t + s * 2 * sixteenth,
+                    0.15 * np.sin(2 * np.pi * float(_midi_hz(m)) * ta) * np.exp(-ta * 8),
+                    sr,
+                )
     if g.drive > 0:
         out = np.tanh(out * (1 + 4 * g.drive)) / (1 + g.drive)
     out = out / (np.max(np.abs(out)) + 1e-9) * 0.8
@@ -314,7 +329,7 @@ class Dancer:
     scaling: float  # body size (AIST++ smpl_scaling)
 
     @classmethod
-    def sample(cls, rng: np.random.Generator) -> "Dancer":
+    def sample(cls, rng: np.random.Generator) -> Dancer:
         return cls(
             lag=float(rng.uniform(-0.03, 0.04)),
             amplitude=float(rng.uniform(0.85, 1.15)),
@@ -331,7 +346,9 @@ def _ease(s: np.ndarray, sharp: float) -> np.ndarray:
     return 0.5 - 0.5 * np.cos(np.pi * s)
 
 
-def choreograph(genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, seed: int, rng: np.random.Generator) -> np.ndarray:
+def choreograph(
+    genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, seed: int, rng: np.random.Generator
+) -> np.ndarray:
     """Right-arm parameters (T, 5) at ``times``: theta1, theta2, elbow, wrist, twist.
 
     Per bar: the section's move (verse or chorus; an improvised move with the dancer's
@@ -352,7 +369,9 @@ def choreograph(genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, see
         v = center + dancer.amplitude * (moves[m] - center) + offsets[root] + dancer.bias
         for half in range(2):  # the two-beat move, twice per bar
             kf_v.append(v)
-            kf_t.append(piece.beat_times[4 * b + 2 * half] + np.arange(k) * spb / g.per_beat + dancer.lag)
+            kf_t.append(
+                piece.beat_times[4 * b + 2 * half] + np.arange(k) * spb / g.per_beat + dancer.lag
+            )
     kf_t = np.concatenate(kf_t)
     kf_v = np.concatenate(kf_v)
     rest = np.array([0.05, -0.1, 0.2, 0.1, 0.0])  # arm hanging loosely before the first key pose
@@ -369,7 +388,9 @@ def choreograph(genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, see
     # a slow, smooth wander: no dancer repeats a move exactly
     for _ in range(3):
         f = rng.uniform(0.05, 0.4)
-        arm += rng.normal(0, [0.03, 0.025, 0.03, 0.02, 0.05]) * np.sin(2 * np.pi * f * times[:, None] + rng.uniform(0, 2 * np.pi))
+        arm += rng.normal(0, [0.03, 0.025, 0.03, 0.02, 0.05]) * np.sin(
+            2 * np.pi * f * times[:, None] + rng.uniform(0, 2 * np.pi)
+        )
     arm[:, :4] = np.clip(arm[:, :4], _LIMITS[:, 0] - 0.1, _LIMITS[:, 1] + 0.1)
     arm[:, 2:4] = np.maximum(arm[:, 2:4], 0.0)
     return arm
@@ -390,20 +411,31 @@ def _swing_rotvec(rest_dir: np.ndarray, target: np.ndarray, twist: np.ndarray) -
     return (tw * swing).as_rotvec()
 
 
-def smpl_poses_for(genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, seed: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def smpl_poses_for(
+    genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, seed: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """SMPL parameters (T, 72) and root translation (T, 3, in metres) of the dance at ``times``."""
     from scipy.spatial.transform import Rotation
 
     g = GENRES[genre]
     T = len(times)
     arm = choreograph(genre, piece, dancer, times, seed, rng)
-    phase = np.interp(times, piece.beat_times, np.arange(len(piece.beat_times)), left=0.0, right=len(piece.beat_times))
+    phase = np.interp(
+        times,
+        piece.beat_times,
+        np.arange(len(piece.beat_times)),
+        left=0.0,
+        right=len(piece.beat_times),
+    )
     bounce = g.bounce * (0.5 - 0.5 * np.cos(2 * np.pi * (phase - dancer.lag / (60 / piece.bpm))))
     poses = np.zeros((T, 24, 3))
     yaw0, f_yaw = rng.uniform(-np.pi, np.pi), rng.uniform(0.03, 0.12)
     yaw = yaw0 + g.turn * np.sin(2 * np.pi * f_yaw * times + rng.uniform(0, 6.3))
     lean = 0.08 * np.sin(2 * np.pi * rng.uniform(0.05, 0.2) * times + rng.uniform(0, 6.3))
-    poses[:, 0] = (Rotation.from_euler("y", yaw[:, None]) * Rotation.from_euler("x", (lean + 0.5 * bounce)[:, None])).as_rotvec()
+    poses[:, 0] = (
+        Rotation.from_euler("y", yaw[:, None])
+        * Rotation.from_euler("x", (lean + 0.5 * bounce)[:, None])
+    ).as_rotvec()
     for jnt in (3, 6, 9):  # the spine curls a little with the bounce, and sways sideways
         poses[:, jnt, 0] = 0.3 * bounce
         poses[:, jnt, 2] = 0.03 * np.sin(2 * np.pi * 0.3 * times + jnt)
@@ -420,11 +452,15 @@ def smpl_poses_for(genre: str, piece: Piece, dancer: Dancer, times: np.ndarray, 
     ul = upper_arm_direction(0.7 * left[:, 0], 0.7 * left[:, 1]) * np.array([-1.0, 1.0, 1.0])
     poses[:, 16] = _swing_rotvec(np.array([1.0, 0, 0]), ul, -left[:, 4])
     poses[:, 18, 1] = -0.7 * left[:, 2]
-    drift = np.stack([0.2 * np.sin(0.3 * times + yaw0), -0.3 * bounce, 0.2 * np.cos(0.2 * times)], axis=1)
+    drift = np.stack(
+        [0.2 * np.sin(0.3 * times + yaw0), -0.3 * bounce, 0.2 * np.cos(0.2 * times)], axis=1
+    )
     return poses.reshape(T, 72), drift
 
 
-def pose_timestamps(duration: float, rng: np.random.Generator, fps: float = POSE_FPS, drop: float = 0.02) -> np.ndarray:
+def pose_timestamps(
+    duration: float, rng: np.random.Generator, fps: float = POSE_FPS, drop: float = 0.02
+) -> np.ndarray:
     """Pose capture times in microseconds: ``fps`` nominal, ~1 ms jitter, dropped frames."""
     n = int(duration * fps)
     t = np.arange(n) / fps + rng.normal(0, 0.001, n)
@@ -448,7 +484,9 @@ def skeleton_to_coco17(joints: np.ndarray) -> np.ndarray:
     kp = joints[:, list(COCO_FROM_SKELETON)].copy()
     fwd = np.cross(joints[:, 16] - joints[:, 17], joints[:, 12] - joints[:, 0])
     fwd /= np.linalg.norm(fwd, axis=1, keepdims=True) + 1e-12
-    side = (joints[:, 16] - joints[:, 17]) / (np.linalg.norm(joints[:, 16] - joints[:, 17], axis=1, keepdims=True) + 1e-12)
+    side = (joints[:, 16] - joints[:, 17]) / (
+        np.linalg.norm(joints[:, 16] - joints[:, 17], axis=1, keepdims=True) + 1e-12
+    )
     scale = np.linalg.norm(joints[:, 12] - joints[:, 15], axis=1, keepdims=True)
     kp[:, 0] += 0.6 * scale * fwd
     kp[:, 1] += 0.4 * scale * fwd + 0.2 * scale * side
@@ -518,8 +556,12 @@ def write_aist_layout(root: str | Path, per_genre: int = 6, seconds: float = 8.0
                 "smpl_loss": np.float32(0.0)})  # fmt: skip
             joints = forward_kinematics(poses, trans, dancer.scaling)
             kp3 = skeleton_to_coco17(joints).astype(np.float32)
-            _dump(root / "keypoints3d" / f"{name}.pkl", {"keypoints3d": kp3, "keypoints3d_optim": kp3})
-            kp2 = np.concatenate([kp3[None, :, :, :2], np.ones((1, *kp3.shape[:2], 1), np.float32)], axis=-1)
+            _dump(
+                root / "keypoints3d" / f"{name}.pkl", {"keypoints3d": kp3, "keypoints3d_optim": kp3}
+            )
+            kp2 = np.concatenate(
+                [kp3[None, :, :, :2], np.ones((1, *kp3.shape[:2], 1), np.float32)], axis=-1
+            )
             _dump(root / "keypoints2d" / f"{name}.pkl", {
                 "keypoints2d": kp2, "det_scores": np.ones(kp2.shape[:2], np.float32), "timestamps": ts})  # fmt: skip
             split = "train" if k < per_genre - 2 else ("val" if k == per_genre - 2 else "test")
@@ -555,7 +597,9 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
         g = genres[i % len(genres)]
         rng = _rng(seed, 20, i)
         bpm = float(rng.uniform(80, 135))
-        piece = synth_music(g, bpm, seconds * float(rng.uniform(0.85, 1.2)), seed=int(rng.integers(2**31)))
+        piece = synth_music(
+            g, bpm, seconds * float(rng.uniform(0.85, 1.2)), seed=int(rng.integers(2**31))
+        )
         name = f"{i:03d}"
         _write_wav(root / "music" / f"{name}.wav", piece.audio, AUDIO_SR)
         dancer = Dancer.sample(_rng(seed, 21, i))
@@ -601,7 +645,13 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
         )
     root = Path(root) if root is not None else default_root(layout, size, seed)
     marker = root / ".complete.json"
-    spec = {"generator": GENERATOR_VERSION, "layout": layout, "size": size, "seed": int(seed), **SIZES[(layout, size)]}
+    spec = {
+        "generator": GENERATOR_VERSION,
+        "layout": layout,
+        "size": size,
+        "seed": int(seed),
+        **SIZES[(layout, size)],
+    }
     if marker.is_file():
         try:
             old = json.loads(marker.read_text())
@@ -609,24 +659,40 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
             old = {}
         if old == spec:
             return root
-        if {k: v for k, v in old.items() if k != "generator"} == {k: v for k, v in spec.items() if k != "generator"}:
+        if {k: v for k, v in old.items() if k != "generator"} == {
+            k: v for k, v in spec.items() if k != "generator"
+        }:
             # our own set, made by an older generator: remake it
-            warnings.warn(f"{root} was made by {old.get('generator')}; remaking it with {GENERATOR_VERSION}.")
+            warnings.warn(
+                f"{root} was made by {old.get('generator')}; remaking it with {GENERATOR_VERSION}.",
+                stacklevel=2,
+            )
             shutil.rmtree(root)
         else:
             raise FileExistsError(
                 f"{root} holds another data set ({json.dumps(old)[:200]}); delete it or pass another root."
             )
     if root.exists() and any(root.iterdir()):
-        raise FileExistsError(f"{root} exists and is not a complete default data set; delete it or pass another root.")
+        raise FileExistsError(
+            f"{root} exists and is not a complete default data set; delete it or pass another root."
+        )
     root.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}-", dir=root.parent))
     try:
         p = SIZES[(layout, size)]
         if layout == "aist":
-            write_aist_layout(tmp, per_genre=p["per_genre"], seconds=p["seconds"], dancers=p["dancers"], seed=seed, progress=progress)
+            write_aist_layout(
+                tmp,
+                per_genre=p["per_genre"],
+                seconds=p["seconds"],
+                dancers=p["dancers"],
+                seed=seed,
+                progress=progress,
+            )
         else:
-            write_phantomdance_layout(tmp, n=p["n"], seconds=p["seconds"], seed=seed, progress=progress)
+            write_phantomdance_layout(
+                tmp, n=p["n"], seconds=p["seconds"], seed=seed, progress=progress
+            )
         (tmp / ".complete.json").write_text(json.dumps(spec))
         if root.exists():
             root.rmdir()

@@ -9,11 +9,13 @@ resumes training and translates new music (:func:`load_checkpoint`).
 
 Used in: MDLT chapter (thesis 6.4, 6.5).
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -41,8 +43,10 @@ class DanceBatch:
     subgoals: None = None  # the Trainer's batch_to_torch checks for HDT sub-goals
 
     def to_torch(self, device: str | torch.device = "cpu") -> dict[str, torch.Tensor]:
-        return {k: torch.from_numpy(getattr(self, k)).to(device)
-                for k in ("audio", "poses_in", "poses", "timesteps", "mask")}
+        return {
+            k: torch.from_numpy(getattr(self, k)).to(device)
+            for k in ("audio", "poses_in", "poses", "timesteps", "mask")
+        }
 
 
 class DanceWindows:
@@ -75,22 +79,40 @@ class DanceWindows:
 
     prepend_zero_action = True  # the zero start pose (the Trainer checks this name)
 
-    def __init__(self, features: Sequence[np.ndarray], angles: Sequence[np.ndarray], K: int,
-                 variant: str = "transformer", seed: int = 0, single_frame: bool = False,
-                 pose_noise: float = 0.0) -> None:
+    def __init__(
+        self,
+        features: Sequence[np.ndarray],
+        angles: Sequence[np.ndarray],
+        K: int,
+        variant: str = "transformer",
+        seed: int = 0,
+        single_frame: bool = False,
+        pose_noise: float = 0.0,
+    ) -> None:
         if len(features) != len(angles) or len(features) == 0:
-            raise ValueError(f"Expect as many feature as angle sequences (>= 1), got {len(features)} and {len(angles)}.")
+            raise ValueError(
+                f"Expect as many feature as angle sequences (>= 1), got {len(features)} and {len(angles)}."
+            )
         for i, (f, a) in enumerate(zip(features, angles)):
             if f.ndim != 2 or a.ndim != 2 or len(f) != len(a) or len(f) == 0:
-                raise ValueError(f"Song {i}: expect features (T, D) and angles (T, J) of the same T >= 1, got "
-                                 f"{f.shape} and {a.shape}.")
+                raise ValueError(
+                    f"Song {i}: expect features (T, D) and angles (T, J) of the same T >= 1, got "
+                    f"{f.shape} and {a.shape}."
+                )
             if not (np.isfinite(f).all() and np.isfinite(a).all()):
-                raise ValueError(f"Song {i}: features or angles contain NaN/inf; drop or repair those frames first.")
+                raise ValueError(
+                    f"Song {i}: features or angles contain NaN/inf; drop or repair those frames first."
+                )
         if variant not in ("transformer", "mamba"):
             raise ValueError(f"Unknown variant {variant!r}. Valid: transformer, mamba.")
         if pose_noise < 0:
             raise ValueError(f"Expect pose_noise >= 0 (radians), actually: {pose_noise!r}.")
-        self.K, self.variant, self.single_frame, self.pose_noise = int(K), variant, bool(single_frame), float(pose_noise)
+        self.K, self.variant, self.single_frame, self.pose_noise = (
+            int(K),
+            variant,
+            bool(single_frame),
+            float(pose_noise),
+        )
         self.lengths = np.array([len(f) for f in features])
         self.offsets = np.concatenate([[0], np.cumsum(self.lengths)[:-1]])
         self.states = np.concatenate(features).astype(np.float32)  # (N, 438) all songs' frames
@@ -114,14 +136,16 @@ class DanceWindows:
         for b, (song, t) in enumerate(zip(songs, ends)):
             s = t if self.single_frame else max(0, t - K + 1)
             n, off = t - s + 1, self.offsets[song]
-            audio[b, :n] = self.states[off + s: off + t + 1]
-            poses[b, :n] = self.actions[off + s: off + t + 1]
-            poses_in[b, 1:n] = self.actions[off + s: off + t]
+            audio[b, :n] = self.states[off + s : off + t + 1]
+            poses[b, :n] = self.actions[off + s : off + t + 1]
+            poses_in[b, 1:n] = self.actions[off + s : off + t]
             if self.variant == "mamba" and s > 0 and not self.single_frame:
                 poses_in[b, 0] = self.actions[off + s - 1]
             times[b, :n] = np.arange(s, t + 1) + 1
             mask[b, :n] = True
-        if self.pose_noise > 0:  # only where a real pose is fed (not the zero start pose, not padding)
+        if (
+            self.pose_noise > 0
+        ):  # only where a real pose is fed (not the zero start pose, not padding)
             real = np.zeros((batch_size, K), bool)
             real[:, 1:] = mask[:, 1:]
             real[:, 0] = poses_in[:, 0].any(-1)
@@ -166,9 +190,15 @@ class MDLTTrainer(Trainer):
         meta: Extra JSON-able facts to store (fps, training songs, ...).
     """
 
-    def __init__(self, model, dataset, config: TrainConfig | None = None,
-                 eval_fn: Callable[[torch.nn.Module], Any] | None = None, scaler: Any = None,
-                 meta: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        model,
+        dataset,
+        config: TrainConfig | None = None,
+        eval_fn: Callable[[torch.nn.Module], Any] | None = None,
+        scaler: Any = None,
+        meta: dict[str, Any] | None = None,
+    ) -> None:
         self.scaler, self.meta = scaler, dict(meta or {})
         super().__init__(model, dataset, config, eval_fn)
 
@@ -179,21 +209,31 @@ class MDLTTrainer(Trainer):
         return state
 
 
-def save_checkpoint(path: str | Path, model: torch.nn.Module, scaler: Any = None, meta: dict | None = None) -> Path:
+def save_checkpoint(
+    path: str | Path, model: torch.nn.Module, scaler: Any = None, meta: dict | None = None
+) -> Path:
     """Write a model-only checkpoint that :func:`load_checkpoint` (and ``thesis mdlt dance``) reads.
 
     Used in: MDLT chapter (thesis 6.5).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save({
-        "model_class": type(model).__name__, "model_config": asdict(model.config), "model": model.state_dict(),
-        "scaler": _to_safe(scaler.state_dict()) if scaler is not None else None, "meta": _to_safe(dict(meta or {})),
-    }, path)
+    torch.save(
+        {
+            "model_class": type(model).__name__,
+            "model_config": asdict(model.config),
+            "model": model.state_dict(),
+            "scaler": _to_safe(scaler.state_dict()) if scaler is not None else None,
+            "meta": _to_safe(dict(meta or {})),
+        },
+        path,
+    )
     return path
 
 
-def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Module, Any, dict[str, Any]]:
+def load_checkpoint(
+    path: str | Path, device: str = "cpu"
+) -> tuple[torch.nn.Module, Any, dict[str, Any]]:
     """Rebuild ``(model in eval mode, feature scaler, meta)`` from a checkpoint.
 
     Reads both :class:`MDLTTrainer` checkpoints and :func:`save_checkpoint` files.
@@ -206,18 +246,29 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Mod
     """
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"No checkpoint at '{path}'. Train one with thesis_lib.mdlt.experiments.train_model "
-                                "(or the 06_mdlt chapter with save_checkpoint) first.")
+        raise FileNotFoundError(
+            f"No checkpoint at '{path}'. Train one with thesis_lib.mdlt.experiments.train_model "
+            "(or the 06_mdlt chapter with save_checkpoint) first."
+        )
     try:
         ckpt = torch.load(path, map_location=device, weights_only=True)
     except Exception as err:  # not a torch file
-        raise ValueError(f"'{path}' is not a readable torch checkpoint ({type(err).__name__}: {err}).") from err
-    if not isinstance(ckpt, dict) or ckpt.get("model_class") not in ("MDLTTransformer", "MDLTMamba"):
+        raise ValueError(
+            f"'{path}' is not a readable torch checkpoint ({type(err).__name__}: {err})."
+        ) from err
+    if not isinstance(ckpt, dict) or ckpt.get("model_class") not in (
+        "MDLTTransformer",
+        "MDLTMamba",
+    ):
         got = ckpt.get("model_class") if isinstance(ckpt, dict) else type(ckpt).__name__
-        raise ValueError(f"'{path}' is not an MDLT checkpoint (it holds {got!r}; expected MDLTTransformer or MDLTMamba).")
+        raise ValueError(
+            f"'{path}' is not an MDLT checkpoint (it holds {got!r}; expected MDLTTransformer or MDLTMamba)."
+        )
     if ckpt.get("scaler") is None:
-        raise ValueError(f"Checkpoint '{path}' carries no feature scaler; new music cannot be scaled like the "
-                         "training data. Save it with MDLTTrainer(scaler=...) or save_checkpoint(..., scaler=...).")
+        raise ValueError(
+            f"Checkpoint '{path}' carries no feature scaler; new music cannot be scaled like the "
+            "training data. Save it with MDLTTrainer(scaler=...) or save_checkpoint(..., scaler=...)."
+        )
     cfg = dict(ckpt["model_config"])
     model = build_model(MDLTConfig(**cfg)).to(device)
     model.load_state_dict(ckpt["model"])

@@ -33,11 +33,18 @@ TD3 -209, DDPG -132. `n_jobs=2` was slower (74 s) on the busy 2-core box.
 
 Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
 """
+
 from __future__ import annotations
 
 from typing import Any
 
-from thesis_lib.rl.callbacks import EPISODE_COLUMNS, EpisodeLogger, ProgressBar, find_horizon, is_crash
+from thesis_lib.rl.callbacks import (
+    EPISODE_COLUMNS,
+    EpisodeLogger,
+    ProgressBar,
+    find_horizon,
+    is_crash,
+)
 from thesis_lib.rl.config import ALGOS, AUTO_NOISE, RLConfig
 from thesis_lib.rl.train import (
     CURVE_COLUMNS,

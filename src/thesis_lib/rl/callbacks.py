@@ -6,6 +6,7 @@ wrapping the env, and it is confined to this module).
 
 Used in: Background (thesis 2.5-2.7), DEFENDER (4.3).
 """
+
 from __future__ import annotations
 
 import time
@@ -199,7 +200,9 @@ class ProgressBar(BaseCallback):
                 f"mean{self.window}": f"{np.mean(recent):.1f}",
                 "episodes": n_logged,
             }
-            self._pbar.set_postfix(postfix, refresh=False)  # a dict keeps this order; kwargs get sorted
+            self._pbar.set_postfix(
+                postfix, refresh=False
+            )  # a dict keeps this order; kwargs get sorted
         return True
 
     def _on_training_end(self) -> None:

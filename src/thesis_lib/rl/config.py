@@ -2,6 +2,7 @@
 
 Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -115,7 +116,9 @@ class RLConfig:
                 f"got {self.gradient_steps}."
             )
         if not self.net_arch or any(int(w) <= 0 for w in self.net_arch):
-            raise ValueError(f"RLConfig.net_arch must list positive layer widths, got {self.net_arch!r}.")
+            raise ValueError(
+                f"RLConfig.net_arch must list positive layer widths, got {self.net_arch!r}."
+            )
         self.net_arch = [int(w) for w in self.net_arch]
         if not self.learning_rate > 0:
             raise ValueError(f"RLConfig.learning_rate must be > 0, got {self.learning_rate}.")
@@ -130,7 +133,9 @@ class RLConfig:
                 f"Valid: {', '.join(NOISE_KINDS)} or None."
             )
         if self.action_noise_sigma < 0:
-            raise ValueError(f"RLConfig.action_noise_sigma must be >= 0, got {self.action_noise_sigma}.")
+            raise ValueError(
+                f"RLConfig.action_noise_sigma must be >= 0, got {self.action_noise_sigma}."
+            )
         auto = self.action_noise == "auto"
         self.action_noise_resolved = AUTO_NOISE[self.algo] if auto else self.action_noise
         self._check_extra()
@@ -146,7 +151,9 @@ class RLConfig:
             raise ValueError(
                 f"RLConfig.extra sets {clash}, which RLConfig fields own; set the field instead."
             )
-        params = [p for p in inspect.signature(_algo_class(self.algo).__init__).parameters if p != "self"]
+        params = [
+            p for p in inspect.signature(_algo_class(self.algo).__init__).parameters if p != "self"
+        ]
         for key in self.extra:
             if key not in params:
                 raise ValueError(

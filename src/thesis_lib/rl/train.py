@@ -2,6 +2,7 @@
 
 Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
 """
+
 from __future__ import annotations
 
 import json
@@ -27,13 +28,26 @@ from stable_baselines3.common.noise import (
 from stable_baselines3.common.utils import set_random_seed
 from stable_baselines3.common.vec_env import VecEnv
 
-from thesis_lib.rl.callbacks import EPISODE_COLUMNS, EpisodeLogger, ProgressBar, find_horizon, is_crash
+from thesis_lib.rl.callbacks import (
+    EPISODE_COLUMNS,
+    EpisodeLogger,
+    ProgressBar,
+    find_horizon,
+    is_crash,
+)
 from thesis_lib.rl.config import RLConfig, _algo_class, _did_you_mean
 
 CURVE_COLUMNS: tuple[str, ...] = ("algo", "seed", *EPISODE_COLUMNS)
 """Columns of `learning_curves`, in order."""
 
-EVAL_COLUMNS: tuple[str, ...] = ("episode", "return", "length", "terminated", "truncated", "crashed")
+EVAL_COLUMNS: tuple[str, ...] = (
+    "episode",
+    "return",
+    "length",
+    "terminated",
+    "truncated",
+    "crashed",
+)
 """Columns of `evaluate`, in order."""
 
 
@@ -57,7 +71,11 @@ class Predictor(Protocol):
     """Anything that acts like an SB3 model: `predict(obs, state, episode_start, deterministic)`."""
 
     def predict(
-        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = False
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = False,
     ) -> tuple[Any, Any]: ...
 
 
@@ -84,7 +102,9 @@ def config_from_params(params: Mapping[str, Any]) -> RLConfig:
     return RLConfig(**params)
 
 
-def make_action_noise(kind: str | None, sigma: float, n_actions: int, n_envs: int = 1) -> ActionNoise | None:
+def make_action_noise(
+    kind: str | None, sigma: float, n_actions: int, n_envs: int = 1
+) -> ActionNoise | None:
     """Exploration noise for TD3/DDPG: Gaussian or Ornstein-Uhlenbeck with std `sigma` per dimension.
 
     Args:
@@ -98,7 +118,9 @@ def make_action_noise(kind: str | None, sigma: float, n_actions: int, n_envs: in
     if kind is None or sigma == 0:
         return None
     mean, std = np.zeros(n_actions), sigma * np.ones(n_actions)
-    noise_cls = {"normal": NormalActionNoise, "ornstein-uhlenbeck": OrnsteinUhlenbeckActionNoise}[kind]
+    noise_cls = {"normal": NormalActionNoise, "ornstein-uhlenbeck": OrnsteinUhlenbeckActionNoise}[
+        kind
+    ]
     noise = noise_cls(mean=mean, sigma=std)
     return VectorizedActionNoise(noise, n_envs) if n_envs > 1 else noise
 
@@ -119,9 +141,14 @@ def make_model(config: RLConfig, env: gym.Env | VecEnv | None = None) -> BaseAlg
     set_random_seed(config.seed)  # before any network is built
     n_envs = env.num_envs if isinstance(env, VecEnv) else 1
     if not isinstance(env.action_space, gym.spaces.Box):
-        raise ValueError(f"{config.algo} needs a continuous (Box) action space, got {env.action_space}.")
+        raise ValueError(
+            f"{config.algo} needs a continuous (Box) action space, got {env.action_space}."
+        )
     noise = make_action_noise(
-        config.action_noise_resolved, config.action_noise_sigma, int(np.prod(env.action_space.shape)), n_envs
+        config.action_noise_resolved,
+        config.action_noise_sigma,
+        int(np.prod(env.action_space.shape)),
+        n_envs,
     )
     cls = _algo_class(config.algo)
     return cls(_policy_for(env), env, action_noise=noise, **config.sb3_kwargs())
@@ -227,13 +254,23 @@ def learning_curves(
     from joblib import Parallel, delayed
     from tqdm.auto import tqdm
 
-    steps = total_timesteps if isinstance(total_timesteps, Mapping) else dict.fromkeys(algos, total_timesteps)
+    steps = (
+        total_timesteps
+        if isinstance(total_timesteps, Mapping)
+        else dict.fromkeys(algos, total_timesteps)
+    )
     missing = [algo for algo in algos if algo not in steps]
     if missing:
         raise ValueError(f"total_timesteps has no entry for {missing}; it has {sorted(steps)}.")
     configs = [
         config_from_params(
-            {**overrides, "algo": algo, "env_id": env_id, "seed": int(seed), "total_timesteps": steps[algo]}
+            {
+                **overrides,
+                "algo": algo,
+                "env_id": env_id,
+                "seed": int(seed),
+                "total_timesteps": steps[algo],
+            }
         )
         for algo in algos
         for seed in seeds
@@ -277,7 +314,9 @@ def evaluate(
     if n_episodes <= 0:
         raise ValueError(f"evaluate expects n_episodes > 0, got {n_episodes}.")
     if isinstance(env, VecEnv):
-        raise TypeError("evaluate expects a gymnasium id or gymnasium.Env, got a VecEnv; pass its inner env.")
+        raise TypeError(
+            "evaluate expects a gymnasium id or gymnasium.Env, got a VecEnv; pass its inner env."
+        )
     env = gym.make(env) if isinstance(env, str) else env
     horizon = find_horizon(env)
     env.action_space.seed(seed)

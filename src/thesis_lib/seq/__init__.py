@@ -19,6 +19,7 @@ Mask convention throughout: a boolean mask is ``True`` where a query may attend 
 
 Used in: Background chapter (thesis 2.2, 2.3, 2.8); DT, HDT, MDLT, Decision Mamba chapters.
 """
+
 from __future__ import annotations
 
 from thesis_lib.seq.attention import (
@@ -37,7 +38,12 @@ from thesis_lib.seq.attention import (
 )
 from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig, RecurrentPolicy, TokenMamba
 from thesis_lib.seq.evaluate import EvalResult, evaluate, target_returns
-from thesis_lib.seq.experiments import HDTExperimentConfig, run_hdt_experiments, run_method, summarize
+from thesis_lib.seq.experiments import (
+    HDTExperimentConfig,
+    run_hdt_experiments,
+    run_method,
+    summarize,
+)
 from thesis_lib.seq.mamba import (
     SCAN_BACKENDS,
     GatedMLP,

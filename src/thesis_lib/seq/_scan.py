@@ -34,6 +34,7 @@ The kernels are serial: with ``prange`` over batch rows, numba's threads and tor
 threads (which spin after each op) fought over the 2 cores, and a training step got 2-4x
 slower. ``∂A`` is accumulated per batch row and summed by torch.
 """
+
 from __future__ import annotations
 
 import threading
@@ -72,7 +73,9 @@ def _scan_fwd_kernel(u, delta, dA, B, C, y, hs, h_last, store):  # pragma: no co
 
 
 @njit(cache=True, fastmath=True)
-def _scan_bwd_kernel(gy, u, delta, AT, dA, B, C, hs, gu, gdelta, gA_rows, gB, gC):  # pragma: no cover
+def _scan_bwd_kernel(
+    gy, u, delta, AT, dA, B, C, hs, gu, gdelta, gA_rows, gB, gC
+):  # pragma: no cover
     # gy, u, delta, gu, gdelta: (Bt, L, D); dA, hs: (Bt, L, N, D); B, C, gB, gC: (Bt, L, N);
     # AT: (N, D) = A transposed; gA_rows: (Bt, N, D), summed over rows by the caller.
     n_batch, L, D = u.shape
@@ -160,7 +163,9 @@ def _exp_delta_A(delta: torch.Tensor, AT_log2e: torch.Tensor) -> torch.Tensor:
     ``exp`` here (the rounding of the product adds ~1e-7 relative error per step).
     """
     rows, L, D = delta.shape
-    dA = _workspace(0, rows * L * AT_log2e.shape[0] * D, delta.dtype).view(rows, L, AT_log2e.shape[0], D)
+    dA = _workspace(0, rows * L * AT_log2e.shape[0] * D, delta.dtype).view(
+        rows, L, AT_log2e.shape[0], D
+    )
     torch.mul(delta.unsqueeze(2), AT_log2e, out=dA)
     return dA.exp2_()
 
@@ -182,8 +187,17 @@ def scan_cpu_forward(u, delta, A, B, C, store: bool = False):
     AT_log2e = AT * LOG2E
     for b0, b1 in _chunks(n_batch, L, N, D, u.element_size()):
         dA = _exp_delta_A(delta[b0:b1], AT_log2e)
-        _scan_fwd_kernel(u[b0:b1].numpy(), delta[b0:b1].numpy(), dA.numpy(), B[b0:b1].numpy(), C[b0:b1].numpy(),
-                         y[b0:b1].numpy(), hs, h_last[b0:b1].numpy(), False)
+        _scan_fwd_kernel(
+            u[b0:b1].numpy(),
+            delta[b0:b1].numpy(),
+            dA.numpy(),
+            B[b0:b1].numpy(),
+            C[b0:b1].numpy(),
+            y[b0:b1].numpy(),
+            hs,
+            h_last[b0:b1].numpy(),
+            False,
+        )
     return y, h_last.transpose(1, 2)
 
 
@@ -196,14 +210,14 @@ class SelectiveScanCPU(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, u, delta, A, B, C):  # noqa: D102
+    def forward(ctx, u, delta, A, B, C):
         y, h_last = scan_cpu_forward(u, delta, A, B, C)
         ctx.save_for_backward(u, delta, A, B, C)
         ctx.mark_non_differentiable(h_last)
         return y, h_last
 
     @staticmethod
-    def backward(ctx, gy, _g_h_last):  # noqa: D102
+    def backward(ctx, gy, _g_h_last):
         u, delta, A, B, C = (t.detach().contiguous() for t in ctx.saved_tensors)
         gy = gy.contiguous()
         AT = A.T.contiguous()
@@ -221,11 +235,30 @@ class SelectiveScanCPU(torch.autograd.Function):
             dA = _exp_delta_A(delta[b0:b1], AT_log2e)
             hs = _workspace(1, dA.numel(), u.dtype).view(dA.shape)
             args = (u[b0:b1].numpy(), delta[b0:b1].numpy())
-            _scan_fwd_kernel(*args, dA.numpy(), B[b0:b1].numpy(), C[b0:b1].numpy(), y[b0:b1].numpy(), hs.numpy(),
-                             h_last[b0:b1].numpy(), True)
-            _scan_bwd_kernel(gy[b0:b1].numpy(), *args, AT.numpy(), dA.numpy(), B[b0:b1].numpy(), C[b0:b1].numpy(),
-                             hs.numpy(), gu[b0:b1].numpy(), gdelta[b0:b1].numpy(), gA_rows[b0:b1].numpy(),
-                             gB[b0:b1].numpy(), gC[b0:b1].numpy())
+            _scan_fwd_kernel(
+                *args,
+                dA.numpy(),
+                B[b0:b1].numpy(),
+                C[b0:b1].numpy(),
+                y[b0:b1].numpy(),
+                hs.numpy(),
+                h_last[b0:b1].numpy(),
+                True,
+            )
+            _scan_bwd_kernel(
+                gy[b0:b1].numpy(),
+                *args,
+                AT.numpy(),
+                dA.numpy(),
+                B[b0:b1].numpy(),
+                C[b0:b1].numpy(),
+                hs.numpy(),
+                gu[b0:b1].numpy(),
+                gdelta[b0:b1].numpy(),
+                gA_rows[b0:b1].numpy(),
+                gB[b0:b1].numpy(),
+                gC[b0:b1].numpy(),
+            )
         return gu, gdelta, gA_rows.sum(0).T, gB, gC
 
 
@@ -237,7 +270,7 @@ class SelectiveScanTorch(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, u, delta, A, B, C):  # noqa: D102
+    def forward(ctx, u, delta, A, B, C):
         dt, ut = delta.transpose(0, 1), u.transpose(0, 1)  # (L, B, Din)
         Bt, Ct = B.transpose(0, 1), C.transpose(0, 1)  # (L, B, N)
         dA = torch.exp(dt.unsqueeze(-1) * A)  # (L, B, Din, N)
@@ -250,7 +283,7 @@ class SelectiveScanTorch(torch.autograd.Function):
         return y.transpose(0, 1), hs[-1].clone()
 
     @staticmethod
-    def backward(ctx, gy, _g_h_last):  # noqa: D102
+    def backward(ctx, gy, _g_h_last):
         ut, dt, A, Bt, Ct, dA, hs = ctx.saved_tensors
         gyt = gy.transpose(0, 1)  # (L, B, Din)
         g = gyt.unsqueeze(-1) * Ct.unsqueeze(2)  # (L, B, Din, N), becomes ∂loss/∂h[t]
@@ -265,4 +298,10 @@ class SelectiveScanTorch(torch.autograd.Function):
         gdelta = gdelta + gBu * ut
         gu = gBu * dt
         gB = torch.einsum("lbdn,lbd->lbn", g, dt * ut)
-        return gu.transpose(0, 1), gdelta.transpose(0, 1), gA, gB.transpose(0, 1), gC.transpose(0, 1)
+        return (
+            gu.transpose(0, 1),
+            gdelta.transpose(0, 1),
+            gA,
+            gB.transpose(0, 1),
+            gC.transpose(0, 1),
+        )

@@ -9,6 +9,7 @@ compiled loop, with the weights of all layers stacked once (:func:`pack_weights`
 
 Inference only: no autograd. The tests check it against the torch path and the full forward.
 """
+
 from __future__ import annotations
 
 import math
@@ -53,10 +54,14 @@ def pack_weights(model, dtype: torch.dtype) -> PackedWeights:
         ts = []
         for b in blocks:
             t = get(b)
-            ts.append(torch.zeros(default_shape, dtype=dtype) if t is None else t.detach().to("cpu", dtype))
+            ts.append(
+                torch.zeros(default_shape, dtype=dtype)
+                if t is None
+                else t.detach().to("cpu", dtype)
+            )
         return torch.stack(ts).contiguous().numpy()
 
-    m = lambda b: b.mixer  # noqa: E731
+    m = lambda b: b.mixer
     has_mlp = blocks[0].mlp is not None
     np_dtype = torch.empty(0, dtype=dtype).numpy().dtype
     n = len(blocks)
@@ -76,8 +81,11 @@ def pack_weights(model, dtype: torch.dtype) -> PackedWeights:
         norm2_w=st(lambda b: b.norm2.weight) if has_mlp else np.zeros((n, 1), np_dtype),
         fc1=st(lambda b: b.mlp.fc1.weight) if has_mlp else np.zeros((n, 1, 1), np_dtype),
         fc2=st(lambda b: b.mlp.fc2.weight) if has_mlp else np.zeros((n, 1, 1), np_dtype),
-        norm_f=(model.norm_f.weight.detach().to("cpu", dtype).contiguous().numpy() if model.norm_f is not None
-                else np.ones(1, np_dtype)),
+        norm_f=(
+            model.norm_f.weight.detach().to("cpu", dtype).contiguous().numpy()
+            if model.norm_f is not None
+            else np.ones(1, np_dtype)
+        ),
         has_mlp=has_mlp,
         has_norm_f=model.norm_f is not None,
         eps=float(cfg.norm_eps),
@@ -109,8 +117,31 @@ def _matvec(W, v, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=True)
-def stack_step_kernel(x, conv, h, out, norm_w, in_w, in_b, conv_w, conv_b, xp_w, dt_w, dt_b, A, D, out_w, out_b,
-                      norm2_w, fc1, fc2, norm_f, has_mlp, has_norm_f, eps):  # pragma: no cover - compiled
+def stack_step_kernel(
+    x,
+    conv,
+    h,
+    out,
+    norm_w,
+    in_w,
+    in_b,
+    conv_w,
+    conv_b,
+    xp_w,
+    dt_w,
+    dt_b,
+    A,
+    D,
+    out_w,
+    out_b,
+    norm2_w,
+    fc1,
+    fc2,
+    norm_f,
+    has_mlp,
+    has_norm_f,
+    eps,
+):  # pragma: no cover - compiled
     """Advance ``conv (nl, B, Din, K-1)`` and ``h (nl, B, Din, N)`` in place over ``x (T, B, d)``."""
     T, n_batch, d = x.shape
     nl, Din, K = conv_w.shape

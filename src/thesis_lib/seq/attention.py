@@ -17,6 +17,7 @@ attend** to a key, the same convention as the boolean ``attn_mask`` of
 
 Used in: Background chapter (thesis 2.2, 2.8); Decision Transformer, HDT and MDLT chapters.
 """
+
 from __future__ import annotations
 
 import math
@@ -75,7 +76,9 @@ def sinusoidal_positional_encoding(
             f"actually: {d_model!r}."
         )
     if not base > 0:
-        raise ValueError(f"Expect `base` to be positive (10000 standard, 1000 as printed), actually: {base!r}.")
+        raise ValueError(
+            f"Expect `base` to be positive (10000 standard, 1000 as printed), actually: {base!r}."
+        )
     position = torch.arange(n_positions, dtype=torch.float64)[:, None]  # (P, 1)
     two_i = torch.arange(0, d_model, 2, dtype=torch.float64)  # (d/2,) = 0, 2, 4, ...
     angle = position / float(base) ** (two_i / d_model)  # (P, d/2)
@@ -216,17 +219,25 @@ def combine_masks(
         [[1, 0, 0], [1, 1, 0], [0, 0, 1]]
     """
     if attn_mask is None and key_padding_mask is None:
-        raise ValueError("combine_masks needs `attn_mask`, `key_padding_mask` or both; got neither.")
+        raise ValueError(
+            "combine_masks needs `attn_mask`, `key_padding_mask` or both; got neither."
+        )
     for name, m in (("attn_mask", attn_mask), ("key_padding_mask", key_padding_mask)):
         if m is not None and m.dtype != torch.bool:
             raise ValueError(
                 f"Expect `{name}` to be a bool tensor (True = may attend), got dtype {m.dtype}. "
                 f"Convert a 0/1 mask with `.bool()`."
             )
-    if attn_mask is not None and (attn_mask.ndim not in (2, 3) or attn_mask.shape[-1] != attn_mask.shape[-2]):
-        raise ValueError(f"Expect `attn_mask` of shape (T, T) or (B, T, T), got {tuple(attn_mask.shape)}.")
+    if attn_mask is not None and (
+        attn_mask.ndim not in (2, 3) or attn_mask.shape[-1] != attn_mask.shape[-2]
+    ):
+        raise ValueError(
+            f"Expect `attn_mask` of shape (T, T) or (B, T, T), got {tuple(attn_mask.shape)}."
+        )
     if key_padding_mask is not None and key_padding_mask.ndim != 2:
-        raise ValueError(f"Expect `key_padding_mask` of shape (B, T), got {tuple(key_padding_mask.shape)}.")
+        raise ValueError(
+            f"Expect `key_padding_mask` of shape (B, T), got {tuple(key_padding_mask.shape)}."
+        )
 
     if key_padding_mask is None:
         allowed = attn_mask if attn_mask.ndim == 3 else attn_mask[None]  # (B, T, T)
@@ -399,7 +410,9 @@ class CausalSelfAttention(nn.Module):
     def __init__(self, config: GPTBlockConfig) -> None:
         super().__init__()
         self.config = config
-        self.c_attn = nn.Linear(config.d_model, 3 * config.d_model, bias=config.bias)  # q, k, v for all heads
+        self.c_attn = nn.Linear(
+            config.d_model, 3 * config.d_model, bias=config.bias
+        )  # q, k, v for all heads
         self.c_proj = nn.Linear(config.d_model, config.d_model, bias=config.bias)
         self.resid_dropout = nn.Dropout(config.dropout)
 
@@ -424,7 +437,9 @@ class CausalSelfAttention(nn.Module):
         causal = causal_mask(T, device=x.device) if self.config.causal else None
         return combine_masks(causal, key_padding_mask)  # (B, 1, T, T)
 
-    def forward(self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Attend.
 
         Args:
@@ -439,14 +454,20 @@ class CausalSelfAttention(nn.Module):
         dropout_p = self.config.dropout if self.training else 0.0
         if key_padding_mask is None:
             # The fused kernel builds the causal mask itself.
-            y = F.scaled_dot_product_attention(q, k, v, dropout_p=dropout_p, is_causal=self.config.causal)
+            y = F.scaled_dot_product_attention(
+                q, k, v, dropout_p=dropout_p, is_causal=self.config.causal
+            )
         else:
-            y = F.scaled_dot_product_attention(q, k, v, attn_mask=self._mask(x, key_padding_mask), dropout_p=dropout_p)
+            y = F.scaled_dot_product_attention(
+                q, k, v, attn_mask=self._mask(x, key_padding_mask), dropout_p=dropout_p
+            )
         y = y.transpose(1, 2).contiguous().view(B, T, C)  # (B, T, nh * hs): heads side by side
         return self.resid_dropout(self.c_proj(y))
 
     @torch.no_grad()
-    def attention_weights(self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None) -> torch.Tensor:
+    def attention_weights(
+        self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Per-head attention weights for ``x``, through the explicit :func:`attention`.
 
         Args:
@@ -501,7 +522,9 @@ class Block(nn.Module):
         self.ln_2 = nn.LayerNorm(config.d_model, bias=config.bias)
         self.mlp = MLP(config)
 
-    def forward(self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Apply the block.
 
         Args:
@@ -521,7 +544,9 @@ class Block(nn.Module):
         return x
 
     @torch.no_grad()
-    def attention_weights(self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None) -> torch.Tensor:
+    def attention_weights(
+        self, x: torch.Tensor, key_padding_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """The attention weights this block uses on input ``x`` (for plots).
 
         Args:
@@ -575,7 +600,9 @@ class GPTBlockConfig:
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ValueError(f"Expect `{name}` to be a positive int, actually: {value!r}.")
         if self.d_model % self.n_head != 0:
-            divisors = ", ".join(str(n) for n in range(1, self.d_model + 1) if self.d_model % n == 0)
+            divisors = ", ".join(
+                str(n) for n in range(1, self.d_model + 1) if self.d_model % n == 0
+            )
             raise ValueError(
                 f"d_model must be divisible by n_head, got d_model={self.d_model} and n_head={self.n_head} "
                 f"({self.d_model} % {self.n_head} = {self.d_model % self.n_head}). "
@@ -584,5 +611,7 @@ class GPTBlockConfig:
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expect `dropout` in [0, 1), actually: {self.dropout!r}.")
         if self.activation not in ACTIVATIONS:
-            raise ValueError(f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}.")
+            raise ValueError(
+                f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}."
+            )
         self.head_dim = self.d_model // self.n_head

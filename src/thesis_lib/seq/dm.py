@@ -32,10 +32,12 @@ z-scored states), and evaluation re-runs the window (``eval_mode="auto"`` -> ``"
 
 Used in: Decision Mamba chapter (thesis 5.3, Tables 5.5-5.6, Figs 5.3-5.6).
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal, Mapping
+from typing import Literal
 
 import torch
 import torch.nn as nn
@@ -98,15 +100,23 @@ class _MambaModelConfig(_ModelConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.eval_mode not in EVAL_MODES:
-            raise ValueError(f"Unknown eval_mode {self.eval_mode!r}. Valid: {', '.join(EVAL_MODES)}.")
+            raise ValueError(
+                f"Unknown eval_mode {self.eval_mode!r}. Valid: {', '.join(EVAL_MODES)}."
+            )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expect `dropout` in [0, 1), actually: {self.dropout!r}.")
         self.mamba_config()  # validates n_layer, d_model, d_state ...
 
     def mamba_config(self) -> MambaConfig:
         """The :class:`MambaConfig` of each trunk."""
-        return MambaConfig(d_model=self.d_model, n_layers=self.n_layer, d_state=self.d_state, d_conv=self.d_conv,
-                           expand=self.expand, gated_mlp=self.gated_mlp)
+        return MambaConfig(
+            d_model=self.d_model,
+            n_layers=self.n_layer,
+            d_state=self.d_state,
+            d_conv=self.d_conv,
+            expand=self.expand,
+            gated_mlp=self.gated_mlp,
+        )
 
     @property
     def resolved_eval_mode(self) -> str:
@@ -232,7 +242,9 @@ class DecisionMamba(nn.Module):
 
     def recurrent_policy(self, n_envs: int) -> RecurrentPolicy | None:
         """A :class:`RecurrentPolicy` for ``n_envs`` episodes, or ``None`` when ``eval_mode`` is ``"window"``."""
-        return RecurrentPolicy(self, n_envs) if self.config.resolved_eval_mode == "recurrent" else None
+        return (
+            RecurrentPolicy(self, n_envs) if self.config.resolved_eval_mode == "recurrent" else None
+        )
 
 
 class HDM(nn.Module):
@@ -256,7 +268,9 @@ class HDM(nn.Module):
         self.high_embed_state = nn.Linear(sd, d)
         self.high = TokenMamba(config)
         # The authors' head ends in a Tanh although sub-goals are z-scored states (|z| > 1 is common).
-        self.predict_subgoal = nn.Sequential(nn.Linear(d, sd), nn.Tanh()) if config.paper_compat else nn.Linear(d, sd)
+        self.predict_subgoal = (
+            nn.Sequential(nn.Linear(d, sd), nn.Tanh()) if config.paper_compat else nn.Linear(d, sd)
+        )
         self.low_embed_subgoal = nn.Linear(sd, d)
         self.low_embed_state = nn.Linear(sd, d)
         self.low_embed_action = nn.Linear(config.act_dim, d)
@@ -275,14 +289,21 @@ class HDM(nn.Module):
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
         """Sub-goals ``g_t`` ``(B, T, state_dim)`` from ``(g_{t-1}, s_t)`` tokens."""
-        tokens = [self.high_embed_subgoal(batch["prev_subgoals"]), self.high_embed_state(batch["states"])]
+        tokens = [
+            self.high_embed_subgoal(batch["prev_subgoals"]),
+            self.high_embed_state(batch["states"]),
+        ]
         _, h_state = self.high(tokens)
         return self.predict_subgoal(h_state)
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
         """Actions ``a_t`` ``(B, T, act_dim)`` from ``(g_t, s_t, a_t)`` tokens."""
         a_tok = batch[_action_key(self.config.paper_compat)]
-        tokens = [self.low_embed_subgoal(subgoals), self.low_embed_state(batch["states"]), self.low_embed_action(a_tok)]
+        tokens = [
+            self.low_embed_subgoal(subgoals),
+            self.low_embed_state(batch["states"]),
+            self.low_embed_action(a_tok),
+        ]
         h = self.low(tokens)
         return self.predict_action(h[1]) * self.config.max_action  # read at s_t
 
@@ -296,7 +317,9 @@ class HDM(nn.Module):
         mask = batch.get("mask")
         l_high = masked_mse(subgoals, targets["subgoals"], mask)
         l_low = masked_mse(actions, targets["actions"], mask)
-        return SeqOutput(actions, subgoals, l_high + l_low, {"subgoal": l_high.item(), "action": l_low.item()})
+        return SeqOutput(
+            actions, subgoals, l_high + l_low, {"subgoal": l_high.item(), "action": l_low.item()}
+        )
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -309,7 +332,9 @@ class HDM(nn.Module):
 
     def recurrent_policy(self, n_envs: int) -> RecurrentPolicy | None:
         """A :class:`RecurrentPolicy` for ``n_envs`` episodes, or ``None`` when ``eval_mode`` is ``"window"``."""
-        return RecurrentPolicy(self, n_envs) if self.config.resolved_eval_mode == "recurrent" else None
+        return (
+            RecurrentPolicy(self, n_envs) if self.config.resolved_eval_mode == "recurrent" else None
+        )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -335,19 +360,24 @@ class RecurrentPolicy:
 
     def __init__(self, model: DecisionMamba | HDM, n_envs: int) -> None:
         if not isinstance(model, (DecisionMamba, HDM)):
-            raise TypeError(f"RecurrentPolicy drives a DecisionMamba or an HDM, got {type(model).__name__}.")
+            raise TypeError(
+                f"RecurrentPolicy drives a DecisionMamba or an HDM, got {type(model).__name__}."
+            )
         self.model = model
         self.n_envs = int(n_envs)
         self.t = 0
         device = next(model.parameters()).device
         if isinstance(model, HDM):
-            self.states = {"high": model.high.allocate_state(n_envs, device),
-                           "low": model.low.allocate_state(n_envs, device)}
+            self.states = {
+                "high": model.high.allocate_state(n_envs, device),
+                "low": model.low.allocate_state(n_envs, device),
+            }
         else:
             self.states = {"low": model.trunk.allocate_state(n_envs, device)}
 
-    def _advance(self, level: str, trunk: TokenMamba, tokens: list[torch.Tensor], live: torch.Tensor | None
-                 ) -> torch.Tensor:
+    def _advance(
+        self, level: str, trunk: TokenMamba, tokens: list[torch.Tensor], live: torch.Tensor | None
+    ) -> torch.Tensor:
         state = self.states[level]
         x = torch.stack(tokens, 1)  # (n_live, n, d)
         if live is None:  # every episode runs: no gather / scatter
@@ -379,7 +409,9 @@ class RecurrentPolicy:
         m, cfg = self.model, self.model.config
         s = history["states"][:, -1]  # (n_live, state_dim)
         if s.shape[-1] != cfg.state_dim:
-            raise ValueError(f"{type(m).__name__} expects states of size {cfg.state_dim}, got {s.shape[-1]}.")
+            raise ValueError(
+                f"{type(m).__name__} expects states of size {cfg.state_dim}, got {s.shape[-1]}."
+            )
         if live is not None and len(live) == self.n_envs:
             live = None  # all running (the evaluator passes the indices in order)
         first = self.t == 0

@@ -17,12 +17,14 @@
 
 Used in: Decision Mamba chapter (thesis 5.3; Tables 5.5, 5.6; Figs 5.3-5.6).
 """
+
 from __future__ import annotations
 
 import difflib
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -57,7 +59,13 @@ __all__ = [
 
 DM_METHODS: tuple[str, ...] = ("DT", "HDT", "DM-RTG", "DM", "HDM")
 """Our method names: DT (with RTG), HDT, DM with RTG, DM without RTG, HDM."""
-THESIS_METHOD: dict[str, str] = {"DT": "DT", "HDT": "HDT", "DM-RTG": "DM_with_R", "DM": "DM_without_R", "HDM": "HDM"}
+THESIS_METHOD: dict[str, str] = {
+    "DT": "DT",
+    "HDT": "HDT",
+    "DM-RTG": "DM_with_R",
+    "DM": "DM_without_R",
+    "HDM": "HDM",
+}
 """Our names -> the reference tables' (``table_5_5.csv``, ``table_5_6.csv``)."""
 RTG_METHODS = ("DT", "DM-RTG")
 HIERARCHICAL = ("HDT", "HDM")
@@ -99,7 +107,9 @@ def parse_arch(text: str | Arch) -> Arch:
     except ValueError:
         values = []
     if len(values) != 3 or min(values) < 1:
-        raise ValueError(f"Expect an architecture as 'layers/d_model/K', e.g. '6/128/20'; got '{text}'.")
+        raise ValueError(
+            f"Expect an architecture as 'layers/d_model/K', e.g. '6/128/20'; got '{text}'."
+        )
     return Arch(*values)
 
 
@@ -186,17 +196,30 @@ class DMChapterConfig:
                 if m not in DM_METHODS:
                     close = difflib.get_close_matches(m, DM_METHODS, n=1)
                     hint = f" Did you mean: '{close[0]}'?" if close else ""
-                    raise ValueError(f"Unknown method '{m}' in {name}.{hint} Valid: {', '.join(DM_METHODS)}.")
+                    raise ValueError(
+                        f"Unknown method '{m}' in {name}.{hint} Valid: {', '.join(DM_METHODS)}."
+                    )
         for name in ("datasets", "sweep_datasets", "timing_datasets"):
             for d in getattr(self, name):
                 if str(d).count("/") != 1:
-                    raise ValueError(f"Expect {name} as 'task/tier', e.g. 'hopper/medium'; got '{d}'.")
+                    raise ValueError(
+                        f"Expect {name} as 'task/tier', e.g. 'hopper/medium'; got '{d}'."
+                    )
         for a in [self.arch, self.timing_arch, *self.sweep_archs]:
             parse_arch(a)
         if self.eval_mode not in ("recurrent", "window"):
             raise ValueError(f"Unknown eval_mode {self.eval_mode!r}. Valid: recurrent, window.")
-        for name in ("iterations", "batch_size", "eval_every", "eval_episodes", "timing_batch_size",
-                     "timing_train_iters", "timing_infer_steps", "timing_infer_episodes", "warmup_steps"):
+        for name in (
+            "iterations",
+            "batch_size",
+            "eval_every",
+            "eval_episodes",
+            "timing_batch_size",
+            "timing_train_iters",
+            "timing_infer_steps",
+            "timing_infer_episodes",
+            "warmup_steps",
+        ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"Expect `{name}` >= 1, actually: {getattr(self, name)!r}.")
 
@@ -210,16 +233,29 @@ class DMChapterConfig:
 # One run
 
 
-def build_dm_model(method: str, seq: Any, arch: Arch, cfg: DMChapterConfig, max_action: float = 1.0) -> torch.nn.Module:
+def build_dm_model(
+    method: str, seq: Any, arch: Arch, cfg: DMChapterConfig, max_action: float = 1.0
+) -> torch.nn.Module:
     """The model of ``method`` with architecture ``arch`` sized for the data set ``seq``.
 
     Used in: Decision Mamba chapter.
     """
-    sizes = dict(state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=arch.K,
-                 max_action=max_action, d_model=arch.d_model, n_layer=arch.n_layer, paper_compat=cfg.paper_compat)
+    sizes = dict(
+        state_dim=int(seq.states.shape[-1]),
+        act_dim=int(seq.actions.shape[-1]),
+        K=arch.K,
+        max_action=max_action,
+        d_model=arch.d_model,
+        n_layer=arch.n_layer,
+        paper_compat=cfg.paper_compat,
+    )
     if method in ("DT", "HDT"):
         tf = dict(n_head=cfg.n_head, dropout=cfg.dropout, max_timestep=4096, **sizes)
-        return DecisionTransformer(DTConfig(use_rtg=True, **tf)) if method == "DT" else HDT(HDTConfig(**tf))
+        return (
+            DecisionTransformer(DTConfig(use_rtg=True, **tf))
+            if method == "DT"
+            else HDT(HDTConfig(**tf))
+        )
     mb = dict(gated_mlp=cfg.gated_mlp, eval_mode=cfg.eval_mode, **sizes)
     if method in ("DM", "DM-RTG"):
         return DecisionMamba(DMConfig(use_rtg=method == "DM-RTG", **mb))
@@ -245,9 +281,17 @@ def _max_action(task: str) -> float:
         env.close()
 
 
-def run_dm_method(method: str, task: str, tier: str, seed: int, cfg: DMChapterConfig, data: Any = None,
-                  arch: Arch | str | None = None, compare_eval_modes: bool = False,
-                  targets: tuple[str, ...] = TARGETS) -> pd.DataFrame:
+def run_dm_method(
+    method: str,
+    task: str,
+    tier: str,
+    seed: int,
+    cfg: DMChapterConfig,
+    data: Any = None,
+    arch: Arch | str | None = None,
+    compare_eval_modes: bool = False,
+    targets: tuple[str, ...] = TARGETS,
+) -> pd.DataFrame:
     """Train ``method`` on ``thesis/<task>/<tier>`` with ``seed``; evaluate along the way.
 
     Used in: Decision Mamba chapter (Table 5.5, Figs 5.3-5.6).
@@ -292,14 +336,27 @@ def run_dm_method(method: str, task: str, tier: str, seed: int, cfg: DMChapterCo
         # Every target in one batch of environments (one model call per step for all targets);
         # episode k of the batch resets with seed ep_seed + k, so each target has its own starts.
         E, values = cfg.eval_episodes, list(targets.values())
-        per_episode = None if values[0] is None else np.repeat(np.asarray(values, dtype=np.float64), E)
+        per_episode = (
+            None if values[0] is None else np.repeat(np.asarray(values, dtype=np.float64), E)
+        )
         ep_seed = 10_000 * (seed + 1) + trainer.iteration
-        res_all = evaluate(m, task, E * len(values), target_return=per_episode, dataset=seq, seed=ep_seed,
-                           max_steps=eval_step_cap(task, cfg.max_eval_steps), n_envs=E * len(values))
+        res_all = evaluate(
+            m,
+            task,
+            E * len(values),
+            target_return=per_episode,
+            dataset=seq,
+            seed=ep_seed,
+            max_steps=eval_step_cap(task, cfg.max_eval_steps),
+            n_envs=E * len(values),
+        )
         for i, (name, target) in enumerate(targets.items()):
             part = slice(i * E, (i + 1) * E)
-            res = EvalResult(res_all.returns[part], res_all.lengths[part],
-                             None if res_all.scores is None else res_all.scores[part])
+            res = EvalResult(
+                res_all.returns[part],
+                res_all.lengths[part],
+                None if res_all.scores is None else res_all.scores[part],
+            )
             rows.append({
                 "method": method, "task": task, "tier": tier, "seed": seed, "arch": arch.label,
                 "n_layer": arch.n_layer, "d_model": arch.d_model, "K": arch.K, "eval_mode": mode,
@@ -315,9 +372,16 @@ def run_dm_method(method: str, task: str, tier: str, seed: int, cfg: DMChapterCo
         run_eval(m, base_mode)
         return rows[-1]["return_mean"]
 
-    train_cfg = TrainConfig(iterations=cfg.iterations, batch_size=cfg.batch_size, lr=cfg.lr,
-                            warmup_steps=cfg.warmup_steps, eval_every=cfg.eval_every, seed=seed,
-                            device=cfg.device, progress=cfg.progress)
+    train_cfg = TrainConfig(
+        iterations=cfg.iterations,
+        batch_size=cfg.batch_size,
+        lr=cfg.lr,
+        warmup_steps=cfg.warmup_steps,
+        eval_every=cfg.eval_every,
+        seed=seed,
+        device=cfg.device,
+        progress=cfg.progress,
+    )
     trainer = Trainer(model, seq, train_cfg, eval_fn=eval_fn)
     trainer.train()
     if cfg.iterations % cfg.eval_every:  # always evaluate the final model
@@ -338,7 +402,9 @@ def _split(name: str) -> tuple[str, str]:
     return task, tier
 
 
-def _load(names: list[str], cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None) -> dict:
+def _load(
+    names: list[str], cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None
+) -> dict:
     from thesis_lib.data import get_dataset
 
     out = dict(data or {})
@@ -349,20 +415,35 @@ def _load(names: list[str], cfg: DMChapterConfig, data: Mapping[tuple[str, str],
     return out
 
 
-def run_table_5_5(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
+def run_table_5_5(
+    cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None
+) -> pd.DataFrame:
     """Every data set x seed x method of ``cfg`` at ``cfg.arch``: the :func:`run_dm_method` rows.
 
     Used in: Decision Mamba chapter (Table 5.5, Fig 5.4).
     """
     data = _load(cfg.datasets, cfg, data)
     jobs = [(m, *_split(d), s) for d in cfg.datasets for s in cfg.seeds for m in cfg.methods]
-    frames = [run_dm_method(m, task, tier, s, cfg, data=data[(task, tier)], compare_eval_modes=cfg.compare_eval_modes)
-              for m, task, tier, s in tqdm(jobs, desc="Table 5.5 runs", disable=not cfg.progress)]
+    frames = [
+        run_dm_method(
+            m,
+            task,
+            tier,
+            s,
+            cfg,
+            data=data[(task, tier)],
+            compare_eval_modes=cfg.compare_eval_modes,
+        )
+        for m, task, tier, s in tqdm(jobs, desc="Table 5.5 runs", disable=not cfg.progress)
+    ]
     return pd.concat(frames, ignore_index=True)
 
 
-def run_sweeps(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None,
-               reuse: pd.DataFrame | None = None) -> pd.DataFrame:
+def run_sweeps(
+    cfg: DMChapterConfig,
+    data: Mapping[tuple[str, str], Any] | None = None,
+    reuse: pd.DataFrame | None = None,
+) -> pd.DataFrame:
     """The architecture sweeps of Figs 5.3 (HDM), 5.5 (DM) and 5.6 (DM with RTG, at the max target only).
 
     Runs already in ``reuse`` (e.g. :func:`run_table_5_5`'s, same method, data set, seed and
@@ -378,14 +459,21 @@ def run_sweeps(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None 
             for s in cfg.seeds:
                 for m in cfg.sweep_methods:
                     if reuse is not None and len(reuse):
-                        hit = reuse[(reuse.method == m) & (reuse.task == task) & (reuse.tier == tier)
-                                    & (reuse.seed == s) & (reuse.arch == a.label)]
+                        hit = reuse[
+                            (reuse.method == m)
+                            & (reuse.task == task)
+                            & (reuse.tier == tier)
+                            & (reuse.seed == s)
+                            & (reuse.arch == a.label)
+                        ]
                         if len(hit):
                             frames.append(hit)
                             continue
                     jobs.append((m, task, tier, s, a))
     for m, task, tier, s, a in tqdm(jobs, desc="sweep runs", disable=not cfg.progress):
-        frames.append(run_dm_method(m, task, tier, s, cfg, data=data[(task, tier)], arch=a, targets=("max",)))
+        frames.append(
+            run_dm_method(m, task, tier, s, cfg, data=data[(task, tier)], arch=a, targets=("max",))
+        )
     return pd.concat(frames, ignore_index=True)
 
 
@@ -406,21 +494,39 @@ def summarize_dm(curves: pd.DataFrame) -> pd.DataFrame:
     """
     keys = ["method", "task", "tier", "target", "arch", "eval_mode"]
     per_run = curves.sort_values("iteration").groupby(keys + ["seed"], sort=False)
-    runs = pd.DataFrame({"best": per_run["return_mean"].max(), "final": per_run["return_mean"].last()}).reset_index()
+    runs = pd.DataFrame(
+        {"best": per_run["return_mean"].max(), "final": per_run["return_mean"].last()}
+    ).reset_index()
     g = runs.groupby(keys, sort=False)
     out = pd.DataFrame({
         "best_mean": g["best"].mean(), "best_std": g["best"].std(ddof=0),
         "final_mean": g["final"].mean(), "final_std": g["final"].std(ddof=0),
         "n_seeds": g["seed"].nunique(),
     }).reset_index()  # fmt: skip
-    order = {m: i for i, m in enumerate(DM_METHODS)} | {t: i for i, t in enumerate((*TARGETS, "none"))}
-    return out.sort_values(["task", "tier", "arch", "method", "target"],
-                           key=lambda c: c.map(order) if c.name in ("method", "target") else c).reset_index(drop=True)
+    order = {m: i for i, m in enumerate(DM_METHODS)} | {
+        t: i for i, t in enumerate((*TARGETS, "none"))
+    }
+    return out.sort_values(
+        ["task", "tier", "arch", "method", "target"],
+        key=lambda c: c.map(order) if c.name in ("method", "target") else c,
+    ).reset_index(drop=True)
 
 
-_TASKS_5_5 = {"hopper": "Hopper", "walker2d": "Walker2D", "halfcheetah": "HalfCheetah", "ant": "Ant"}
-_TASKS_5_6 = {"hopper": "Hopper", "walker2d": "Walker2d", "halfcheetah": "HalfCheetah", "ant": "Ant",
-              "maze2d": "Maze2d", "antmaze": "Antmaze", "kitchen": "Kitchen"}
+_TASKS_5_5 = {
+    "hopper": "Hopper",
+    "walker2d": "Walker2D",
+    "halfcheetah": "HalfCheetah",
+    "ant": "Ant",
+}
+_TASKS_5_6 = {
+    "hopper": "Hopper",
+    "walker2d": "Walker2d",
+    "halfcheetah": "HalfCheetah",
+    "ant": "Ant",
+    "maze2d": "Maze2d",
+    "antmaze": "Antmaze",
+    "kitchen": "Kitchen",
+}
 
 
 def thesis_labels_5_5(task: str, tier: str) -> tuple[str, str]:
@@ -435,13 +541,17 @@ def thesis_labels_5_5(task: str, tier: str) -> tuple[str, str]:
     if task.startswith("maze2d-"):
         return "Maze2D", task.split("-", 1)[1]
     if task.startswith("antmaze-"):
-        return "Antmaze", task.split("-", 1)[1] + ("" if tier in ("expert", "play", "") else f"-{tier}")
+        return "Antmaze", task.split("-", 1)[1] + (
+            "" if tier in ("expert", "play", "") else f"-{tier}"
+        )
     if task == "kitchen":
         return "Kitchen", tier
     return _TASKS_5_5.get(task, task), tier
 
 
-def thesis_table_5_5(summary: pd.DataFrame, eval_mode: str = "recurrent", differs: Any = None) -> pd.DataFrame:
+def thesis_table_5_5(
+    summary: pd.DataFrame, eval_mode: str = "recurrent", differs: Any = None
+) -> pd.DataFrame:
     """Table 5.5 beside the thesis's, for both metrics.
 
     DT and HDT rows are windowed (they have no other mode); DM/HDM rows use ``eval_mode``.
@@ -466,17 +576,46 @@ def thesis_table_5_5(summary: pd.DataFrame, eval_mode: str = "recurrent", differ
     frames = []
     for metric, col in METRICS.items():
         ours = s.assign(ours=s[f"{col}_mean"])
-        c = compare_with_paper("5.5", ours, on=["task", "dataset", "method", "desired_return"], value="ours",
-                               paper_value="return_mean", differs=differs)
-        c = c.merge(ref.rename(columns={"return_std": "paper_std"})[["task", "dataset", "method", "desired_return",
-                                                                    "paper_std"]].astype({"desired_return": str}),
-                    on=["task", "dataset", "method", "desired_return"], how="left")
-        std = ours.assign(ours_std=ours[f"{col}_std"])[["task", "dataset", "method", "desired_return", "ours_std"]]
-        c = c.merge(std.astype({"desired_return": str}), on=["task", "dataset", "method", "desired_return"], how="left")
+        c = compare_with_paper(
+            "5.5",
+            ours,
+            on=["task", "dataset", "method", "desired_return"],
+            value="ours",
+            paper_value="return_mean",
+            differs=differs,
+        )
+        c = c.merge(
+            ref.rename(columns={"return_std": "paper_std"})[
+                ["task", "dataset", "method", "desired_return", "paper_std"]
+            ].astype({"desired_return": str}),
+            on=["task", "dataset", "method", "desired_return"],
+            how="left",
+        )
+        std = ours.assign(ours_std=ours[f"{col}_std"])[
+            ["task", "dataset", "method", "desired_return", "ours_std"]
+        ]
+        c = c.merge(
+            std.astype({"desired_return": str}),
+            on=["task", "dataset", "method", "desired_return"],
+            how="left",
+        )
         frames.append(c.assign(metric=metric))
     out = pd.concat(frames, ignore_index=True)
-    return out[["metric", "method", "task", "dataset", "desired_return", "paper", "paper_std", "ours", "ours_std",
-                "difference", "what differs"]]
+    return out[
+        [
+            "metric",
+            "method",
+            "task",
+            "dataset",
+            "desired_return",
+            "paper",
+            "paper_std",
+            "ours",
+            "ours_std",
+            "difference",
+            "what differs",
+        ]
+    ]
 
 
 #: The comparisons the thesis quotes in 5.3.3 and its counts (out of 27 settings).
@@ -515,11 +654,15 @@ def win_counts_5_5(table: pd.DataFrame) -> pd.DataFrame:
     from thesis_lib.book import load_reference
 
     ref = load_reference("5.5")
-    paper_all = ref.pivot_table(index=["task", "dataset"], columns=["method", "desired_return"], values="return_mean")
+    paper_all = ref.pivot_table(
+        index=["task", "dataset"], columns=["method", "desired_return"], values="return_mean"
+    )
     rows = []
     for metric in table.metric.unique():
         t = table[table.metric == metric]
-        ours = t.pivot_table(index=["task", "dataset"], columns=["method", "desired_return"], values="ours")
+        ours = t.pivot_table(
+            index=["task", "dataset"], columns=["method", "desired_return"], values="ours"
+        )
         ran = t.dropna(subset=["ours"])[["task", "dataset"]].drop_duplicates()
         keys = set(zip(ran.task, ran.dataset))
         paper_ours = paper_all[[k in keys for k in paper_all.index]]
@@ -527,9 +670,16 @@ def win_counts_5_5(table: pd.DataFrame) -> pd.DataFrame:
             w_all, n_all = _wins(paper_all, a, b)
             w_sub, n_sub = _wins(paper_ours, a, b)
             w_ours, n_ours = _wins(ours, a, b)
-            rows.append({"comparison": name, "metric": metric, "thesis text": f"{quoted}/27",
-                         "thesis table (all settings)": f"{w_all}/{n_all}",
-                         "thesis table (our settings)": f"{w_sub}/{n_sub}", "ours": f"{w_ours}/{n_ours}"})
+            rows.append(
+                {
+                    "comparison": name,
+                    "metric": metric,
+                    "thesis text": f"{quoted}/27",
+                    "thesis table (all settings)": f"{w_all}/{n_all}",
+                    "thesis table (our settings)": f"{w_sub}/{n_sub}",
+                    "ours": f"{w_ours}/{n_ours}",
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -545,7 +695,9 @@ def _timing_env(task: str) -> Any:
     return gym.vector.SyncVectorEnv([lambda: make_env(task)])
 
 
-def time_methods(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
+def time_methods(
+    cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None
+) -> pd.DataFrame:
     """Table 5.6: ms per training iteration and per inference step of each method, at ``cfg.timing_arch``.
 
     * train: one gradient step of the :class:`~thesis_lib.seq.trainer.Trainer` (sampling the
@@ -575,16 +727,36 @@ def time_methods(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | Non
             seq = _sequence_dataset(data[(task, tier)], method, arch.K, cfg.seed, cfg.paper_compat)
             torch.manual_seed(cfg.seed)
             model = build_dm_model(method, seq, arch, cfg, max_action)
-            trainer = Trainer(model, seq, TrainConfig(iterations=10**9, batch_size=cfg.timing_batch_size, lr=cfg.lr,
-                                                      warmup_steps=cfg.warmup_steps, progress=False, device=cfg.device))
+            trainer = Trainer(
+                model,
+                seq,
+                TrainConfig(
+                    iterations=10**9,
+                    batch_size=cfg.timing_batch_size,
+                    lr=cfg.lr,
+                    warmup_steps=cfg.warmup_steps,
+                    progress=False,
+                    device=cfg.device,
+                ),
+            )
             times = []
             for i in range(cfg.timing_train_iters + 1):
                 t0 = time.perf_counter()
                 trainer.step()
                 if i:
                     times.append((time.perf_counter() - t0) * 1e3)
-            rows.append({"task": task, "tier": tier, "method": method, "phase": "train", "mode": "",
-                         "time_ms_mean": float(np.mean(times)), "time_ms_std": float(np.std(times)), "n": len(times)})
+            rows.append(
+                {
+                    "task": task,
+                    "tier": tier,
+                    "method": method,
+                    "phase": "train",
+                    "mode": "",
+                    "time_ms_mean": float(np.mean(times)),
+                    "time_ms_std": float(np.std(times)),
+                    "n": len(times),
+                }
+            )
             target = target_returns(data[(task, tier)])["max"] if method in RTG_METHODS else None
             modes = ("window", "recurrent") if method in MAMBA_METHODS else ("window",)
             venv = _timing_env(task)
@@ -595,13 +767,31 @@ def time_methods(cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | Non
                     per_step = []
                     for i in range(cfg.timing_infer_episodes + 1):
                         t0 = time.perf_counter()
-                        res = evaluate(model, venv, 1, target_return=target, dataset=seq, seed=cfg.seed + i,
-                                       max_steps=cfg.timing_infer_steps)
+                        res = evaluate(
+                            model,
+                            venv,
+                            1,
+                            target_return=target,
+                            dataset=seq,
+                            seed=cfg.seed + i,
+                            max_steps=cfg.timing_infer_steps,
+                        )
                         if i:
-                            per_step.append((time.perf_counter() - t0) * 1e3 / max(int(res.lengths[0]), 1))
-                    rows.append({"task": task, "tier": tier, "method": method, "phase": "inference", "mode": mode,
-                                 "time_ms_mean": float(np.mean(per_step)), "time_ms_std": float(np.std(per_step)),
-                                 "n": len(per_step)})
+                            per_step.append(
+                                (time.perf_counter() - t0) * 1e3 / max(int(res.lengths[0]), 1)
+                            )
+                    rows.append(
+                        {
+                            "task": task,
+                            "tier": tier,
+                            "method": method,
+                            "phase": "inference",
+                            "mode": mode,
+                            "time_ms_mean": float(np.mean(per_step)),
+                            "time_ms_std": float(np.std(per_step)),
+                            "n": len(per_step),
+                        }
+                    )
             finally:
                 venv.close()
     return pd.DataFrame(rows)
@@ -619,9 +809,13 @@ def thesis_table_5_6(timing: pd.DataFrame, differs: Any = None) -> pd.DataFrame:
 
     t = timing.copy()
     t["env"] = [_TASKS_5_6.get(task.split("-")[0], task) for task in t.task]
-    t["method"] = [THESIS_METHOD[m] + (" (recurrent step)" if mode == "recurrent" else "")
-                   for m, mode in zip(t.method, t["mode"])]
-    out = compare_with_paper("5.6", t, on=["env", "phase", "method"], value="time_ms_mean", differs=differs)
+    t["method"] = [
+        THESIS_METHOD[m] + (" (recurrent step)" if mode == "recurrent" else "")
+        for m, mode in zip(t.method, t["mode"])
+    ]
+    out = compare_with_paper(
+        "5.6", t, on=["env", "phase", "method"], value="time_ms_mean", differs=differs
+    )
     std = t[["env", "phase", "method", "time_ms_std"]].rename(columns={"time_ms_std": "ours_std"})
     return out.merge(std, on=["env", "phase", "method"], how="left")
 
@@ -644,8 +838,14 @@ def _one_mode(summary: pd.DataFrame, eval_mode: str) -> pd.DataFrame:
     return summary[(summary.eval_mode == eval_mode) | ~summary.method.isin(MAMBA_METHODS)]
 
 
-def plot_sweep(summary: pd.DataFrame, method: str, data: Mapping[tuple[str, str], Any], metric: str = "best",
-               ax: Any = None, eval_mode: str = "recurrent") -> Any:
+def plot_sweep(
+    summary: pd.DataFrame,
+    method: str,
+    data: Mapping[tuple[str, str], Any],
+    metric: str = "best",
+    ax: Any = None,
+    eval_mode: str = "recurrent",
+) -> Any:
     """Figs 5.3 (HDM), 5.5 (DM), 5.6 (DM with RTG, at the max target): one bar per architecture.
 
     Bars are the metric (``best`` or ``final`` mean over seeds) divided by the data set's
@@ -667,16 +867,32 @@ def plot_sweep(summary: pd.DataFrame, method: str, data: Mapping[tuple[str, str]
     width = 0.8 / max(len(archs), 1)
     for i, a in enumerate(archs):
         g = s[s.arch == a].set_index(["task", "tier"]).reindex(sets)
-        ax.bar(np.arange(len(sets)) + i * width, g["value"], width, yerr=g["err"].fillna(0), label=a, capsize=2)
-    ax.set_xticks(np.arange(len(sets)) + width * (len(archs) - 1) / 2, [f"{t}\n{r}" for t, r in sets])
+        ax.bar(
+            np.arange(len(sets)) + i * width,
+            g["value"],
+            width,
+            yerr=g["err"].fillna(0),
+            label=a,
+            capsize=2,
+        )
+    ax.set_xticks(
+        np.arange(len(sets)) + width * (len(archs) - 1) / 2, [f"{t}\n{r}" for t, r in sets]
+    )
     ax.set_ylabel("return / data set max")
-    ax.set_title(f"{method}: architectures ({'best during training' if metric == 'best' else 'final checkpoint'})")
+    ax.set_title(
+        f"{method}: architectures ({'best during training' if metric == 'best' else 'final checkpoint'})"
+    )
     ax.legend(fontsize=8)
     return ax
 
 
-def plot_methods(summary: pd.DataFrame, data: Mapping[tuple[str, str], Any], metric: str = "best",
-                 ax: Any = None, eval_mode: str = "recurrent") -> Any:
+def plot_methods(
+    summary: pd.DataFrame,
+    data: Mapping[tuple[str, str], Any],
+    metric: str = "best",
+    ax: Any = None,
+    eval_mode: str = "recurrent",
+) -> Any:
     """Fig 5.4: the five methods side by side per data set (DT and DM with RTG at the max target).
 
     Used in: Decision Mamba chapter (Fig 5.4).
@@ -694,11 +910,21 @@ def plot_methods(summary: pd.DataFrame, data: Mapping[tuple[str, str], Any], met
     width = 0.8 / max(len(methods), 1)
     for i, m in enumerate(methods):
         g = s[s.method == m].set_index(["task", "tier"]).reindex(sets)
-        ax.bar(np.arange(len(sets)) + i * width, g["value"], width, yerr=g["err"].fillna(0),
-               label=THESIS_METHOD[m].replace("_", " "), capsize=2)
-    ax.set_xticks(np.arange(len(sets)) + width * (len(methods) - 1) / 2, [f"{t}\n{r}" for t, r in sets])
+        ax.bar(
+            np.arange(len(sets)) + i * width,
+            g["value"],
+            width,
+            yerr=g["err"].fillna(0),
+            label=THESIS_METHOD[m].replace("_", " "),
+            capsize=2,
+        )
+    ax.set_xticks(
+        np.arange(len(sets)) + width * (len(methods) - 1) / 2, [f"{t}\n{r}" for t, r in sets]
+    )
     ax.set_ylabel("return / data set max")
-    ax.set_title(f"Five methods ({'best during training' if metric == 'best' else 'final checkpoint'})")
+    ax.set_title(
+        f"Five methods ({'best during training' if metric == 'best' else 'final checkpoint'})"
+    )
     ax.legend(fontsize=8)
     return ax
 
@@ -709,8 +935,12 @@ def eval_mode_effect(summary: pd.DataFrame) -> pd.DataFrame:
     Used in: Decision Mamba chapter (recurrent vs windowed acting).
     """
     s = summary[summary.method.isin(MAMBA_METHODS)]
-    wide = s.pivot_table(index=["method", "task", "tier", "target", "arch"], columns="eval_mode", values="final_mean",
-                         aggfunc="first")
+    wide = s.pivot_table(
+        index=["method", "task", "tier", "target", "arch"],
+        columns="eval_mode",
+        values="final_mean",
+        aggfunc="first",
+    )
     wide = wide.reset_index()
     if {"recurrent", "window"} <= set(wide.columns):
         wide["recurrent - window"] = wide["recurrent"] - wide["window"]
@@ -720,15 +950,26 @@ def eval_mode_effect(summary: pd.DataFrame) -> pd.DataFrame:
 __all__ += ["METRICS", "WIN_COMPARISONS", "eval_mode_effect"]
 
 
-def format_table_5_5(table: pd.DataFrame, metric: str = "best during training (thesis)") -> pd.DataFrame:
+def format_table_5_5(
+    table: pd.DataFrame, metric: str = "best during training (thesis)"
+) -> pd.DataFrame:
     """Table 5.5 laid out as the thesis prints it: one row per setting, one column per method/target,
     each cell ``"ours ± std  (thesis ± std)"``; settings we did not run are left out.
 
     Used in: Decision Mamba chapter (Table 5.5).
     """
     t = table[(table.metric == metric)].dropna(subset=["ours"]).copy()
-    order = [("DT", "half"), ("DT", "max"), ("DT", "10k"), ("HDT", "none"), ("DM_with_R", "half"),
-             ("DM_with_R", "max"), ("DM_with_R", "10k"), ("DM_without_R", "none"), ("HDM", "none")]
+    order = [
+        ("DT", "half"),
+        ("DT", "max"),
+        ("DT", "10k"),
+        ("HDT", "none"),
+        ("DM_with_R", "half"),
+        ("DM_with_R", "max"),
+        ("DM_with_R", "10k"),
+        ("DM_without_R", "none"),
+        ("HDM", "none"),
+    ]
 
     def cell(r: pd.Series) -> str:
         paper = "" if pd.isna(r.paper) else f"  ({r.paper:.1f} ± {r.paper_std:.1f})"
@@ -736,7 +977,9 @@ def format_table_5_5(table: pd.DataFrame, metric: str = "best during training (t
 
     t["cell"] = t.apply(cell, axis=1)
     t["column"] = [f"{m} {d}" if d != "none" else m for m, d in zip(t.method, t.desired_return)]
-    wide = t.pivot_table(index=["task", "dataset"], columns="column", values="cell", aggfunc="first")
+    wide = t.pivot_table(
+        index=["task", "dataset"], columns="column", values="cell", aggfunc="first"
+    )
     cols = [f"{m} {d}" if d != "none" else m for m, d in order]
     return wide[[c for c in cols if c in wide.columns]]
 

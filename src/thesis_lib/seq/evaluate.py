@@ -18,10 +18,12 @@ Episodes end at ``terminated or truncated`` (the environment's time limit) or at
 
 Used in: HDT chapter (thesis 5.2.5; Tables 5.1-5.3); Decision Mamba chapter (5.3).
 """
+
 from __future__ import annotations
 
 import warnings
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -103,7 +105,6 @@ def _env_factory(env: Any) -> tuple[Callable[[], Any] | None, Any, str | None]:
 
     if isinstance(env, str):
         from thesis_lib.data import make_env
-
         from thesis_lib.data.tasks import get_task
 
         get_task(env)  # unknown task -> ValueError listing the valid ones
@@ -120,7 +121,9 @@ def _env_factory(env: Any) -> tuple[Callable[[], Any] | None, Any, str | None]:
         return (lambda: gym.make(spec)), None, None
     if callable(env):
         return env, None, None
-    raise TypeError(f"Expect a task name, an env factory, a gymnasium Env or VectorEnv; got {type(env).__name__}.")
+    raise TypeError(
+        f"Expect a task name, an env factory, a gymnasium Env or VectorEnv; got {type(env).__name__}."
+    )
 
 
 def _observation(obs: Any) -> np.ndarray:
@@ -191,7 +194,11 @@ def evaluate(
             f"{type(model).__name__} reads returns-to-go: pass target_return= (the thesis uses the "
             f"data set's maximum return, half of it, and 10000)."
         )
-    targets = np.zeros(n_episodes) if target_return is None else np.asarray(target_return, dtype=np.float64)
+    targets = (
+        np.zeros(n_episodes)
+        if target_return is None
+        else np.asarray(target_return, dtype=np.float64)
+    )
     if targets.ndim == 0:
         targets = np.full(n_episodes, float(targets))
     if targets.shape != (n_episodes,) or not np.all(np.isfinite(targets)):
@@ -209,8 +216,13 @@ def evaluate(
             state_mean, state_std = np.zeros(cfg.state_dim), np.ones(cfg.state_dim)
     rtg_scale = 1000.0 if rtg_scale is None else float(rtg_scale)
     if state_mean is None:
-        warnings.warn("evaluate got no state statistics: observations are fed raw. Pass dataset=seq.", stacklevel=2)
-    mean = np.zeros(cfg.state_dim) if state_mean is None else np.asarray(state_mean, dtype=np.float64)
+        warnings.warn(
+            "evaluate got no state statistics: observations are fed raw. Pass dataset=seq.",
+            stacklevel=2,
+        )
+    mean = (
+        np.zeros(cfg.state_dim) if state_mean is None else np.asarray(state_mean, dtype=np.float64)
+    )
     std = np.ones(cfg.state_dim) if state_std is None else np.asarray(state_std, dtype=np.float64)
     if device is None:
         p = next(model.parameters(), None)
@@ -230,7 +242,9 @@ def evaluate(
             f"with act_dim={cfg.act_dim}."
         )
     if max_steps is None:
-        spec = getattr(venv, "spec", None) or getattr(getattr(venv, "envs", [None])[0], "spec", None)
+        spec = getattr(venv, "spec", None) or getattr(
+            getattr(venv, "envs", [None])[0], "spec", None
+        )
         max_steps = (spec.max_episode_steps if spec is not None else None) or 1000
     max_steps = min(int(max_steps), getattr(cfg, "max_timestep", max_steps))
 
@@ -243,10 +257,20 @@ def evaluate(
             n_env = venv.num_envs
             round_targets = targets[done_so_far : done_so_far + n_env]
             round_targets = np.pad(round_targets, (0, n_env - len(round_targets)), mode="edge")
-            r, l = _run_round(model, venv, seed + done_so_far, max_steps, mean, std, round_targets,
-                              rtg_scale, device, progress)
+            r, ep_len = _run_round(
+                model,
+                venv,
+                seed + done_so_far,
+                max_steps,
+                mean,
+                std,
+                round_targets,
+                rtg_scale,
+                device,
+                progress,
+            )
             take = min(len(r), n_episodes - done_so_far)
-            returns.append(r[:take]), lengths.append(l[:take])
+            returns.append(r[:take]), lengths.append(ep_len[:take])
             done_so_far += take
     finally:
         model.train(was_training)
@@ -280,8 +304,12 @@ def _run_round(model, venv, seed, H, mean, std, target_return, rtg_scale, device
     f32 = dict(dtype=torch.float32, device=device)
     states = torch.zeros(N, H, sd, **f32)  # z-scored s_t
     rtgs = torch.zeros(N, H, 1, **f32)  # rtg_t / scale
-    actions = torch.zeros(N, H + 1, ad, **f32)  # actions[:, t + 1] = a_t; actions[:, 0] = a_{-1} = 0
-    subgoals = torch.zeros(N, H + 1, sd, **f32)  # subgoals[:, t + 1] = g_t; subgoals[:, 0] = g_{-1} = 0
+    actions = torch.zeros(
+        N, H + 1, ad, **f32
+    )  # actions[:, t + 1] = a_t; actions[:, 0] = a_{-1} = 0
+    subgoals = torch.zeros(
+        N, H + 1, sd, **f32
+    )  # subgoals[:, t + 1] = g_t; subgoals[:, 0] = g_{-1} = 0
     timesteps = torch.arange(H, device=device)[None, :].expand(N, H)  # (N, H)
     rtg = np.asarray(target_return, dtype=np.float64) / rtg_scale  # (N,) one target per env
     ret, length = np.zeros(N), np.zeros(N, dtype=np.int64)

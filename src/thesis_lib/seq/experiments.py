@@ -24,6 +24,7 @@ Methods: ``BC``; ``DT`` (RTG, Tables 5.1, 5.3); ``DT-noRTG`` (Table 5.1); ``HDT`
 
 Used in: HDT chapter (Tables 5.1-5.3).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -41,8 +42,14 @@ from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
 
 __all__ = [
-    "METHODS", "HDTExperimentConfig", "build_model", "compare_paper_compat", "run_hdt_experiments",
-    "run_method", "run_paper_compat", "summarize",
+    "METHODS",
+    "HDTExperimentConfig",
+    "build_model",
+    "compare_paper_compat",
+    "run_hdt_experiments",
+    "run_method",
+    "run_paper_compat",
+    "summarize",
 ]
 
 METHODS: tuple[str, ...] = ("BC", "DT", "DT-noRTG", "HDT", "HDT-RTG")
@@ -135,21 +142,39 @@ class HDTExperimentConfig:
     """Progress bars."""
 
     def __post_init__(self) -> None:
-        for name in ("datasets", "methods", "seeds", "extra_seeds", "extra_seed_datasets", "compat_methods"):
+        for name in (
+            "datasets",
+            "methods",
+            "seeds",
+            "extra_seeds",
+            "extra_seed_datasets",
+            "compat_methods",
+        ):
             value = getattr(self, name)
             if isinstance(value, str):
                 raise ValueError(f"Expect `{name}` to be a list, got the string {value!r}.")
             setattr(self, name, list(value))
         if not self.datasets:
             raise ValueError("Expect at least one data set in `datasets`, e.g. ['hopper/medium'].")
-        for d in self.datasets + self.extra_seed_datasets + ([self.compat_dataset] if self.compat_dataset else []):
+        for d in (
+            self.datasets
+            + self.extra_seed_datasets
+            + ([self.compat_dataset] if self.compat_dataset else [])
+        ):
             _split_dataset(d)
         for d in self.extra_seed_datasets:
             if d not in self.datasets:
-                raise ValueError(f"extra_seed_datasets entry '{d}' is not in datasets ({', '.join(self.datasets)}).")
+                raise ValueError(
+                    f"extra_seed_datasets entry '{d}' is not in datasets ({', '.join(self.datasets)})."
+                )
         _check_names(self.methods, METHODS, "method")
         _check_names(self.compat_methods, METHODS, "method")
-        if self.iterations < 1 or self.eval_every < 1 or self.eval_episodes < 1 or self.batch_size < 1:
+        if (
+            self.iterations < 1
+            or self.eval_every < 1
+            or self.eval_episodes < 1
+            or self.batch_size < 1
+        ):
             raise ValueError(
                 f"Expect iterations, eval_every, eval_episodes and batch_size >= 1, got {self.iterations}, "
                 f"{self.eval_every}, {self.eval_episodes}, {self.batch_size}."
@@ -173,21 +198,40 @@ class HDTExperimentConfig:
         for d in self.datasets:
             extra = [d] if d in self.extra_seed_datasets else []
             compat = self.compat_dataset if self.compat_dataset == d else None
-            out.append(dataclasses.replace(self, datasets=[d], extra_seed_datasets=extra, compat_dataset=compat))
+            out.append(
+                dataclasses.replace(
+                    self, datasets=[d], extra_seed_datasets=extra, compat_dataset=compat
+                )
+            )
         return out
 
 
-def build_model(method: str, seq: Any, cfg: HDTExperimentConfig, max_action: float = 1.0,
-                paper_compat: bool | None = None) -> torch.nn.Module:
+def build_model(
+    method: str,
+    seq: Any,
+    cfg: HDTExperimentConfig,
+    max_action: float = 1.0,
+    paper_compat: bool | None = None,
+) -> torch.nn.Module:
     """The model of ``method`` sized for the data set ``seq``.
 
     Used in: HDT chapter (Tables 5.1-5.3).
     """
     compat = cfg.paper_compat if paper_compat is None else paper_compat
-    tf = dict(d_model=cfg.d_model, n_layer=cfg.n_layer, n_head=cfg.n_head, dropout=cfg.dropout,
-              paper_compat=compat, max_action=max_action)
+    tf = dict(
+        d_model=cfg.d_model,
+        n_layer=cfg.n_layer,
+        n_head=cfg.n_head,
+        dropout=cfg.dropout,
+        paper_compat=compat,
+        max_action=max_action,
+    )
     if method == "BC":
-        return BC(BCConfig.for_data(seq, max_action=max_action, dropout=cfg.dropout, hidden_dim=cfg.bc_hidden_dim))
+        return BC(
+            BCConfig.for_data(
+                seq, max_action=max_action, dropout=cfg.dropout, hidden_dim=cfg.bc_hidden_dim
+            )
+        )
     if method in ("DT", "DT-noRTG"):
         return DecisionTransformer(DTConfig.for_data(seq, use_rtg=method == "DT", **tf))
     if method in ("HDT", "HDT-RTG"):
@@ -217,8 +261,15 @@ class _EnvPool:
 
 
 def run_method(
-    method: str, task: str, tier: str, seed: int, cfg: HDTExperimentConfig, data: Any = None,
-    envs: _EnvPool | None = None, paper_compat: bool | None = None, seq: Any = None,
+    method: str,
+    task: str,
+    tier: str,
+    seed: int,
+    cfg: HDTExperimentConfig,
+    data: Any = None,
+    envs: _EnvPool | None = None,
+    paper_compat: bool | None = None,
+    seq: Any = None,
 ) -> pd.DataFrame:
     """Train ``method`` on ``thesis/<task>/<tier>`` with ``seed``; evaluate along the way.
 
@@ -247,10 +298,14 @@ def run_method(
     if data is None:
         data = get_dataset(task, tier, cfg.profile, n_transitions=cfg.n_transitions)
     if seq is None:
-        seq = SequenceDataset(data, K=cfg.K, subgoal_fn=subgoal_fn(compat), paper_compat=compat, seed=seed)
+        seq = SequenceDataset(
+            data, K=cfg.K, subgoal_fn=subgoal_fn(compat), paper_compat=compat, seed=seed
+        )
     elif seq.K != cfg.K or seq.paper_compat != compat or seq.subgoals is None:
-        raise ValueError(f"The given SequenceDataset has K={seq.K}, paper_compat={seq.paper_compat}, "
-                         f"sub-goals {seq.subgoals is not None}; this run needs K={cfg.K}, paper_compat={compat}.")
+        raise ValueError(
+            f"The given SequenceDataset has K={seq.K}, paper_compat={seq.paper_compat}, "
+            f"sub-goals {seq.subgoals is not None}; this run needs K={cfg.K}, paper_compat={compat}."
+        )
     else:
         seq.rng = np.random.default_rng(seed)  # the same batches as a freshly built data set
     own_envs = envs is None
@@ -265,8 +320,16 @@ def run_method(
     rows: list[dict[str, Any]] = []
 
     def eval_fn(m: torch.nn.Module) -> float:
-        res = evaluate(m, venv, n * len(targets), target_return=per_episode, dataset=seq, task=task,
-                       seed=10_000 * (seed + 1) + trainer.iteration, max_steps=eval_step_cap(task, cfg.max_eval_steps))
+        res = evaluate(
+            m,
+            venv,
+            n * len(targets),
+            target_return=per_episode,
+            dataset=seq,
+            task=task,
+            seed=10_000 * (seed + 1) + trainer.iteration,
+            max_steps=eval_step_cap(task, cfg.max_eval_steps),
+        )
         for k, (name, target) in enumerate(targets.items()):
             part = slice(k * n, (k + 1) * n)
             rows.append({
@@ -280,9 +343,16 @@ def run_method(
             })  # fmt: skip
         return rows[-len(targets)]["return_mean"]  # the first target's (max) for the progress bar
 
-    train_cfg = TrainConfig(iterations=cfg.iterations, batch_size=cfg.batch_size, lr=cfg.lr,
-                            warmup_steps=cfg.warmup_steps, eval_every=cfg.eval_every, seed=seed,
-                            device=cfg.device, progress=cfg.progress)
+    train_cfg = TrainConfig(
+        iterations=cfg.iterations,
+        batch_size=cfg.batch_size,
+        lr=cfg.lr,
+        warmup_steps=cfg.warmup_steps,
+        eval_every=cfg.eval_every,
+        seed=seed,
+        device=cfg.device,
+        progress=cfg.progress,
+    )
     trainer = Trainer(model, seq, train_cfg, eval_fn=eval_fn)
     try:
         trainer.train()
@@ -294,8 +364,12 @@ def run_method(
     return pd.DataFrame(rows)
 
 
-def run_hdt_experiments(cfg: HDTExperimentConfig, paper_compat: bool | None = None,
-                        datasets: list[str] | None = None, methods: list[str] | None = None) -> pd.DataFrame:
+def run_hdt_experiments(
+    cfg: HDTExperimentConfig,
+    paper_compat: bool | None = None,
+    datasets: list[str] | None = None,
+    methods: list[str] | None = None,
+) -> pd.DataFrame:
     """Every data set x seed x method of ``cfg``: the concatenated :func:`run_method` rows.
 
     Used in: HDT chapter (Tables 5.1-5.3).
@@ -325,8 +399,19 @@ def run_hdt_experiments(cfg: HDTExperimentConfig, paper_compat: bool | None = No
                 for seed in cfg.seeds_for(d):
                     for method in methods:
                         bar.set_postfix_str(f"{d} {method} seed {seed}", refresh=False)
-                        frames.append(run_method(method, task, tier, seed, cfg, data=data, envs=envs,
-                                                 paper_compat=compat, seq=seq))
+                        frames.append(
+                            run_method(
+                                method,
+                                task,
+                                tier,
+                                seed,
+                                cfg,
+                                data=data,
+                                envs=envs,
+                                paper_compat=compat,
+                                seq=seq,
+                            )
+                        )
                         bar.update(1)
             finally:
                 envs.close()
@@ -345,7 +430,9 @@ def run_paper_compat(cfg: HDTExperimentConfig) -> pd.DataFrame:
     """
     if not cfg.compat_dataset:
         raise ValueError("Set compat_dataset='task/tier' to measure the paper_compat behaviours.")
-    return run_hdt_experiments(cfg, paper_compat=True, datasets=[cfg.compat_dataset], methods=cfg.compat_methods)
+    return run_hdt_experiments(
+        cfg, paper_compat=True, datasets=[cfg.compat_dataset], methods=cfg.compat_methods
+    )
 
 
 def summarize(curves: pd.DataFrame) -> pd.DataFrame:
@@ -361,7 +448,9 @@ def summarize(curves: pd.DataFrame) -> pd.DataFrame:
 
     Used in: HDT chapter (Tables 5.1-5.3).
     """
-    keys = ["method", "task", "tier", "target"] + (["paper_compat"] if "paper_compat" in curves else [])
+    keys = ["method", "task", "tier", "target"] + (
+        ["paper_compat"] if "paper_compat" in curves else []
+    )
     per_run = curves.sort_values("iteration", kind="stable").groupby(keys + ["seed"], sort=False)
     runs = pd.DataFrame({
         "best_return": per_run["return_mean"].max(),
@@ -381,8 +470,11 @@ def summarize(curves: pd.DataFrame) -> pd.DataFrame:
         "n_seeds": g["seed"].nunique(),
     }).reset_index()  # fmt: skip
     order = {m: i for i, m in enumerate(METHODS)} | {t: i for i, t in enumerate(TARGET_ORDER)}
-    out = out.sort_values(["task", "tier", "method", "target"], kind="stable",
-                          key=lambda c: c.map(order) if c.name in ("method", "target") else c)
+    out = out.sort_values(
+        ["task", "tier", "method", "target"],
+        kind="stable",
+        key=lambda c: c.map(order) if c.name in ("method", "target") else c,
+    )
     return out.reset_index(drop=True)
 
 
@@ -406,9 +498,13 @@ def compare_paper_compat(curves: pd.DataFrame, compat_curves: pd.DataFrame) -> p
     b = summarize(compat_curves.assign(paper_compat=True))
     a = a.merge(b[keys], on=keys)  # the settings measured both ways
     frames = []
-    for metric, (col, std) in {"best during training (thesis)": ("best_return", "best_return_std"),
-                               "final checkpoint": ("final_return_mean", "final_return_std")}.items():
-        m = a[keys + [col, std, "n_seeds"]].merge(b[keys + [col, std]], on=keys, suffixes=("", "_compat"))
+    for metric, (col, std) in {
+        "best during training (thesis)": ("best_return", "best_return_std"),
+        "final checkpoint": ("final_return_mean", "final_return_std"),
+    }.items():
+        m = a[keys + [col, std, "n_seeds"]].merge(
+            b[keys + [col, std]], on=keys, suffixes=("", "_compat")
+        )
         frames.append(pd.DataFrame({
             "metric": metric, **{k: m[k] for k in keys},
             "correct": m[col], "correct_std": m[std],

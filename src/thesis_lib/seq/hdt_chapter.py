@@ -11,20 +11,31 @@
 
 Used in: HDT chapter (Tables 5.1-5.3, Figures of 5.2.2).
 """
+
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from thesis_lib.seq.experiments import METHODS, HDTExperimentConfig, run_hdt_experiments, summarize
+from thesis_lib.seq.experiments import HDTExperimentConfig, run_hdt_experiments
 from thesis_lib.seq.subgoals import select_subgoal_indices
 
 __all__ = [
-    "HDTChapterConfig", "METRICS", "METRIC_STD", "plot_maze_subgoals", "plot_subgoal_index", "plot_training_curves",
-    "run_chapter_experiments", "thesis_labels", "thesis_table_5_1", "thesis_table_5_2",
-    "thesis_table_5_3", "win_counts",
+    "HDTChapterConfig",
+    "METRICS",
+    "METRIC_STD",
+    "plot_maze_subgoals",
+    "plot_subgoal_index",
+    "plot_training_curves",
+    "run_chapter_experiments",
+    "thesis_labels",
+    "thesis_table_5_1",
+    "thesis_table_5_2",
+    "thesis_table_5_3",
+    "win_counts",
 ]
 
 #: Our summary columns for the two metrics: the thesis's and the honest one.
@@ -33,11 +44,16 @@ METRICS: dict[str, str] = {
     "final checkpoint": "final_return_mean",
 }
 #: The std over seeds of each metric's column.
-METRIC_STD: dict[str, str] = {"best_return": "best_return_std", "final_return_mean": "final_return_std"}
+METRIC_STD: dict[str, str] = {
+    "best_return": "best_return_std",
+    "final_return_mean": "final_return_std",
+}
 
 # Task spellings of each thesis table (reference/README.md keeps them as printed).
 _TASK_NAMES = {
-    "hopper": "Hopper", "halfcheetah": "Half-Cheetah", "ant": "Ant",
+    "hopper": "Hopper",
+    "halfcheetah": "Half-Cheetah",
+    "ant": "Ant",
     "walker2d": {"5.1": "Walker-2D", "5.2": "Walker 2D", "5.3": "Walker 2D"},
 }
 _TIER_NAMES = {"medium-replay": "replay"}
@@ -80,18 +96,32 @@ def _paper_targets(table: str) -> pd.DataFrame:
     for (task, ds), g in ref.groupby(["task", "dataset"], sort=False):
         vals = sorted(g["desired_return"].unique(), key=float)
         names = ["half", "max", "10k"] if len(vals) == 3 else ["half", "max"]
-        rows += [{"task": task, "dataset": ds, "target": n, "desired_return": v} for n, v in zip(names, vals)]
+        rows += [
+            {"task": task, "dataset": ds, "target": n, "desired_return": v}
+            for n, v in zip(names, vals)
+        ]
     return pd.DataFrame(rows)
 
 
-def _compare(table: str, ours: pd.DataFrame, on: list[str], paper_value: str,
-             differs: Mapping[str, str] | str | None) -> pd.DataFrame:
+def _compare(
+    table: str,
+    ours: pd.DataFrame,
+    on: list[str],
+    paper_value: str,
+    differs: Mapping[str, str] | str | None,
+) -> pd.DataFrame:
     from thesis_lib.book import compare_with_paper
 
     frames = []
     for metric, col in METRICS.items():
-        c = compare_with_paper(table, ours.assign(ours=ours[col]), on=on, value="ours",
-                               paper_value=paper_value, differs=differs)
+        c = compare_with_paper(
+            table,
+            ours.assign(ours=ours[col]),
+            on=on,
+            value="ours",
+            paper_value=paper_value,
+            differs=differs,
+        )
         extra = [x for x in (METRIC_STD.get(col), "n_seeds") if x in ours]
         if extra:  # ours: mean over seeds; beside it the std over seeds and their number
             spread = ours[on + extra].rename(columns={METRIC_STD.get(col): "ours_std"})
@@ -101,7 +131,9 @@ def _compare(table: str, ours: pd.DataFrame, on: list[str], paper_value: str,
     return pd.concat(frames, ignore_index=True)
 
 
-def _with_target_rows(summary: pd.DataFrame, table: str, methods: Mapping[str, str]) -> pd.DataFrame:
+def _with_target_rows(
+    summary: pd.DataFrame, table: str, methods: Mapping[str, str]
+) -> pd.DataFrame:
     s = _labelled(summary, table)
     s = s[s["method"].isin(list(methods))]
     targets = _paper_targets(table)
@@ -112,10 +144,23 @@ def _with_target_rows(summary: pd.DataFrame, table: str, methods: Mapping[str, s
         for _, tr in t.iterrows():
             if r["target"] in ("none", tr["target"]):
                 our_target = "" if r["target"] == "none" else f"our target {tr['target']}"
-                rows.append({**r.to_dict(), "desired_return": tr["desired_return"], "column": methods[r["method"]],
-                             "differs": our_target})
+                rows.append(
+                    {
+                        **r.to_dict(),
+                        "desired_return": tr["desired_return"],
+                        "column": methods[r["method"]],
+                        "differs": our_target,
+                    }
+                )
         if t.empty:  # a setting the thesis did not run: keep our own target label
-            rows.append({**r.to_dict(), "desired_return": r["target"], "column": methods[r["method"]], "differs": ""})
+            rows.append(
+                {
+                    **r.to_dict(),
+                    "desired_return": r["target"],
+                    "column": methods[r["method"]],
+                    "differs": "",
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -125,8 +170,19 @@ def _by_column(table: str, rows: pd.DataFrame, differs: Any) -> pd.DataFrame:
         c = _compare(table, g, ["task", "dataset", "desired_return"], col, differs)
         frames.append(c.assign(method=col))
     out = pd.concat(frames, ignore_index=True)
-    cols = ["metric", "method", "task", "dataset", "desired_return", "paper", "ours", "ours_std", "n_seeds",
-            "difference", "what differs"]
+    cols = [
+        "metric",
+        "method",
+        "task",
+        "dataset",
+        "desired_return",
+        "paper",
+        "ours",
+        "ours_std",
+        "n_seeds",
+        "difference",
+        "what differs",
+    ]
     return out.reindex(columns=cols)
 
 
@@ -136,7 +192,9 @@ def thesis_table_5_1(summary: pd.DataFrame, differs: Any = None) -> pd.DataFrame
     ``desired_return`` holds the thesis's target; ours (from our data set's max return) is
     named in ``what differs``. Rows for both metrics (column ``metric``).
     """
-    rows = _with_target_rows(summary, "5.1", {"DT": "original_dt", "DT-noRTG": "dt_without_returns"})
+    rows = _with_target_rows(
+        summary, "5.1", {"DT": "original_dt", "DT-noRTG": "dt_without_returns"}
+    )
     return _by_column("5.1", rows, differs)
 
 
@@ -147,34 +205,59 @@ def thesis_table_5_2(summary: pd.DataFrame, differs: Any = None) -> pd.DataFrame
     return _by_column("5.2", rows, differs)
 
 
-def thesis_table_5_3(summary: pd.DataFrame, data_avg: Mapping[tuple[str, str], float],
-                     differs: Any = None) -> pd.DataFrame:
+def thesis_table_5_3(
+    summary: pd.DataFrame, data_avg: Mapping[tuple[str, str], float], differs: Any = None
+) -> pd.DataFrame:
     """Table 5.3 (BC, DT at the max target, HDT, and the data set's average return).
 
     Args:
         summary: :func:`summarize` output.
         data_avg: ``{(task, tier): average episode return of the data set}``.
     """
-    s = summary[summary["method"].isin(["BC", "DT", "HDT"]) & summary["target"].isin(["none", "max"])]
+    s = summary[
+        summary["method"].isin(["BC", "DT", "HDT"]) & summary["target"].isin(["none", "max"])
+    ]
     s = _labelled(s, "5.3")
     cols = {"BC": "bc", "DT": "dt", "HDT": "hdt"}
     frames = []
     for method, g in s.groupby("method", sort=False):
         c = _compare("5.3", g, ["task", "dataset"], cols[method], differs)
         frames.append(c.assign(method=cols[method]))
-    avg = pd.DataFrame([{"task_id": t, "tier_id": r, "data_avg": v} for (t, r), v in data_avg.items()])
+    avg = pd.DataFrame(
+        [{"task_id": t, "tier_id": r, "data_avg": v} for (t, r), v in data_avg.items()]
+    )
     lab = [thesis_labels(t, r, "5.3") for t, r in zip(avg.task_id, avg.tier_id)]
     avg["task"], avg["dataset"] = [a for a, _ in lab], [b for _, b in lab]
     for metric in METRICS:
-        c = _compare("5.3", avg.assign(best_return=avg.data_avg, final_return_mean=avg.data_avg),
-                     ["task", "dataset"], "data_avg", differs)
+        c = _compare(
+            "5.3",
+            avg.assign(best_return=avg.data_avg, final_return_mean=avg.data_avg),
+            ["task", "dataset"],
+            "data_avg",
+            differs,
+        )
         frames.append(c[c.metric == metric].assign(method="data_avg"))
-    out = pd.concat(frames, ignore_index=True).drop_duplicates(["metric", "method", "task", "dataset"])
-    cols = ["metric", "method", "task", "dataset", "paper", "ours", "ours_std", "n_seeds", "difference", "what differs"]
+    out = pd.concat(frames, ignore_index=True).drop_duplicates(
+        ["metric", "method", "task", "dataset"]
+    )
+    cols = [
+        "metric",
+        "method",
+        "task",
+        "dataset",
+        "paper",
+        "ours",
+        "ours_std",
+        "n_seeds",
+        "difference",
+        "what differs",
+    ]
     return out.reindex(columns=cols)
 
 
-def win_counts(table_5_3: pd.DataFrame, metric: str = "best during training (thesis)") -> pd.DataFrame:
+def win_counts(
+    table_5_3: pd.DataFrame, metric: str = "best during training (thesis)"
+) -> pd.DataFrame:
     """Settings each of BC, DT and HDT wins, ours and the thesis's (ties count for each)."""
     t = table_5_3[(table_5_3.metric == metric) & table_5_3.method.isin(["bc", "dt", "hdt"])]
     out = {}
@@ -187,11 +270,14 @@ def win_counts(table_5_3: pd.DataFrame, metric: str = "best during training (the
     t_ran = t.merge(ran, on=["task", "dataset"])
     wide = t_ran.pivot_table(index=["task", "dataset"], columns="method", values="paper").dropna()
     best = wide.max(axis=1)
-    out["paper, our settings only"] = {m: int((wide[m] == best).sum()) for m in wide.columns} | {"settings": len(wide)}
+    out["paper, our settings only"] = {m: int((wide[m] == best).sum()) for m in wide.columns} | {
+        "settings": len(wide)
+    }
     return pd.DataFrame(out).T.rename_axis("counted on").reset_index()
 
 
 # ----------------------------------------------------------------------------------------- figures
+
 
 def plot_maze_subgoals(episode: Any, ax: Any = None, paper_compat: bool = False) -> Any:
     """A Maze2D episode's (x, y) path with the sub-goals the rule selects on it.
@@ -205,16 +291,29 @@ def plot_maze_subgoals(episode: Any, ax: Any = None, paper_compat: bool = False)
         _, ax = plt.subplots(figsize=(5, 5))
     obs = np.asarray(episode.observations)
     r = np.asarray(episode.rewards, dtype=float)
-    idx = select_subgoal_indices(r, n_states=None if paper_compat else obs.shape[0], paper_compat=paper_compat)
+    idx = select_subgoal_indices(
+        r, n_states=None if paper_compat else obs.shape[0], paper_compat=paper_compat
+    )
     xy = obs[:, :2]
     ax.plot(xy[:, 0], xy[:, 1], color="0.7", lw=1, zorder=1)
-    sc = ax.scatter(xy[:-1, 0], xy[:-1, 1], c=r, cmap="coolwarm", s=10, zorder=2, vmin=0, vmax=max(1.0, r.max()))
+    sc = ax.scatter(
+        xy[:-1, 0], xy[:-1, 1], c=r, cmap="coolwarm", s=10, zorder=2, vmin=0, vmax=max(1.0, r.max())
+    )
     starts = np.flatnonzero(np.r_[True, idx[1:] != idx[:-1]])
     for s in starts:
         g = idx[s]
-        ax.annotate("", xy=xy[g], xytext=xy[s], arrowprops=dict(arrowstyle="->", color="green", alpha=0.5))
-    ax.scatter(xy[np.unique(idx), 0], xy[np.unique(idx), 1], marker="*", s=120, c="green", zorder=3,
-               label=f"sub-goals ({len(np.unique(idx))} distinct)")
+        ax.annotate(
+            "", xy=xy[g], xytext=xy[s], arrowprops=dict(arrowstyle="->", color="green", alpha=0.5)
+        )
+    ax.scatter(
+        xy[np.unique(idx), 0],
+        xy[np.unique(idx), 1],
+        marker="*",
+        s=120,
+        c="green",
+        zorder=3,
+        label=f"sub-goals ({len(np.unique(idx))} distinct)",
+    )
     ax.scatter(*xy[0], marker="o", s=60, c="k", zorder=4, label="start")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
@@ -256,7 +355,7 @@ def plot_training_curves(curves: pd.DataFrame, ncols: int = 4) -> Any:
     ncols = max(1, min(ncols, len(sets)))
     nrows = -(-len(sets) // ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=(4.5 * ncols, 3.4 * nrows), squeeze=False)
-    for ax in axes.flat[len(sets):]:
+    for ax in axes.flat[len(sets) :]:
         ax.set_visible(False)
     for ax, (task, tier) in zip(axes.flat, sets):
         g = c[(c.task == task) & (c.tier == tier)]
@@ -264,11 +363,20 @@ def plot_training_curves(curves: pd.DataFrame, ncols: int = 4) -> Any:
             m = gm.groupby("iteration")["return_mean"].agg(["mean", "std"]).reset_index()
             ax.plot(m["iteration"], m["mean"], marker="o", label=method)
             if gm["seed"].nunique() > 1:
-                ax.fill_between(m["iteration"], m["mean"] - m["std"], m["mean"] + m["std"], alpha=0.15)
+                ax.fill_between(
+                    m["iteration"], m["mean"] - m["std"], m["mean"] + m["std"], alpha=0.15
+                )
         ax.set_title(f"{task}/{tier}", fontsize=10)
         ax.set_xlabel("iteration")
         ax.set_ylabel("evaluation return")
     handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9, bbox_to_anchor=(0.5, -0.02))
+    fig.legend(
+        handles,
+        labels,
+        loc="lower center",
+        ncol=len(labels),
+        fontsize=9,
+        bbox_to_anchor=(0.5, -0.02),
+    )
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return fig

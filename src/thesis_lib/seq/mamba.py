@@ -34,6 +34,7 @@ shorter than the window (or after :meth:`Mamba.forward` with ``return_state`` on
 
 Used in: Background chapter (thesis 2.3); Decision Mamba chapter (thesis 5.3); MDLT chapter.
 """
+
 from __future__ import annotations
 
 import math
@@ -154,13 +155,27 @@ def selective_scan(
         _check_scan_inputs(u, delta, A, B, C, D, z, delta_bias)
     which = resolve_scan_backend(u.device, backend)
     if which == "mamba_ssm":
-        return _scan_with_mamba_ssm(_mamba_ssm_scan_fn(), u, delta, A, B, C, D, z, delta_bias,
-                                    delta_softplus, return_last_state)
+        return _scan_with_mamba_ssm(
+            _mamba_ssm_scan_fn(),
+            u,
+            delta,
+            A,
+            B,
+            C,
+            D,
+            z,
+            delta_bias,
+            delta_softplus,
+            return_last_state,
+        )
     if which == "reference":
         if return_last_state:
-            raise ValueError("backend='reference' cannot return the last state; use 'numba' or 'torch'.")
-        return selective_scan_reference(u, delta, A, B, C, D, z, delta_bias=delta_bias,
-                                        delta_softplus=delta_softplus)
+            raise ValueError(
+                "backend='reference' cannot return the last state; use 'numba' or 'torch'."
+            )
+        return selective_scan_reference(
+            u, delta, A, B, C, D, z, delta_bias=delta_bias, delta_softplus=delta_softplus
+        )
 
     tensors = [x for x in (u, delta, A, B, C, D, z, delta_bias) if x is not None]
     dtype = tensors[0].dtype
@@ -176,8 +191,9 @@ def selective_scan(
         core = SelectiveScanCPU
         needs_grad = torch.is_grad_enabled() and any(x.requires_grad for x in (u_, dl, A_, B_, C_))
         if needs_grad:
-            y, h_last = core.apply(u_.contiguous(), dl.contiguous(), A_.contiguous(), B_.contiguous(),
-                                   C_.contiguous())
+            y, h_last = core.apply(
+                u_.contiguous(), dl.contiguous(), A_.contiguous(), B_.contiguous(), C_.contiguous()
+            )
         else:  # no autograd graph: skip storing the states for the backward
             y, h_last = scan_cpu_forward(u_, dl, A_, B_, C_)
     else:
@@ -190,17 +206,31 @@ def selective_scan(
     return ScanOutput(y, h_last) if return_last_state else y
 
 
-def _scan_with_mamba_ssm(fn, u, delta, A, B, C, D, z, delta_bias, delta_softplus, return_last_state):
+def _scan_with_mamba_ssm(
+    fn, u, delta, A, B, C, D, z, delta_bias, delta_softplus, return_last_state
+):
     """Call ``mamba_ssm``'s ``selective_scan_fn`` (layout ``(B, Din, L)``) on our ``(B, L, Din)``."""
-    t = lambda x: None if x is None else x.transpose(1, 2).contiguous()  # noqa: E731
-    out = fn(t(u), t(delta), A, t(B), t(C), D, t(z), delta_bias=delta_bias, delta_softplus=delta_softplus,
-             return_last_state=return_last_state)
+    t = lambda x: None if x is None else x.transpose(1, 2).contiguous()
+    out = fn(
+        t(u),
+        t(delta),
+        A,
+        t(B),
+        t(C),
+        D,
+        t(z),
+        delta_bias=delta_bias,
+        delta_softplus=delta_softplus,
+        return_last_state=return_last_state,
+    )
     if return_last_state:
         return ScanOutput(out[0].transpose(1, 2), out[1])
     return out.transpose(1, 2)
 
 
-def causal_depthwise_conv1d(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None = None) -> torch.Tensor:
+def causal_depthwise_conv1d(
+    x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None = None
+) -> torch.Tensor:
     """Causal depthwise convolution in the token-major layout: ``y[t] = b + Σ_k w[:, k] x[t - K + 1 + k]``.
 
     Same result as ``nn.Conv1d(D, D, K, groups=D, padding=K - 1)`` on ``x.transpose(1, 2)``
@@ -219,9 +249,9 @@ def causal_depthwise_conv1d(x: torch.Tensor, weight: torch.Tensor, bias: torch.T
     w = weight.reshape(weight.shape[0], -1)  # (D, K)
     K, L = w.shape[1], x.shape[1]
     xp = F.pad(x, (0, 0, K - 1, 0))  # (B, L + K - 1, D): zeros before the first token
-    y = xp[:, K - 1:] * w[:, K - 1]
+    y = xp[:, K - 1 :] * w[:, K - 1]
     for k in range(K - 1):
-        y = y + xp[:, k:k + L] * w[:, k]
+        y = y + xp[:, k : k + L] * w[:, k]
     return y if bias is None else y + bias
 
 
@@ -294,8 +324,12 @@ class MambaConfig:
                 raise ValueError(f"Expect `{name}` to be a positive int, actually: {value!r}.")
         for name in ("dt_rank", "mlp_hidden"):
             value = getattr(self, name)
-            if value != "auto" and (not isinstance(value, int) or isinstance(value, bool) or value <= 0):
-                raise ValueError(f"Expect `{name}` to be 'auto' or a positive int, actually: {value!r}.")
+            if value != "auto" and (
+                not isinstance(value, int) or isinstance(value, bool) or value <= 0
+            ):
+                raise ValueError(
+                    f"Expect `{name}` to be 'auto' or a positive int, actually: {value!r}."
+                )
         if not (0 < self.dt_min <= self.dt_max):
             raise ValueError(
                 f"Expect 0 < dt_min <= dt_max, actually: dt_min={self.dt_min}, dt_max={self.dt_max}. "
@@ -305,9 +339,13 @@ class MambaConfig:
             raise ValueError(f"Unknown dt_init {self.dt_init!r}. Valid: random, constant.")
         for name in ("dt_scale", "dt_init_floor", "norm_eps"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"Expect `{name}` to be positive, actually: {getattr(self, name)!r}.")
+                raise ValueError(
+                    f"Expect `{name}` to be positive, actually: {getattr(self, name)!r}."
+                )
         self.d_inner = self.expand * self.d_model
-        self.dt_rank_value = math.ceil(self.d_model / 16) if self.dt_rank == "auto" else self.dt_rank
+        self.dt_rank_value = (
+            math.ceil(self.d_model / 16) if self.dt_rank == "auto" else self.dt_rank
+        )
         hidden = int(8 * self.d_model / 3) if self.mlp_hidden == "auto" else self.mlp_hidden
         self.mlp_hidden_value = (hidden + 127) // 128 * 128 if self.mlp_hidden == "auto" else hidden
 
@@ -349,8 +387,9 @@ class MambaMixer(nn.Module):
         self.in_proj = nn.Linear(c.d_model, 2 * c.d_inner, bias=c.bias)
         # An nn.Conv1d for its parameters' names and init (mamba_ssm's); applied by
         # causal_depthwise_conv1d in the (B, L, D) layout.
-        self.conv1d = nn.Conv1d(c.d_inner, c.d_inner, c.d_conv, groups=c.d_inner, padding=c.d_conv - 1,
-                                bias=c.conv_bias)
+        self.conv1d = nn.Conv1d(
+            c.d_inner, c.d_inner, c.d_conv, groups=c.d_inner, padding=c.d_conv - 1, bias=c.conv_bias
+        )
         self.x_proj = nn.Linear(c.d_inner, c.dt_rank_value + 2 * c.d_state, bias=False)
         self.dt_proj = nn.Linear(c.dt_rank_value, c.d_inner, bias=True)
         # S4D-real init: A[d, n] = -(n + 1), stored as its log so A stays negative.
@@ -371,7 +410,9 @@ class MambaMixer(nn.Module):
             nn.init.constant_(self.dt_proj.weight, std)
         else:
             nn.init.uniform_(self.dt_proj.weight, -std, std)
-        dt = torch.exp(torch.rand(c.d_inner) * (math.log(c.dt_max) - math.log(c.dt_min)) + math.log(c.dt_min))
+        dt = torch.exp(
+            torch.rand(c.d_inner) * (math.log(c.dt_max) - math.log(c.dt_min)) + math.log(c.dt_min)
+        )
         dt = dt.clamp(min=c.dt_init_floor)
         self.dt_proj.bias.copy_(dt + torch.log(-torch.expm1(-dt)))  # inverse of softplus
         self.dt_proj.bias._no_reinit = True
@@ -399,14 +440,30 @@ class MambaMixer(nn.Module):
         delta, B, C = self._ssm_params(x)
         A = -torch.exp(self.A_log.float())  # (d_inner, N)
         out = selective_scan(
-            x, delta, A, B, C, self.D.float(), z, delta_bias=self.dt_proj.bias.float(),
-            delta_softplus=True, return_last_state=return_state, backend=self.scan_backend, check=False,
+            x,
+            delta,
+            A,
+            B,
+            C,
+            self.D.float(),
+            z,
+            delta_bias=self.dt_proj.bias.float(),
+            delta_softplus=True,
+            return_last_state=return_state,
+            backend=self.scan_backend,
+            check=False,
         )
         if not return_state:
             return self.out_proj(out)
         y, h_last = out
-        tail = x_in[:, -(c.d_conv - 1):].transpose(1, 2) if c.d_conv > 1 else x_in[:, :0].transpose(1, 2)
-        conv = F.pad(tail, (c.d_conv - 1 - tail.shape[-1], 0))  # left-pad short sequences with zeros
+        tail = (
+            x_in[:, -(c.d_conv - 1) :].transpose(1, 2)
+            if c.d_conv > 1
+            else x_in[:, :0].transpose(1, 2)
+        )
+        conv = F.pad(
+            tail, (c.d_conv - 1 - tail.shape[-1], 0)
+        )  # left-pad short sequences with zeros
         return self.out_proj(y), LayerState(conv, h_last.to(x.dtype))
 
     def allocate_state(self, batch: int, device=None, dtype=None) -> LayerState:
@@ -414,8 +471,10 @@ class MambaMixer(nn.Module):
         c = self.config
         device = device if device is not None else self.A_log.device
         dtype = dtype if dtype is not None else self.in_proj.weight.dtype
-        return LayerState(torch.zeros(batch, c.d_inner, c.d_conv - 1, device=device, dtype=dtype),
-                          torch.zeros(batch, c.d_inner, c.d_state, device=device, dtype=dtype))
+        return LayerState(
+            torch.zeros(batch, c.d_inner, c.d_conv - 1, device=device, dtype=dtype),
+            torch.zeros(batch, c.d_inner, c.d_state, device=device, dtype=dtype),
+        )
 
     def step(self, x_t: torch.Tensor, state: LayerState) -> tuple[torch.Tensor, LayerState]:
         """One token ``x_t (B, d_model)`` -> ``(y_t (B, d_model), new state)``, O(1) in the length."""
@@ -428,7 +487,9 @@ class MambaMixer(nn.Module):
         delta, B, C = self._ssm_params(xc)
         delta = F.softplus(delta + self.dt_proj.bias)
         A = -torch.exp(self.A_log.float())
-        y, h = selective_scan_step(state.ssm, xc, delta, A.to(xc.dtype), B, C, self.D.to(xc.dtype), z)
+        y, h = selective_scan_step(
+            state.ssm, xc, delta, A.to(xc.dtype), B, C, self.D.to(xc.dtype), z
+        )
         return self.out_proj(y), LayerState(window[..., 1:], h)
 
 
@@ -517,7 +578,9 @@ class Mamba(nn.Module):
         if not isinstance(config, MambaConfig):
             raise TypeError(f"Expect a MambaConfig, got {type(config).__name__}.")
         self.config = config
-        self.layers = nn.ModuleList(MambaBlock(config, scan_backend) for _ in range(config.n_layers))
+        self.layers = nn.ModuleList(
+            MambaBlock(config, scan_backend) for _ in range(config.n_layers)
+        )
         self.norm_f = nn.RMSNorm(config.d_model, eps=config.norm_eps) if config.final_norm else None
         self._rescale_residual_projections()
 
@@ -534,7 +597,9 @@ class Mamba(nn.Module):
         d = self.config.d_model
         if x.ndim != ndim or x.shape[-1] != d:
             want = "(B, L, d_model)" if ndim == 3 else "(B, d_model)"
-            raise ValueError(f"Expect input of shape {want} with d_model={d}, got {tuple(x.shape)}.")
+            raise ValueError(
+                f"Expect input of shape {want} with d_model={d}, got {tuple(x.shape)}."
+            )
 
     def forward(self, x: torch.Tensor, return_state: bool = False):
         """Apply the stack.
@@ -559,18 +624,24 @@ class Mamba(nn.Module):
             x = self.norm_f(x)
         if not return_state:
             return x
-        return x, MambaState(torch.stack([s.conv for s in states]), torch.stack([s.ssm for s in states]))
+        return x, MambaState(
+            torch.stack([s.conv for s in states]), torch.stack([s.ssm for s in states])
+        )
 
-    def allocate_state(self, batch: int, device: torch.device | str | None = None,
-                       dtype: torch.dtype | None = None) -> MambaState:
+    def allocate_state(
+        self, batch: int, device: torch.device | str | None = None, dtype: torch.dtype | None = None
+    ) -> MambaState:
         """Zero :class:`MambaState` for ``batch`` sequences, as before their first token."""
         if not isinstance(batch, int) or isinstance(batch, bool) or batch <= 0:
             raise ValueError(f"Expect `batch` to be a positive int, actually: {batch!r}.")
         states = [block.mixer.allocate_state(batch, device, dtype) for block in self.layers]
-        return MambaState(torch.stack([s.conv for s in states]), torch.stack([s.ssm for s in states]))
+        return MambaState(
+            torch.stack([s.conv for s in states]), torch.stack([s.ssm for s in states])
+        )
 
-    def step(self, x_t: torch.Tensor, state: MambaState, fused: bool | None = None
-             ) -> tuple[torch.Tensor, MambaState]:
+    def step(
+        self, x_t: torch.Tensor, state: MambaState, fused: bool | None = None
+    ) -> tuple[torch.Tensor, MambaState]:
         """Advance every sequence by one token, O(1) in the length so far.
 
         Args:
@@ -589,8 +660,9 @@ class Mamba(nn.Module):
         y, state = self.step_tokens(x_t.unsqueeze(1), state, fused=fused)
         return y[:, 0], state
 
-    def step_tokens(self, x: torch.Tensor, state: MambaState, fused: bool | None = None
-                    ) -> tuple[torch.Tensor, MambaState]:
+    def step_tokens(
+        self, x: torch.Tensor, state: MambaState, fused: bool | None = None
+    ) -> tuple[torch.Tensor, MambaState]:
         """Advance every sequence by ``T`` tokens, one at a time: :meth:`step` over ``x (B, T, d_model)``.
 
         Acting with a DM, each action appends one timestep's tokens (e.g. R, s, a): one call.
@@ -604,8 +676,14 @@ class Mamba(nn.Module):
                 f"Expect a MambaState for {self.config.n_layers} layers and batch {x.shape[0]}, got "
                 f"ssm of shape {tuple(state.ssm.shape)}. Create one with allocate_state(batch={x.shape[0]})."
             )
-        can_fuse = (x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64)
-                    and not (torch.is_grad_enabled() and (x.requires_grad or any(p.requires_grad for p in self.parameters()))))
+        can_fuse = (
+            x.device.type == "cpu"
+            and x.dtype in (torch.float32, torch.float64)
+            and not (
+                torch.is_grad_enabled()
+                and (x.requires_grad or any(p.requires_grad for p in self.parameters()))
+            )
+        )
         if fused is None:
             fused = can_fuse
         elif fused and not can_fuse:
@@ -644,7 +722,29 @@ class Mamba(nn.Module):
         ssm = state.ssm.to(x.dtype, copy=True).contiguous()
         xs = x.detach().transpose(0, 1).contiguous()  # (T, B, d)
         out = torch.empty_like(xs)
-        stack_step_kernel(xs.numpy(), conv.numpy(), ssm.numpy(), out.numpy(), w.norm_w, w.in_w, w.in_b, w.conv_w,
-                          w.conv_b, w.xp_w, w.dt_w, w.dt_b, w.A, w.D, w.out_w, w.out_b, w.norm2_w, w.fc1, w.fc2,
-                          w.norm_f, w.has_mlp, w.has_norm_f, w.eps)
+        stack_step_kernel(
+            xs.numpy(),
+            conv.numpy(),
+            ssm.numpy(),
+            out.numpy(),
+            w.norm_w,
+            w.in_w,
+            w.in_b,
+            w.conv_w,
+            w.conv_b,
+            w.xp_w,
+            w.dt_w,
+            w.dt_b,
+            w.A,
+            w.D,
+            w.out_w,
+            w.out_b,
+            w.norm2_w,
+            w.fc1,
+            w.fc2,
+            w.norm_f,
+            w.has_mlp,
+            w.has_norm_f,
+            w.eps,
+        )
         return out.transpose(0, 1), MambaState(conv, ssm)

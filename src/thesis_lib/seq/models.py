@@ -30,10 +30,12 @@ for the last step of each history, for evaluation.
 
 Used in: HDT chapter (thesis 5.2, Tables 5.1-5.3, 5.6); Decision Mamba chapter (baselines).
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal, Mapping, NamedTuple
+from typing import Literal, NamedTuple
 
 import torch
 import torch.nn as nn
@@ -89,7 +91,9 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
         1.0
     """
     if pred.shape != target.shape:
-        raise ValueError(f"Prediction shape {tuple(pred.shape)} differs from target shape {tuple(target.shape)}.")
+        raise ValueError(
+            f"Prediction shape {tuple(pred.shape)} differs from target shape {tuple(target.shape)}."
+        )
     err = (pred - target.to(pred.dtype)) ** 2  # (B, T, D)
     if mask is None:
         return err.mean()
@@ -121,7 +125,9 @@ class _ModelConfig:
             >>> DTConfig.for_data(seq, n_layer=2)
             DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layer=2, n_head=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, use_rtg=True)
         """
-        sizes = dict(state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=int(seq.K))
+        sizes = dict(
+            state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=int(seq.K)
+        )
         return cls(**{**sizes, **kwargs})
 
     def __post_init__(self) -> None:
@@ -130,7 +136,9 @@ class _ModelConfig:
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ValueError(f"Expect `{name}` to be a positive int, actually: {value!r}.")
         if not self.max_action > 0:
-            raise ValueError(f"Expect `max_action` > 0 (the action bound), actually: {self.max_action!r}.")
+            raise ValueError(
+                f"Expect `max_action` > 0 (the action bound), actually: {self.max_action!r}."
+            )
 
 
 @dataclass
@@ -148,7 +156,9 @@ class BCConfig(_ModelConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         if not isinstance(self.hidden_dim, int) or self.hidden_dim <= 0:
-            raise ValueError(f"Expect `hidden_dim` to be a positive int, actually: {self.hidden_dim!r}.")
+            raise ValueError(
+                f"Expect `hidden_dim` to be a positive int, actually: {self.hidden_dim!r}."
+            )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expect `dropout` in [0, 1), actually: {self.dropout!r}.")
 
@@ -175,15 +185,22 @@ class _TransformerConfig(_ModelConfig):
         if not isinstance(self.n_layer, int) or self.n_layer <= 0:
             raise ValueError(f"Expect `n_layer` to be a positive int, actually: {self.n_layer!r}.")
         if not isinstance(self.max_timestep, int) or self.max_timestep <= 0:
-            raise ValueError(f"Expect `max_timestep` to be a positive int, actually: {self.max_timestep!r}.")
+            raise ValueError(
+                f"Expect `max_timestep` to be a positive int, actually: {self.max_timestep!r}."
+            )
         if self.activation not in ACTIVATIONS:
-            raise ValueError(f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}.")
+            raise ValueError(
+                f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}."
+            )
         self.block_config()  # validates d_model, n_head, dropout
 
     def block_config(self) -> GPTBlockConfig:
         """The :class:`GPTBlockConfig` of each block."""
         return GPTBlockConfig(
-            d_model=self.d_model, n_head=self.n_head, dropout=self.dropout, activation=self.activation
+            d_model=self.d_model,
+            n_head=self.n_head,
+            dropout=self.dropout,
+            activation=self.activation,
         )
 
 
@@ -231,9 +248,16 @@ def _check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tu
         )
     B, T = s.shape[:2]
     if T > cfg.K:
-        raise ValueError(f"Cannot forward a sequence of {T} steps: {name} was built with context K={cfg.K}.")
-    dims = {"actions": cfg.act_dim, "prev_actions": cfg.act_dim, "subgoals": cfg.state_dim,
-            "prev_subgoals": cfg.state_dim, "returns_to_go": 1}
+        raise ValueError(
+            f"Cannot forward a sequence of {T} steps: {name} was built with context K={cfg.K}."
+        )
+    dims = {
+        "actions": cfg.act_dim,
+        "prev_actions": cfg.act_dim,
+        "subgoals": cfg.state_dim,
+        "prev_subgoals": cfg.state_dim,
+        "returns_to_go": 1,
+    }
     for k in keys:
         if k in dims and tuple(batch[k].shape) != (B, T, dims[k]):
             raise ValueError(
@@ -243,7 +267,9 @@ def _check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tu
     if "timesteps" in keys:
         ts = batch["timesteps"]
         if tuple(ts.shape) != (B, T):
-            raise ValueError(f"{name} expects timesteps of shape (batch, seq_len) = {(B, T)}, got {tuple(ts.shape)}.")
+            raise ValueError(
+                f"{name} expects timesteps of shape (batch, seq_len) = {(B, T)}, got {tuple(ts.shape)}."
+            )
         if ts.numel() and int(ts.max()) >= cfg.max_timestep:
             raise ValueError(
                 f"Time step {int(ts.max())} is beyond the time-step embedding (max_timestep={cfg.max_timestep}); "
@@ -263,7 +289,10 @@ def _action_key(paper_compat: bool) -> str:
 
 def _rsa_tokens(model: nn.Module, batch: Tensors) -> list[torch.Tensor]:
     """``[rtg_t,] s_t, a_t`` embeddings of a DT-style model (``embed_rtg``/``embed_state``/``embed_action``)."""
-    tokens = [model.embed_state(batch["states"]), model.embed_action(batch[_action_key(model.config.paper_compat)])]
+    tokens = [
+        model.embed_state(batch["states"]),
+        model.embed_action(batch[_action_key(model.config.paper_compat)]),
+    ]
     if model.embed_rtg is not None:
         tokens.insert(0, model.embed_rtg(batch["returns_to_go"]))  # (rtg_t, s_t, a_t)
     return tokens
@@ -383,7 +412,9 @@ class DecisionTransformer(nn.Module):
 
     def _keys(self) -> tuple[str, ...]:
         action_key = _action_key(self.config.paper_compat)
-        return ("states", action_key, "timesteps") + (("returns_to_go",) if self.config.use_rtg else ())
+        return ("states", action_key, "timesteps") + (
+            ("returns_to_go",) if self.config.use_rtg else ()
+        )
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the loss."""
@@ -444,14 +475,21 @@ class HDT(nn.Module):
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
         """Sub-goal predictions ``g_t`` ``(B, T, state_dim)`` from ``(s_t, g_{t-1})`` tokens."""
-        tokens = [self.high_embed_state(batch["states"]), self.high_embed_subgoal(batch["prev_subgoals"])]
+        tokens = [
+            self.high_embed_state(batch["states"]),
+            self.high_embed_subgoal(batch["prev_subgoals"]),
+        ]
         _, h_goal = self.high(tokens, batch["timesteps"], batch.get("mask"))  # (B, T, d) at g_{t-1}
         return self.predict_subgoal(h_goal)
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
         """Actions ``a_t`` ``(B, T, act_dim)`` from ``([rtg_t,] g_t, s_t, a_t)`` tokens."""
         a_tok = batch[_action_key(self.config.paper_compat)]
-        tokens = [self.low_embed_subgoal(subgoals), self.low_embed_state(batch["states"]), self.low_embed_action(a_tok)]
+        tokens = [
+            self.low_embed_subgoal(subgoals),
+            self.low_embed_state(batch["states"]),
+            self.low_embed_action(a_tok),
+        ]
         if self.low_embed_rtg is not None:
             tokens.insert(0, self.low_embed_rtg(batch["returns_to_go"]))
         h = self.low(tokens, batch["timesteps"], batch.get("mask"))
@@ -473,7 +511,9 @@ class HDT(nn.Module):
         l_high = masked_mse(subgoals, targets["subgoals"], mask)
         l_low = masked_mse(actions, targets["actions"], mask)
         loss = l_high + l_low
-        return SeqOutput(actions, subgoals, loss, {"subgoal": l_high.item(), "action": l_low.item()})
+        return SeqOutput(
+            actions, subgoals, loss, {"subgoal": l_high.item(), "action": l_low.item()}
+        )
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -489,4 +529,3 @@ class HDT(nn.Module):
         subgoals[:, -1] = g
         actions = self.low_forward(history, subgoals)[:, -1]  # (B, act_dim)
         return SeqOutput(actions, g)
-

@@ -31,6 +31,7 @@ diagonal of a diagonal matrix (S4D, Mamba). The selective scan takes torch tenso
 
 Used in: Background chapter (thesis 2.3); Decision Mamba chapter.
 """
+
 from __future__ import annotations
 
 from typing import Literal, NamedTuple
@@ -53,7 +54,9 @@ def _as_finite(name: str, x: object, ndims: tuple[int, ...]) -> np.ndarray:
         want = " or ".join(f"{n}-D" for n in ndims)
         raise ValueError(f"Expect `{name}` to be {want}, got shape {arr.shape}.")
     if not np.all(np.isfinite(arr)):
-        raise ValueError(f"Expect `{name}` to be finite, it has {int(np.sum(~np.isfinite(arr)))} NaN/inf entries.")
+        raise ValueError(
+            f"Expect `{name}` to be finite, it has {int(np.sum(~np.isfinite(arr)))} NaN/inf entries."
+        )
     return arr
 
 
@@ -120,7 +123,9 @@ def zoh_discretize(A: np.ndarray, B: np.ndarray, delta: float) -> Discretization
     N = A.shape[0]
     B = _check_vector("B", B, N)
     if not (np.isscalar(delta) or np.ndim(delta) == 0) or not np.isfinite(delta) or not delta > 0:
-        raise ValueError(f"Expect the step `delta` to be a positive finite scalar, actually: {delta!r}.")
+        raise ValueError(
+            f"Expect the step `delta` to be a positive finite scalar, actually: {delta!r}."
+        )
     delta = float(delta)
     if A.ndim == 1:
         dA = delta * A  # (N,)
@@ -135,7 +140,9 @@ def zoh_discretize(A: np.ndarray, B: np.ndarray, delta: float) -> Discretization
     return Discretization(E[:N, :N], E[:N, N].copy())
 
 
-def ssm_recurrence(A_bar: np.ndarray, B_bar: np.ndarray, C: np.ndarray, x: np.ndarray) -> np.ndarray:
+def ssm_recurrence(
+    A_bar: np.ndarray, B_bar: np.ndarray, C: np.ndarray, x: np.ndarray
+) -> np.ndarray:
     """Run the discrete SSM as a recurrence: ``h_k = Ā h_{k-1} + B̄ x_k``, ``y_k = C h_k``, ``h_{-1} = 0``.
 
     This is Eq. 2.6 in discrete time (the thesis writes ``h'(t)`` for ``h_k`` and ``C h'`` for
@@ -308,7 +315,11 @@ class ScanStep(NamedTuple):
 
 
 def _compute_dtype(*xs: torch.Tensor | None) -> torch.dtype:
-    return torch.float64 if any(x is not None and x.dtype == torch.float64 for x in xs) else torch.float32
+    return (
+        torch.float64
+        if any(x is not None and x.dtype == torch.float64 for x in xs)
+        else torch.float32
+    )
 
 
 def selective_scan_step(
@@ -436,14 +447,25 @@ def selective_scan_reference(
 
 
 def _check_scan_inputs(u, delta, A, B, C, D, z, delta_bias) -> None:
-    named = {"u": u, "delta": delta, "A": A, "B": B, "C": C, "D": D, "z": z, "delta_bias": delta_bias}
+    named = {
+        "u": u,
+        "delta": delta,
+        "A": A,
+        "B": B,
+        "C": C,
+        "D": D,
+        "z": z,
+        "delta_bias": delta_bias,
+    }
     for name, t in named.items():
         if t is None:
             continue
         if not isinstance(t, torch.Tensor):
             raise TypeError(f"Expect `{name}` to be a torch.Tensor, got {type(t).__name__}.")
         if t.is_complex():
-            raise ValueError(f"Expect `{name}` to be real; complex A is not supported by this reference.")
+            raise ValueError(
+                f"Expect `{name}` to be real; complex A is not supported by this reference."
+            )
     if u.ndim != 3:
         raise ValueError(f"Expect `u` of shape (B, L, Din), got {tuple(u.shape)}.")
     batch, L, Din = u.shape

@@ -48,9 +48,10 @@ compiled with numba. 1000 episodes of 1000 steps take about a second.
 
 Used in: HDT chapter (thesis 5.2.2); the Hierarchical Decision Mamba (5.3) reuses it.
 """
+
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
@@ -130,7 +131,9 @@ def select_subgoal_indices(
         )
     if not np.all(np.isfinite(r)):
         bad = np.flatnonzero(~np.isfinite(r))
-        raise ValueError(f"Expect finite rewards, got {bad.size} NaN/inf values (first at step {int(bad[0])}).")
+        raise ValueError(
+            f"Expect finite rewards, got {bad.size} NaN/inf values (first at step {int(bad[0])})."
+        )
     T = r.shape[0]
     if T == 0:
         return np.zeros(0, dtype=np.int64)
@@ -146,7 +149,9 @@ def select_subgoal_indices(
     return _subgoal_indices(np.ascontiguousarray(r), int(n_states), bool(paper_compat))
 
 
-def select_subgoals(states: np.ndarray, rewards: np.ndarray, paper_compat: bool = False) -> np.ndarray:
+def select_subgoals(
+    states: np.ndarray, rewards: np.ndarray, paper_compat: bool = False
+) -> np.ndarray:
     """The sub-goal state of each step of one episode (thesis Sec. 5.2.2).
 
     See the module docstring for the rule, its index range, ties, the last state and sparse

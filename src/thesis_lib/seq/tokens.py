@@ -16,6 +16,7 @@ Time steps are 0-based here, as the index fed to the time-step embedding; the th
 
 Used in: Background chapter (thesis 2.8); DT, HDT, MDLT chapters.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -62,7 +63,9 @@ def returns_to_go(rewards: np.ndarray, gamma: float = 1.0) -> np.ndarray:
         )
     if not np.all(np.isfinite(r)):
         bad = np.flatnonzero(~np.isfinite(r))
-        raise ValueError(f"Expect finite rewards, got {bad.size} NaN/inf values (first at step {int(bad[0])}).")
+        raise ValueError(
+            f"Expect finite rewards, got {bad.size} NaN/inf values (first at step {int(bad[0])})."
+        )
     if not 0.0 <= gamma <= 1.0:
         raise ValueError(f"Expect the discount `gamma` in [0, 1], actually: {gamma!r}.")
     if gamma == 1.0:
@@ -140,7 +143,9 @@ def interleave_tokens(
         {
             "position": np.arange(n * T),
             "timestep": np.repeat(ts, n).astype(np.int64),
-            "modality": pd.Categorical(list(MODALITIES) * T, categories=list(MODALITIES), ordered=True),
+            "modality": pd.Categorical(
+                list(MODALITIES) * T, categories=list(MODALITIES), ordered=True
+            ),
             "value": [per_modality[m][k] for k in range(T) for m in range(n)],
         }
     )

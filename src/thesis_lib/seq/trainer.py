@@ -16,14 +16,16 @@ an uninterrupted one.
 
 Used in: HDT chapter (thesis 5.2.5); Decision Mamba chapter (5.3).
 """
+
 from __future__ import annotations
 
 import functools
 import math
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -74,7 +76,9 @@ class TrainConfig:
                 raise ValueError(f"Expect `{name}` >= 1, actually: {getattr(self, name)!r}.")
         for name in ("eval_every", "checkpoint_every"):
             if int(getattr(self, name)) < 0:
-                raise ValueError(f"Expect `{name}` >= 0 (0 = never), actually: {getattr(self, name)!r}.")
+                raise ValueError(
+                    f"Expect `{name}` >= 0 (0 = never), actually: {getattr(self, name)!r}."
+                )
         if not self.lr > 0 or self.weight_decay < 0 or self.grad_clip < 0:
             raise ValueError(
                 f"Expect lr > 0, weight_decay >= 0 and grad_clip >= 0, got lr={self.lr}, "
@@ -88,7 +92,9 @@ def _warmup(step: int, warmup_steps: int) -> float:
     return min((step + 1) / warmup_steps, 1.0)
 
 
-def batch_to_torch(dataset: Any, batch: Any, device: str | torch.device = "cpu") -> dict[str, torch.Tensor]:
+def batch_to_torch(
+    dataset: Any, batch: Any, device: str | torch.device = "cpu"
+) -> dict[str, torch.Tensor]:
     """A :class:`~thesis_lib.data.SequenceBatch` as model inputs (tensors on ``device``).
 
     The batch carries everything the models read, HDT's ``prev_subgoals`` included
@@ -150,7 +156,9 @@ class Trainer:
         else:
             self.device = torch.device(config.device)
         self.model.to(self.device)
-        self.optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        self.optimizer = torch.optim.AdamW(
+            model.parameters(), lr=config.lr, weight_decay=config.weight_decay
+        )
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
             self.optimizer, functools.partial(_warmup, warmup_steps=config.warmup_steps)
         )
@@ -165,7 +173,9 @@ class Trainer:
 
     def step(self) -> dict[str, float]:
         """One gradient step on a fresh batch; returns ``{"loss": ..., "loss_<part>": ...}``."""
-        batch = batch_to_torch(self.dataset, self.dataset.sample(self.config.batch_size), self.device)
+        batch = batch_to_torch(
+            self.dataset, self.dataset.sample(self.config.batch_size), self.device
+        )
         self.model.train()
         with torch.random.fork_rng(devices=[]):  # our own dropout stream; global RNG untouched
             torch.set_rng_state(self._rng_state)
@@ -174,7 +184,11 @@ class Trainer:
             out.loss.backward()
             self._rng_state = torch.get_rng_state()
         if self.config.grad_clip > 0:
-            groups = self.model.clip_groups() if hasattr(self.model, "clip_groups") else [list(self.model.parameters())]
+            groups = (
+                self.model.clip_groups()
+                if hasattr(self.model, "clip_groups")
+                else [list(self.model.parameters())]
+            )
             for params in groups:
                 torch.nn.utils.clip_grad_norm_(params, self.config.grad_clip)
         self.optimizer.step()
@@ -187,7 +201,9 @@ class Trainer:
     def evaluate(self) -> Any:
         """Run ``eval_fn`` on the model in eval mode; record and return its result."""
         if self.eval_fn is None:
-            raise ValueError("This Trainer has no eval_fn; pass eval_fn=lambda m: evaluate(m, task, ...).")
+            raise ValueError(
+                "This Trainer has no eval_fn; pass eval_fn=lambda m: evaluate(m, task, ...)."
+            )
         self.model.eval()
         try:
             result = self.eval_fn(self.model)
@@ -207,21 +223,36 @@ class Trainer:
         """
         cfg = self.config
         total = cfg.iterations if iterations is None else int(iterations)
-        bar = tqdm(total=total, initial=self.iteration, disable=not cfg.progress, desc=type(self.model).__name__)
+        bar = tqdm(
+            total=total,
+            initial=self.iteration,
+            disable=not cfg.progress,
+            desc=type(self.model).__name__,
+        )
         try:
             while self.iteration < total:
                 row = self.step()
                 row["lr"] = self.scheduler.get_last_lr()[0]
                 row["eval_return"] = math.nan
-                if self.eval_fn is not None and cfg.eval_every and self.iteration % cfg.eval_every == 0:
+                if (
+                    self.eval_fn is not None
+                    and cfg.eval_every
+                    and self.iteration % cfg.eval_every == 0
+                ):
                     self.evaluate()
                     row["eval_return"] = self.last_eval
                 self.history.append(row)
-                if cfg.checkpoint_path and cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0:
+                if (
+                    cfg.checkpoint_path
+                    and cfg.checkpoint_every
+                    and self.iteration % cfg.checkpoint_every == 0
+                ):
                     self.save(cfg.checkpoint_path)
                 bar.update(1)
                 if self.iteration % 10 == 0 or self.iteration == total:
-                    bar.set_postfix(loss=f"{row['loss']:.4f}", eval=f"{self.last_eval:.1f}", refresh=False)
+                    bar.set_postfix(
+                        loss=f"{row['loss']:.4f}", eval=f"{self.last_eval:.1f}", refresh=False
+                    )
         finally:
             bar.close()
         if cfg.checkpoint_path:
@@ -267,7 +298,9 @@ class Trainer:
         """
         path = Path(path)
         if not path.exists():
-            raise FileNotFoundError(f"No checkpoint at '{path}'. Train with TrainConfig(checkpoint_path=...) first.")
+            raise FileNotFoundError(
+                f"No checkpoint at '{path}'. Train with TrainConfig(checkpoint_path=...) first."
+            )
         ckpt = torch.load(path, map_location=self.device, weights_only=True)
         if ckpt["model_class"] != type(self.model).__name__:
             raise ValueError(
@@ -301,7 +334,9 @@ def _check_compatible(model: nn.Module, dataset: Any) -> None:
             f"size {act_dim}. Build the model with act_dim={act_dim}."
         )
     if dataset.K > cfg.K:
-        raise ValueError(f"The data set's windows have K={dataset.K} steps; {name} was built with K={cfg.K}.")
+        raise ValueError(
+            f"The data set's windows have K={dataset.K} steps; {name} was built with K={cfg.K}."
+        )
     if getattr(cfg, "paper_compat", False) and not dataset.prepend_zero_action:
         raise ValueError(
             f"{name}(paper_compat=True) reads a_(t-1) tokens: build the SequenceDataset with prepend_zero_action=True."

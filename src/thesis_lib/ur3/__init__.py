@@ -13,6 +13,7 @@
 
 Used in: UR3 deployment chapter (notebook ``07_ur3_deployment``).
 """
+
 from __future__ import annotations
 
 from .dance import DanceMapping, DancePlayback, demo_angles, map_dance, prepare_dance
@@ -41,7 +42,13 @@ from .reach import (
     make_demonstrations,
     split_demonstrations,
 )
-from .safety import SafetyLimits, SafetyReport, UnsafeTrajectoryError, check_trajectory, clip_trajectory
+from .safety import (
+    SafetyLimits,
+    SafetyReport,
+    UnsafeTrajectoryError,
+    check_trajectory,
+    clip_trajectory,
+)
 
 
 def trajectory_html(*args, **kwargs):
@@ -52,11 +59,45 @@ def trajectory_html(*args, **kwargs):
 
 
 __all__ = [
-    "DATASET_ID", "DH", "ENV_ID", "GOALS", "HOME", "JOINT_NAMES", "MAX_SPEED", "POSITION_LIMITS",
-    "DanceMapping", "DancePlayback", "PlayResult", "RTDEBackend", "ReachConfig", "RobotStopped",
-    "SafetyLimits", "SafetyReport", "SimBackend", "TeleopController", "UR3Driver", "UR3Kinematics",
-    "UR3ReachEnv", "URScriptBackend", "UnsafeTrajectoryError", "build_mjcf", "check_trajectory",
-    "clip_trajectory", "demo_angles", "dh_transform", "fk_dh", "get_reach_dataset", "load_model",
-    "make_demonstrations", "map_dance", "prepare_dance", "run_reach_method", "run_table_5_4",
-    "split_demonstrations", "success_curves", "table_5_4", "tcp_position", "trajectory_html",
+    "DATASET_ID",
+    "DH",
+    "ENV_ID",
+    "GOALS",
+    "HOME",
+    "JOINT_NAMES",
+    "MAX_SPEED",
+    "POSITION_LIMITS",
+    "DanceMapping",
+    "DancePlayback",
+    "PlayResult",
+    "RTDEBackend",
+    "ReachConfig",
+    "RobotStopped",
+    "SafetyLimits",
+    "SafetyReport",
+    "SimBackend",
+    "TeleopController",
+    "UR3Driver",
+    "UR3Kinematics",
+    "UR3ReachEnv",
+    "URScriptBackend",
+    "UnsafeTrajectoryError",
+    "build_mjcf",
+    "check_trajectory",
+    "clip_trajectory",
+    "demo_angles",
+    "dh_transform",
+    "fk_dh",
+    "get_reach_dataset",
+    "load_model",
+    "make_demonstrations",
+    "map_dance",
+    "prepare_dance",
+    "run_reach_method",
+    "run_table_5_4",
+    "split_demonstrations",
+    "success_curves",
+    "table_5_4",
+    "tcp_position",
+    "trajectory_html",
 ]

@@ -2,6 +2,7 @@
 
 Used in: UR3 deployment chapter (Table 5.4, dance playback, 3-D viewer).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,8 +13,15 @@ import pandas as pd
 
 from .experiments import REACH_METHODS, ReachConfig
 
-__all__ = ["UR3ChapterConfig", "dance_angles", "plot_dance", "plot_goals", "plot_success_curves", "plot_table_5_4",
-           "table_5_4_vs_thesis"]
+__all__ = [
+    "UR3ChapterConfig",
+    "dance_angles",
+    "plot_dance",
+    "plot_goals",
+    "plot_success_curves",
+    "plot_table_5_4",
+    "table_5_4_vs_thesis",
+]
 
 
 @dataclass
@@ -77,14 +85,30 @@ class UR3ChapterConfig:
 
     def reach_config(self) -> ReachConfig:
         """The :class:`~thesis_lib.ur3.experiments.ReachConfig` of Table 5.4."""
-        return ReachConfig(train_demos=tuple(self.train_demos), methods=tuple(self.methods), seeds=tuple(self.seeds),
-                           data_seed=self.seed, iterations=self.iterations, batch_size=self.batch_size, K=self.K,
-                           d_model=self.d_model, n_layer=self.n_layer, n_head=self.n_head, dropout=self.dropout,
-                           lr=self.lr, warmup_steps=self.warmup_steps, max_eval_steps=self.max_eval_steps,
-                           paper_compat=self.paper_compat, device=self.device, progress=self.progress)
+        return ReachConfig(
+            train_demos=tuple(self.train_demos),
+            methods=tuple(self.methods),
+            seeds=tuple(self.seeds),
+            data_seed=self.seed,
+            iterations=self.iterations,
+            batch_size=self.batch_size,
+            K=self.K,
+            d_model=self.d_model,
+            n_layer=self.n_layer,
+            n_head=self.n_head,
+            dropout=self.dropout,
+            lr=self.lr,
+            warmup_steps=self.warmup_steps,
+            max_eval_steps=self.max_eval_steps,
+            paper_compat=self.paper_compat,
+            device=self.device,
+            progress=self.progress,
+        )
 
 
-def dance_angles(source: str = "mdlt", seconds: float = 6.0, fps: int = 60, seed: int = 0) -> tuple[np.ndarray, str]:
+def dance_angles(
+    source: str = "mdlt", seconds: float = 6.0, fps: int = 60, seed: int = 0
+) -> tuple[np.ndarray, str]:
     """``(T, 4)`` dance angles and where they came from.
 
     ``"mdlt"``: the choreography of the first sequence of MDLT's default data set in the AIST++
@@ -97,7 +121,9 @@ def dance_angles(source: str = "mdlt", seconds: float = 6.0, fps: int = 60, seed
     from .dance import demo_angles
 
     if source == "demo":
-        return demo_angles(seconds, fps, seed=seed), f"stand-in dance (thesis_lib.ur3.dance.demo_angles, seed {seed})"
+        return demo_angles(
+            seconds, fps, seed=seed
+        ), f"stand-in dance (thesis_lib.ur3.dance.demo_angles, seed {seed})"
     if source != "mdlt":
         raise ValueError(f"Unknown dance source {source!r}. Valid: mdlt, demo.")
     from thesis_lib.mdlt import readers, synth
@@ -109,14 +135,18 @@ def dance_angles(source: str = "mdlt", seconds: float = 6.0, fps: int = 60, seed
     if int(s.fps) != int(fps):
         raise ValueError(f"MDLT sequence {s.name} is at {s.fps} fps, the chapter asked for {fps}.")
     n = min(len(s.angles), int(round(seconds * fps)))
-    return np.asarray(s.angles[:n], dtype=np.float64), f"MDLT default data set (AIST++ layout), sequence {s.name}"
+    return np.asarray(
+        s.angles[:n], dtype=np.float64
+    ), f"MDLT default data set (AIST++ layout), sequence {s.name}"
 
 
 def table_5_4_vs_thesis(ours: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
     """Our Table 5.4 beside the thesis's, mean and std of goals reached, with what differs."""
     from thesis_lib.book import compare_with_paper
 
-    mean = compare_with_paper("5.4", ours, on=["method", "train_demos"], value="goals_mean", differs=differs)
+    mean = compare_with_paper(
+        "5.4", ours, on=["method", "train_demos"], value="goals_mean", differs=differs
+    )
     std = compare_with_paper("5.4", ours, on=["method", "train_demos"], value="goals_std")
     out = mean.rename(columns={"paper": "paper_mean", "ours": "ours_mean"})
     out.insert(out.columns.get_loc("difference"), "paper_std", std["paper"].to_numpy())
@@ -137,10 +167,25 @@ def plot_table_5_4(ours: pd.DataFrame, ax=None):
     paper = load_reference("5.4")
     colors = {"HDT": "tab:green", "DT": "tab:blue"}
     for m, g in paper.groupby("method", sort=False):
-        ax.plot(g.train_demos, g.goals_mean, "--", color=colors.get(m), alpha=0.6, label=f"{m} (thesis, real UR3)")
+        ax.plot(
+            g.train_demos,
+            g.goals_mean,
+            "--",
+            color=colors.get(m),
+            alpha=0.6,
+            label=f"{m} (thesis, real UR3)",
+        )
     for m, g in ours.groupby("method", sort=False):
         g = g.sort_values("train_demos")
-        ax.errorbar(g.train_demos, g.goals_mean, yerr=g.goals_std, fmt="-o", capsize=3, color=colors.get(m), label=f"{m} (ours, simulation)")
+        ax.errorbar(
+            g.train_demos,
+            g.goals_mean,
+            yerr=g.goals_std,
+            fmt="-o",
+            capsize=3,
+            color=colors.get(m),
+            label=f"{m} (ours, simulation)",
+        )
     ax.set_xlabel("training demonstrations")
     ax.set_ylabel("goal positions reached (of 5)")
     ax.set_ylim(-0.2, 5.5)
@@ -190,7 +235,14 @@ def plot_goals(demo, ax=None):
         p = kin.tcp(g)
         ax.text(*p, f" G{k + 1}", fontsize=8)
     path = np.array([kin.tcp(o[:6]) for o in demo.observations])
-    ax.plot(path[:, 0], path[:, 1], path[:, 2], color="tab:red", lw=1.5, label="tool path of a demonstration")
+    ax.plot(
+        path[:, 0],
+        path[:, 1],
+        path[:, 2],
+        color="tab:red",
+        lw=1.5,
+        label="tool path of a demonstration",
+    )
     plot_arm(ax, demo.observations[0][:6], color="tab:blue", label="start", kin=kin)
     ax.set_xlim(-0.5, 0.5), ax.set_ylim(-0.5, 0.5), ax.set_zlim(0, 0.7)
     ax.set_xlabel("x (m)"), ax.set_ylabel("y (m)"), ax.set_zlabel("z (m)")

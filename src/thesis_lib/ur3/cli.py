@@ -7,6 +7,7 @@ instead) and plays it through the driver, **dry-run unless** ``--execute`` is gi
 
 Used in: UR3 deployment chapter.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,22 +21,30 @@ def read_angles(path: str | Path) -> np.ndarray:
     """A ``(T, 4)`` or ``(T, 6)`` array from a CSV (an optional header line) or ``.npy`` file."""
     path = Path(path)
     if not path.exists():
-        raise FileNotFoundError(f"No angles file {path}: expected a CSV (T rows, 4 or 6 columns, radians) or .npy.")
+        raise FileNotFoundError(
+            f"No angles file {path}: expected a CSV (T rows, 4 or 6 columns, radians) or .npy."
+        )
     if path.suffix == ".npy":
         a = np.load(path)
     else:
         first = path.read_text().splitlines()[:1]
-        header = bool(first) and any(c.isalpha() for c in first[0].replace("e-", "").replace("e+", ""))
+        header = bool(first) and any(
+            c.isalpha() for c in first[0].replace("e-", "").replace("e+", "")
+        )
         if header:  # e.g. `thesis mdlt dance --out`: time_s, then the four angles
             import pandas as pd
 
             frame = pd.read_csv(path)
-            a = frame.drop(columns=[c for c in frame.columns if str(c).lower().startswith("time")]).to_numpy()
+            a = frame.drop(
+                columns=[c for c in frame.columns if str(c).lower().startswith("time")]
+            ).to_numpy()
         else:
             a = np.loadtxt(path, delimiter=",", ndmin=2)
     a = np.asarray(a, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] not in (4, 6):
-        raise ValueError(f"{path}: expected T rows of 4 (MDLT angles) or 6 (UR3 joint angles) columns, got {a.shape}.")
+        raise ValueError(
+            f"{path}: expected T rows of 4 (MDLT angles) or 6 (UR3 joint angles) columns, got {a.shape}."
+        )
     return a
 
 
@@ -127,34 +136,60 @@ def _model(args: argparse.Namespace) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``thesis ur3 ...`` to the main CLI."""
-    p = subparsers.add_parser("ur3", help="the UR3: play or check a dance, make reaching demonstrations")
+    p = subparsers.add_parser(
+        "ur3", help="the UR3: play or check a dance, make reaching demonstrations"
+    )
     sub = p.add_subparsers(dest="ur3_command", required=True)
 
     def common(sp: argparse.ArgumentParser) -> None:
-        sp.add_argument("angles", help="CSV or .npy: T x 4 MDLT angles or T x 6 UR3 joint angles (radians)")
-        sp.add_argument("--fps", type=float, default=60.0, help="frames per second of the file (MDLT: 60)")
-        sp.add_argument("--speed-scale", type=float, default=1.0, help="allowed fraction of the UR3's joint speeds")
+        sp.add_argument(
+            "angles", help="CSV or .npy: T x 4 MDLT angles or T x 6 UR3 joint angles (radians)"
+        )
+        sp.add_argument(
+            "--fps", type=float, default=60.0, help="frames per second of the file (MDLT: 60)"
+        )
+        sp.add_argument(
+            "--speed-scale",
+            type=float,
+            default=1.0,
+            help="allowed fraction of the UR3's joint speeds",
+        )
 
-    play = sub.add_parser("play", help="play a dance/trajectory through the driver (dry-run unless --execute)")
+    play = sub.add_parser(
+        "play", help="play a dance/trajectory through the driver (dry-run unless --execute)"
+    )
     common(play)
-    play.add_argument("--mode", choices=("clip", "reject"), default="clip", help="clip to the limits or refuse")
+    play.add_argument(
+        "--mode", choices=("clip", "reject"), default="clip", help="clip to the limits or refuse"
+    )
     play.add_argument("--backend", choices=("sim", "urscript", "rtde"), default="sim")
     play.add_argument("--host", help="robot controller address (urscript, rtde)")
     dry = play.add_mutually_exclusive_group()
-    dry.add_argument("--dry-run", dest="execute", action="store_false", help="check and log only (default)")
-    dry.add_argument("--execute", dest="execute", action="store_true", help="really send the motion")
+    dry.add_argument(
+        "--dry-run", dest="execute", action="store_false", help="check and log only (default)"
+    )
+    dry.add_argument(
+        "--execute", dest="execute", action="store_true", help="really send the motion"
+    )
     play.set_defaults(execute=False)
-    play.add_argument("--allow-unchecked-approach", action="store_true",
-                      help="urscript: move to the first frame without knowing the current angles")
+    play.add_argument(
+        "--allow-unchecked-approach",
+        action="store_true",
+        help="urscript: move to the first frame without knowing the current angles",
+    )
     play.add_argument("--gif", help="write rendered frames to this GIF")
     play.add_argument("--html", help="write the 3-D viewer (meshcat static HTML) here")
     play.set_defaults(func=_play)
 
-    check = sub.add_parser("check", help="check a dance/trajectory against the joint, speed and workspace limits")
+    check = sub.add_parser(
+        "check", help="check a dance/trajectory against the joint, speed and workspace limits"
+    )
     common(check)
     check.set_defaults(func=_check)
 
-    demos = sub.add_parser("demos", help="(re)make the reaching demonstrations data set (thesis/ur3-reach/teleop-v0)")
+    demos = sub.add_parser(
+        "demos", help="(re)make the reaching demonstrations data set (thesis/ur3-reach/teleop-v0)"
+    )
     demos.add_argument("-n", type=int, default=100)
     demos.add_argument("--seed", type=int, default=0)
     demos.set_defaults(func=_demos)

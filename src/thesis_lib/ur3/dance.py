@@ -13,6 +13,7 @@ MDLT's generated angles are at hand.
 
 Used in: UR3 deployment chapter (chapter 6's application).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -20,8 +21,14 @@ from typing import Literal
 
 import numpy as np
 
-from .safety import (SafetyLimits, SafetyReport, UnsafeTrajectoryError, as_angle_frames, check_trajectory,
-                     clip_trajectory)
+from .safety import (
+    SafetyLimits,
+    SafetyReport,
+    UnsafeTrajectoryError,
+    as_angle_frames,
+    check_trajectory,
+    clip_trajectory,
+)
 
 __all__ = ["DanceMapping", "DancePlayback", "demo_angles", "map_dance", "prepare_dance"]
 
@@ -60,7 +67,9 @@ def map_dance(angles: np.ndarray, mapping: DanceMapping | None = None) -> np.nda
     return q
 
 
-def demo_angles(seconds: float = 8.0, fps: int = 60, bpm: float = 120.0, seed: int = 0) -> np.ndarray:
+def demo_angles(
+    seconds: float = 8.0, fps: int = 60, bpm: float = 120.0, seed: int = 0
+) -> np.ndarray:
     """A stand-in dance: ``(T, 4)`` float32 angles in ``[-π, π]``, smooth moves on a beat.
 
     Each bar (4 beats) picks a move (sway, wave, pump, twist) with its own amplitudes; moves
@@ -76,17 +85,48 @@ def demo_angles(seconds: float = 8.0, fps: int = 60, bpm: float = 120.0, seed: i
     beat = 60.0 / bpm
     phase = 2 * np.pi * t / beat  # one cycle per beat
     moves = {
-        "sway": lambda p, a: np.stack([a[0] * np.sin(p / 2), 0.3 * a[1] * np.sin(p), 0.4 * a[2] * (1 - np.cos(p)), 0 * p], 1),
-        "wave": lambda p, a: np.stack([0.2 * a[0] * np.sin(p / 4), a[1] * np.sin(p), -a[2] * (1 + np.sin(p)), a[3] * np.sin(2 * p)], 1),
-        "pump": lambda p, a: np.stack([0 * p, 0.8 * a[1] * (1 - np.cos(p)), -1.2 * a[2] * (1 - np.cos(p)), 0.5 * a[3] * np.sin(p)], 1),
-        "twist": lambda p, a: np.stack([1.2 * a[0] * np.sin(p / 2), 0.2 * a[1] * np.sin(p), -0.5 * a[2] + 0 * p, a[3] * np.sin(p)], 1),
+        "sway": lambda p, a: np.stack(
+            [a[0] * np.sin(p / 2), 0.3 * a[1] * np.sin(p), 0.4 * a[2] * (1 - np.cos(p)), 0 * p], 1
+        ),
+        "wave": lambda p, a: np.stack(
+            [
+                0.2 * a[0] * np.sin(p / 4),
+                a[1] * np.sin(p),
+                -a[2] * (1 + np.sin(p)),
+                a[3] * np.sin(2 * p),
+            ],
+            1,
+        ),
+        "pump": lambda p, a: np.stack(
+            [
+                0 * p,
+                0.8 * a[1] * (1 - np.cos(p)),
+                -1.2 * a[2] * (1 - np.cos(p)),
+                0.5 * a[3] * np.sin(p),
+            ],
+            1,
+        ),
+        "twist": lambda p, a: np.stack(
+            [
+                1.2 * a[0] * np.sin(p / 2),
+                0.2 * a[1] * np.sin(p),
+                -0.5 * a[2] + 0 * p,
+                a[3] * np.sin(p),
+            ],
+            1,
+        ),
     }
     names = list(moves)
     bar = 4 * beat
     n_bars = int(np.ceil(seconds / bar)) + 1
-    per_bar = [moves[names[rng.integers(len(names))]](phase, rng.uniform(0.3, 0.8, 4)) for _ in range(n_bars)]
+    per_bar = [
+        moves[names[rng.integers(len(names))]](phase, rng.uniform(0.3, 0.8, 4))
+        for _ in range(n_bars)
+    ]
     k = np.minimum((t // bar).astype(int), n_bars - 2)
-    w = np.clip((t - k * bar - (bar - beat / 2)) / (beat / 2), 0, 1)[:, None]  # blend into the next bar
+    w = np.clip((t - k * bar - (bar - beat / 2)) / (beat / 2), 0, 1)[
+        :, None
+    ]  # blend into the next bar
     out = np.empty((T, 4))
     for i in range(T):
         out[i] = (1 - w[i]) * per_bar[k[i]][i] + w[i] * per_bar[k[i] + 1][i]
@@ -122,8 +162,13 @@ class DancePlayback:
         return len(self.q) / self.fps
 
 
-def prepare_dance(angles: np.ndarray, fps: float = 60.0, mode: Literal["clip", "reject"] = "clip",
-                  mapping: DanceMapping | None = None, limits: SafetyLimits | None = None) -> DancePlayback:
+def prepare_dance(
+    angles: np.ndarray,
+    fps: float = 60.0,
+    mode: Literal["clip", "reject"] = "clip",
+    mapping: DanceMapping | None = None,
+    limits: SafetyLimits | None = None,
+) -> DancePlayback:
     """Map MDLT angles to the UR3 and enforce the limits by clipping or rejecting.
 
     Args:
@@ -153,4 +198,6 @@ def prepare_dance(angles: np.ndarray, fps: float = 60.0, mode: Literal["clip", "
     after = check_trajectory(clipped, dt, limits)
     dev = np.abs(clipped - q).max(axis=1)
     notes = [] if after.ok else [f"still unsafe after clipping: {after.summary()}"]
-    return DancePlayback(clipped, float(fps), mode, before, after, int((dev > 1e-9).sum()), float(dev.max()), notes)
+    return DancePlayback(
+        clipped, float(fps), mode, before, after, int((dev > 1e-9).sum()), float(dev.max()), notes
+    )

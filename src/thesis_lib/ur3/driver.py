@@ -24,6 +24,7 @@ log, then ``dry_run=False`` with a hand on the pendant's emergency stop.
 
 Used in: UR3 deployment chapter (robot interface).
 """
+
 from __future__ import annotations
 
 import socket
@@ -36,7 +37,15 @@ import numpy as np
 
 from .safety import SafetyLimits, SafetyReport, UnsafeTrajectoryError, check_trajectory
 
-__all__ = ["PlayResult", "RTDEBackend", "RobotBackend", "RobotStopped", "SimBackend", "UR3Driver", "URScriptBackend"]
+__all__ = [
+    "PlayResult",
+    "RTDEBackend",
+    "RobotBackend",
+    "RobotStopped",
+    "SimBackend",
+    "UR3Driver",
+    "URScriptBackend",
+]
 
 
 class RobotStopped(RuntimeError):
@@ -89,7 +98,9 @@ class SimBackend:
     def move_to(self, q: np.ndarray, speed: float, acceleration: float) -> None:
         del acceleration
         q = np.asarray(q, dtype=np.float64)
-        n = max(1, int(np.ceil(np.abs(q - self.q).max() / max(speed, 1e-9) / 0.01)))  # 100 Hz interpolation
+        n = max(
+            1, int(np.ceil(np.abs(q - self.q).max() / max(speed, 1e-9) / 0.01))
+        )  # 100 Hz interpolation
         for s in np.linspace(0, 1, n + 1)[1:]:
             self.history.append(self.q + s * (q - self.q))
         self.q = q.copy()
@@ -127,8 +138,14 @@ class URScriptBackend:
 
     name = "urscript"
 
-    def __init__(self, host: str, port: int = 30002, timeout: float = 5.0, lookahead_time: float = 0.1,
-                 gain: float = 300.0) -> None:
+    def __init__(
+        self,
+        host: str,
+        port: int = 30002,
+        timeout: float = 5.0,
+        lookahead_time: float = 0.1,
+        gain: float = 300.0,
+    ) -> None:
         self.host, self.port, self.timeout = host, int(port), float(timeout)
         self.lookahead_time, self.gain = float(lookahead_time), float(gain)
         self.sock: socket.socket | None = None
@@ -153,8 +170,10 @@ class URScriptBackend:
     def program(self, q: np.ndarray, dt: float) -> str:
         """The URScript program that servos through ``q`` every ``dt`` s (what :meth:`stream` sends)."""
         lines = ["def thesis_play():"]
-        lines += [f"  servoj({_fmt(x)}, t={dt:.6f}, lookahead_time={self.lookahead_time:.3f}, gain={self.gain:.0f})"
-                  for x in np.asarray(q, dtype=np.float64)]
+        lines += [
+            f"  servoj({_fmt(x)}, t={dt:.6f}, lookahead_time={self.lookahead_time:.3f}, gain={self.gain:.0f})"
+            for x in np.asarray(q, dtype=np.float64)
+        ]
         lines += ["  stopj(2.0)", "end", "thesis_play()", ""]
         return "\n".join(lines)
 
@@ -178,7 +197,9 @@ class RTDEBackend:
 
     name = "rtde"
 
-    def __init__(self, host: str, frequency: float = 125.0, lookahead_time: float = 0.1, gain: float = 300.0) -> None:
+    def __init__(
+        self, host: str, frequency: float = 125.0, lookahead_time: float = 0.1, gain: float = 300.0
+    ) -> None:
         self.host, self.frequency = host, float(frequency)
         self.lookahead_time, self.gain = float(lookahead_time), float(gain)
         self.control: Any = None
@@ -191,7 +212,9 @@ class RTDEBackend:
             import rtde_control
             import rtde_receive
         except ImportError as err:
-            raise ImportError("RTDEBackend needs ur_rtde: pip install ur_rtde (or use URScriptBackend).") from err
+            raise ImportError(
+                "RTDEBackend needs ur_rtde: pip install ur_rtde (or use URScriptBackend)."
+            ) from err
         self.control = rtde_control.RTDEControlInterface(self.host)
         self.receive = rtde_receive.RTDEReceiveInterface(self.host)
 
@@ -265,14 +288,25 @@ class UR3Driver:
     Used in: UR3 deployment chapter.
     """
 
-    def __init__(self, backend: RobotBackend | None = None, limits: SafetyLimits | None = None, dry_run: bool = True,
-                 approach_speed: float = 0.5, approach_acceleration: float = 1.0) -> None:
+    def __init__(
+        self,
+        backend: RobotBackend | None = None,
+        limits: SafetyLimits | None = None,
+        dry_run: bool = True,
+        approach_speed: float = 0.5,
+        approach_acceleration: float = 1.0,
+    ) -> None:
         self.backend = backend if backend is not None else SimBackend()
         self.limits = limits or SafetyLimits()
         self.dry_run = bool(dry_run)
         if not 0 < approach_speed <= float(self.limits.speed.min()):
-            raise ValueError(f"approach_speed must be in (0, {self.limits.speed.min():.3f}] rad/s, got {approach_speed}.")
-        self.approach_speed, self.approach_acceleration = float(approach_speed), float(approach_acceleration)
+            raise ValueError(
+                f"approach_speed must be in (0, {self.limits.speed.min():.3f}] rad/s, got {approach_speed}."
+            )
+        self.approach_speed, self.approach_acceleration = (
+            float(approach_speed),
+            float(approach_acceleration),
+        )
         self.log: list[str] = []
         self._stop = threading.Event()
 
@@ -321,7 +355,9 @@ class UR3Driver:
             path = cur + np.linspace(0, 1, n)[:, None] * (q[0] - cur)
             approach = check_trajectory(path, 0.01, self.limits)
             if len(approach.workspace_frames) or len(approach.position_frames):
-                report.workspace_frames = np.unique(np.concatenate([[0], report.workspace_frames])).astype(int)
+                report.workspace_frames = np.unique(
+                    np.concatenate([[0], report.workspace_frames])
+                ).astype(int)
         return report
 
     # -- motion ---------------------------------------------------------------------------------
@@ -329,8 +365,14 @@ class UR3Driver:
         """Move to one configuration at the approach speed (refused if it or the path is unsafe)."""
         return self.play(np.asarray(q, dtype=np.float64).reshape(1, 6), dt=1.0, current=current)
 
-    def play(self, q: np.ndarray, dt: float | None = None, fps: float | None = None,
-             current: np.ndarray | None = None, allow_unchecked_approach: bool = False) -> PlayResult:
+    def play(
+        self,
+        q: np.ndarray,
+        dt: float | None = None,
+        fps: float | None = None,
+        current: np.ndarray | None = None,
+        allow_unchecked_approach: bool = False,
+    ) -> PlayResult:
         """Approach ``q[0]``, then stream ``q (T, 6)`` every ``dt`` s (or at ``fps``).
 
         Raises:
@@ -354,7 +396,9 @@ class UR3Driver:
         if not report.ok:
             self.log.append(f"refused: {report.summary()}")
             raise UnsafeTrajectoryError(report)
-        commands = [f"movej({_fmt(q[0])}, a={self.approach_acceleration:.4f}, v={self.approach_speed:.4f})"]
+        commands = [
+            f"movej({_fmt(q[0])}, a={self.approach_acceleration:.4f}, v={self.approach_speed:.4f})"
+        ]
         if len(q) > 1:
             commands.append(f"servoj x {len(q)} frames, t={dt:.6f}")
         if self.dry_run:
@@ -375,7 +419,7 @@ class UR3Driver:
         """Close the backend's connection."""
         self.backend.close()
 
-    def __enter__(self) -> "UR3Driver":
+    def __enter__(self) -> UR3Driver:
         if not self.dry_run:
             self.backend.connect()
         return self

@@ -9,6 +9,7 @@ gives the mean number of goals reached after each step.
 
 Used in: UR3 deployment chapter (Table 5.4).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -21,7 +22,14 @@ import pandas as pd
 
 from .reach import UR3ReachEnv, get_reach_dataset, split_demonstrations
 
-__all__ = ["REACH_METHODS", "ReachConfig", "run_reach_method", "run_table_5_4", "success_curves", "table_5_4"]
+__all__ = [
+    "REACH_METHODS",
+    "ReachConfig",
+    "run_reach_method",
+    "run_table_5_4",
+    "success_curves",
+    "table_5_4",
+]
 
 REACH_METHODS = ("HDT", "DT")
 """The two methods of Table 5.4."""
@@ -74,7 +82,11 @@ class ReachConfig:
     """Progress bars."""
 
     def __post_init__(self) -> None:
-        self.train_demos, self.methods, self.seeds = tuple(self.train_demos), tuple(self.methods), tuple(self.seeds)
+        self.train_demos, self.methods, self.seeds = (
+            tuple(self.train_demos),
+            tuple(self.methods),
+            tuple(self.seeds),
+        )
         for m in self.methods:
             if m not in REACH_METHODS:
                 close = difflib.get_close_matches(m, REACH_METHODS, n=1)
@@ -83,20 +95,31 @@ class ReachConfig:
         n_train = self.n_demos - 20
         bad = [n for n in self.train_demos if not 1 <= n <= n_train]
         if bad:
-            raise ValueError(f"train_demos must lie in 1..{n_train} (n_demos - 10 validation - 10 test), got {bad}.")
+            raise ValueError(
+                f"train_demos must lie in 1..{n_train} (n_demos - 10 validation - 10 test), got {bad}."
+            )
 
 
 def _model(method: str, seq: Any, cfg: ReachConfig) -> Any:
     from thesis_lib.seq import HDT, DecisionTransformer, DTConfig, HDTConfig
 
-    kw = dict(d_model=cfg.d_model, n_layer=cfg.n_layer, n_head=cfg.n_head, dropout=cfg.dropout,
-              paper_compat=cfg.paper_compat, max_action=1.0, max_timestep=max(256, cfg.max_eval_steps + 1))
+    kw = dict(
+        d_model=cfg.d_model,
+        n_layer=cfg.n_layer,
+        n_head=cfg.n_head,
+        dropout=cfg.dropout,
+        paper_compat=cfg.paper_compat,
+        max_action=1.0,
+        max_timestep=max(256, cfg.max_eval_steps + 1),
+    )
     if method == "HDT":
         return HDT(HDTConfig.for_data(seq, **kw))
     return DecisionTransformer(DTConfig.for_data(seq, **kw))
 
 
-def run_reach_method(method: str, n_train: int, seed: int, cfg: ReachConfig, demos: Any = None) -> pd.DataFrame:
+def run_reach_method(
+    method: str, n_train: int, seed: int, cfg: ReachConfig, demos: Any = None
+) -> pd.DataFrame:
     """Train ``method`` on ``n_train`` demonstrations with ``seed``; test from every test start.
 
     Args:
@@ -121,12 +144,26 @@ def run_reach_method(method: str, n_train: int, seed: int, cfg: ReachConfig, dem
     if demos is None:
         demos = split_demonstrations(get_reach_dataset(cfg.n_demos, cfg.data_seed).episodes)
     train = demos.train[:n_train]
-    seq = SequenceDataset(train, K=cfg.K, rtg_scale=cfg.rtg_scale, subgoal_fn=subgoal_fn(cfg.paper_compat),
-                          paper_compat=cfg.paper_compat, seed=seed)
+    seq = SequenceDataset(
+        train,
+        K=cfg.K,
+        rtg_scale=cfg.rtg_scale,
+        subgoal_fn=subgoal_fn(cfg.paper_compat),
+        paper_compat=cfg.paper_compat,
+        seed=seed,
+    )
     torch.manual_seed(seed)
     model = _model(method, seq, cfg)
-    tc = TrainConfig(iterations=cfg.iterations, batch_size=cfg.batch_size, lr=cfg.lr, warmup_steps=cfg.warmup_steps,
-                     eval_every=0, seed=seed, device=cfg.device, progress=cfg.progress)
+    tc = TrainConfig(
+        iterations=cfg.iterations,
+        batch_size=cfg.batch_size,
+        lr=cfg.lr,
+        warmup_steps=cfg.warmup_steps,
+        eval_every=0,
+        seed=seed,
+        device=cfg.device,
+        progress=cfg.progress,
+    )
     trainer = Trainer(model, seq, tc)
     trainer.train()
     loss = float(trainer.history[-1]["loss"]) if trainer.history else float("nan")
@@ -135,16 +172,39 @@ def run_reach_method(method: str, n_train: int, seed: int, cfg: ReachConfig, dem
     venv = gym.vector.SyncVectorEnv(envs)
     try:
         target = max(e.episode_return for e in train) if method == "DT" else None
-        evaluate(model, venv, n_episodes=len(envs), target_return=target, dataset=seq, seed=seed,
-                 max_steps=cfg.max_eval_steps)
+        evaluate(
+            model,
+            venv,
+            n_episodes=len(envs),
+            target_return=target,
+            dataset=seq,
+            seed=seed,
+            max_steps=cfg.max_eval_steps,
+        )
         rows = []
         for i, env in enumerate(venv.envs):
             done = env.unwrapped.completed
-            rec = done[0] if done else {"goals_reached": int(env.unwrapped.reached.sum()),
-                                        "reach_steps": env.unwrapped.reach_steps, "steps": env.unwrapped.t}
-            rows.append({"method": method, "train_demos": n_train, "seed": seed, "start": i,
-                         "goals_reached": rec["goals_reached"], "steps": rec["steps"],
-                         "reach_steps": " ".join(str(int(s)) for s in rec["reach_steps"]), "loss": loss})
+            rec = (
+                done[0]
+                if done
+                else {
+                    "goals_reached": int(env.unwrapped.reached.sum()),
+                    "reach_steps": env.unwrapped.reach_steps,
+                    "steps": env.unwrapped.t,
+                }
+            )
+            rows.append(
+                {
+                    "method": method,
+                    "train_demos": n_train,
+                    "seed": seed,
+                    "start": i,
+                    "goals_reached": rec["goals_reached"],
+                    "steps": rec["steps"],
+                    "reach_steps": " ".join(str(int(s)) for s in rec["reach_steps"]),
+                    "loss": loss,
+                }
+            )
     finally:
         venv.close()
     return pd.DataFrame(rows)
@@ -159,7 +219,10 @@ def run_table_5_4(cfg: ReachConfig) -> pd.DataFrame:
 
     demos = split_demonstrations(get_reach_dataset(cfg.n_demos, cfg.data_seed).episodes)
     runs = [(m, n, s) for n in cfg.train_demos for m in cfg.methods for s in cfg.seeds]
-    frames = [run_reach_method(m, n, s, cfg, demos) for m, n, s in tqdm(runs, desc="Table 5.4", disable=not cfg.progress)]
+    frames = [
+        run_reach_method(m, n, s, cfg, demos)
+        for m, n, s in tqdm(runs, desc="Table 5.4", disable=not cfg.progress)
+    ]
     return pd.concat(frames, ignore_index=True)
 
 
@@ -190,7 +253,9 @@ def success_curves(rows: pd.DataFrame, horizon: int = 200) -> pd.DataFrame:
     out = []
     steps = np.arange(horizon + 1)
     for (m, n), g in rows.groupby(["method", "train_demos"], sort=False):
-        reach = np.array([[int(x) for x in s.split()] for s in g["reach_steps"]])  # (episodes, goals)
+        reach = np.array(
+            [[int(x) for x in s.split()] for s in g["reach_steps"]]
+        )  # (episodes, goals)
         hit = (reach[:, :, None] >= 0) & (reach[:, :, None] <= steps[None, None, :])
         mean = hit.sum(axis=1).mean(axis=0)
         out.append(pd.DataFrame({"method": m, "train_demos": n, "step": steps, "goals_mean": mean}))

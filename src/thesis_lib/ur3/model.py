@@ -24,6 +24,7 @@ model as ``<custom><numeric name="max_speed">`` and read back by :func:`load_mod
 
 Used in: UR3 deployment chapter (thesis 5.2.5.4 and chapter 6's application).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -91,7 +92,9 @@ def dh_transform(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
 def _check_q(q: np.ndarray, n: int = 6) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     if q.shape[-1] != n:
-        raise ValueError(f"Expect joint angles of shape (..., {n}) in radians, got shape {q.shape}.")
+        raise ValueError(
+            f"Expect joint angles of shape (..., {n}) in radians, got shape {q.shape}."
+        )
     if not np.all(np.isfinite(q)):
         raise ValueError("Joint angles contain NaN or inf.")
     return q
@@ -154,7 +157,7 @@ def build_mjcf(dh: DHParameters = DH) -> str:
         f'    <numeric name="dh_a" data="{" ".join(_f(v) for v in dh.a)}"/>',
         f'    <numeric name="dh_alpha" data="{" ".join(_f(v) for v in dh.alpha)}"/>',
         "  </custom>",
-        "  <visual><global offwidth=\"640\" offheight=\"480\"/></visual>",
+        '  <visual><global offwidth="640" offheight="480"/></visual>',
         "  <asset>",
         '    <texture name="grid" type="2d" builtin="checker" rgb1="0.9 0.9 0.9" rgb2="0.8 0.8 0.8" width="256" height="256"/>',
         '    <material name="grid" texture="grid" texrepeat="8 8"/>',
@@ -172,19 +175,27 @@ def build_mjcf(dh: DHParameters = DH) -> str:
         lo, hi = POSITION_LIMITS[i]
         lines.append(f'{indent}<body name="link{i + 1}" pos="{pos}" quat="{quat}">')
         ind = indent + "  "
-        lines.append(f'{ind}<joint name="{JOINT_NAMES[i]}" type="hinge" axis="0 0 1" range="{_f(lo)} {_f(hi)}" damping="1"/>')
+        lines.append(
+            f'{ind}<joint name="{JOINT_NAMES[i]}" type="hinge" axis="0 0 1" range="{_f(lo)} {_f(hi)}" damping="1"/>'
+        )
         a, d = dh.a[i], dh.d[i]
         r = _RADII[i]
         # a short cylinder around the joint axis (the motor housing) and a capsule along the link
-        lines.append(f'{ind}<geom type="cylinder" size="{_f(r * 1.15)} {_f(r * 1.1)}" rgba="0.25 0.25 0.3 1" contype="0" conaffinity="0"/>')
+        lines.append(
+            f'{ind}<geom type="cylinder" size="{_f(r * 1.15)} {_f(r * 1.1)}" rgba="0.25 0.25 0.3 1" contype="0" conaffinity="0"/>'
+        )
         if abs(a) + abs(d) > 1e-9:
-            lines.append(f'{ind}<geom type="capsule" fromto="0 0 0 {_f(a)} 0 {_f(d)}" size="{_f(r)}" rgba="{_COLORS[i]}" contype="0" conaffinity="0"/>')
+            lines.append(
+                f'{ind}<geom type="capsule" fromto="0 0 0 {_f(a)} 0 {_f(d)}" size="{_f(r)}" rgba="{_COLORS[i]}" contype="0" conaffinity="0"/>'
+            )
         # the child frame: translate (a, 0, d), rotate alpha about x
         al = dh.alpha[i]
         pos, quat = f"{_f(a)} 0 {_f(d)}", f"{_f(np.cos(al / 2))} {_f(np.sin(al / 2))} 0 0"
         indent = ind
-    lines.append(f'{indent}<site name="tcp" pos="{pos}" quat="{quat}" size="0.012" rgba="0.9 0.3 0.2 1"/>')
-    for i in range(6, 0, -1):
+    lines.append(
+        f'{indent}<site name="tcp" pos="{pos}" quat="{quat}" size="0.012" rgba="0.9 0.3 0.2 1"/>'
+    )
+    for _ in range(6, 0, -1):
         indent = indent[:-2]
         lines.append(f"{indent}</body>")
     lines += ["  </worldbody>", "</mujoco>", ""]
@@ -223,7 +234,9 @@ class UR3Kinematics:
         self.model = load_model()
         self.data = mujoco.MjData(self.model)
         self.tcp_site = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, "tcp")
-        self.body_ids = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"link{i}") for i in range(1, 7)]
+        self.body_ids = [
+            mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f"link{i}") for i in range(1, 7)
+        ]
         self.max_speed = np.array(self.model.numeric("max_speed").data)
         self.position_limits = np.array(self.model.jnt_range)
 
@@ -251,7 +264,11 @@ class UR3Kinematics:
         The arm drawn as a polyline through these points is the DH skeleton.
         """
         self.forward(q)
-        pts = [np.zeros(3)] + [self.data.xpos[b].copy() for b in self.body_ids] + [self.data.site_xpos[self.tcp_site].copy()]
+        pts = (
+            [np.zeros(3)]
+            + [self.data.xpos[b].copy() for b in self.body_ids]
+            + [self.data.site_xpos[self.tcp_site].copy()]
+        )
         return np.array(pts)
 
     def points_trajectory(self, q: np.ndarray) -> np.ndarray:

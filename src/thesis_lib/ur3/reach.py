@@ -27,6 +27,7 @@ the Minari data set ``thesis/ur3-reach/teleop-v0`` (80 train, 10 validation, 10 
 
 Used in: UR3 deployment chapter (Table 5.4).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -128,7 +129,11 @@ class UR3ReachEnv(gym.Env):
                 f"Expect max_steps >= 1, max_step > 0 and tolerance > 0; got {max_steps}, {max_step}, {tolerance}."
             )
         self.n_goals = len(self.goals)
-        self.max_steps, self.max_step, self.tolerance = int(max_steps), float(max_step), float(tolerance)
+        self.max_steps, self.max_step, self.tolerance = (
+            int(max_steps),
+            float(max_step),
+            float(tolerance),
+        )
         self.fixed_start = None if start is None else np.asarray(start, dtype=np.float64).reshape(6)
         self.start_range = float(start_range)
         self.terminate_on_success = bool(terminate_on_success)
@@ -148,7 +153,11 @@ class UR3ReachEnv(gym.Env):
         return np.concatenate([self.q, self.reached.astype(np.float64)]).astype(np.float32)
 
     def _info(self) -> dict[str, Any]:
-        return {"goals_reached": int(self.reached.sum()), "reached": self.reached.copy(), "q": self.q.copy()}
+        return {
+            "goals_reached": int(self.reached.sum()),
+            "reached": self.reached.copy(),
+            "q": self.q.copy(),
+        }
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start at ``options["start"]``, the fixed start, or ``HOME`` + a random offset."""
@@ -181,8 +190,13 @@ class UR3ReachEnv(gym.Env):
         terminated = bool(self.reached.all()) and self.terminate_on_success
         truncated = (not terminated) and self.t >= self.max_steps
         if terminated or truncated:
-            self.completed.append({"goals_reached": int(self.reached.sum()), "reach_steps": self.reach_steps.copy(),
-                                   "steps": self.t})
+            self.completed.append(
+                {
+                    "goals_reached": int(self.reached.sum()),
+                    "reach_steps": self.reach_steps.copy(),
+                    "steps": self.t,
+                }
+            )
         return self._obs(), float(reward), terminated, truncated, self._info()
 
     def render(self):
@@ -244,8 +258,13 @@ class TeleopController:
         return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
-def make_demonstrations(n: int = 100, seed: int = 0, env_kwargs: dict | None = None,
-                        controller: TeleopController | None = None, hold_steps: int = 3) -> list:
+def make_demonstrations(
+    n: int = 100,
+    seed: int = 0,
+    env_kwargs: dict | None = None,
+    controller: TeleopController | None = None,
+    hold_steps: int = 3,
+) -> list:
     """``n`` scripted demonstrations from random starts, as :class:`thesis_lib.data.Episode` s.
 
     Episode ``i`` starts from ``reset(seed=seed + i)``. Each runs until all goals are reached,
@@ -266,18 +285,25 @@ def make_demonstrations(n: int = 100, seed: int = 0, env_kwargs: dict | None = N
     for i in range(n):
         obs, _ = env.reset(seed=seed + i)
         ctrl.reset()
-        O, A, R, term, trunc = [obs], [], [], [], []
+        obs_l, A, R, term, trunc = [obs], [], [], [], []
         done, hold = False, 0
         while not done:
             a = ctrl(env)
             obs, r, te, tr, _ = env.step(a)
             hold += bool(env.reached.all())
             tr = tr or hold > hold_steps  # the operator stops recording
-            O.append(obs), A.append(a), R.append(r), term.append(te), trunc.append(tr)
+            obs_l.append(obs), A.append(a), R.append(r), term.append(te), trunc.append(tr)
             done = te or tr
-        episodes.append(Episode(id=i, observations=np.array(O, dtype=np.float32), actions=np.array(A, dtype=np.float32),
-                                rewards=np.array(R, dtype=np.float64), terminations=np.array(term, dtype=bool),
-                                truncations=np.array(trunc, dtype=bool)))
+        episodes.append(
+            Episode(
+                id=i,
+                observations=np.array(obs_l, dtype=np.float32),
+                actions=np.array(A, dtype=np.float32),
+                rewards=np.array(R, dtype=np.float64),
+                terminations=np.array(term, dtype=bool),
+                truncations=np.array(trunc, dtype=bool),
+            )
+        )
     return episodes
 
 
@@ -295,22 +321,41 @@ def get_reach_dataset(n_demos: int = 100, seed: int = 0, overwrite: bool = False
     from thesis_lib.data.storage import find_dataset
 
     ctrl = TeleopController(seed=seed)
-    info = {"algorithm": "thesis_lib.ur3.reach.TeleopController", "n_demos": int(n_demos), "seed": int(seed),
-            "controller": {k: getattr(ctrl, k) for k in ("gain", "noise", "theta", "order")},
-            "goals": GOALS.tolist(), "hold_steps": 3, "version": 4}
+    info = {
+        "algorithm": "thesis_lib.ur3.reach.TeleopController",
+        "n_demos": int(n_demos),
+        "seed": int(seed),
+        "controller": {k: getattr(ctrl, k) for k in ("gain", "noise", "theta", "order")},
+        "goals": GOALS.tolist(),
+        "hold_steps": 3,
+        "version": 4,
+    }
     if not overwrite and root is None and find_dataset(DATASET_ID) is not None:
         ds = load(DATASET_ID)
         if ds.metadata.get("thesis_info", {}) == info:
             return ds
     episodes = make_demonstrations(n_demos, seed, controller=ctrl)
-    path = write_dataset(DATASET_ID, episodes, ENV_ID, description="UR3 reaching (thesis 5.2.5.4): scripted "
-                         "teleoperation-like demonstrations through five goal joint configurations.",
-                         info=info, root=root)
+    path = write_dataset(
+        DATASET_ID,
+        episodes,
+        ENV_ID,
+        description="UR3 reaching (thesis 5.2.5.4): scripted "
+        "teleoperation-like demonstrations through five goal joint configurations.",
+        info=info,
+        root=root,
+    )
     if root is not None:
         from thesis_lib.data.storage import OfflineDataset
 
-        return OfflineDataset(id=DATASET_ID, episodes=episodes, env_id=ENV_ID, ref_min_score=None,
-                              ref_max_score=None, metadata={"thesis_info": info}, path=path)
+        return OfflineDataset(
+            id=DATASET_ID,
+            episodes=episodes,
+            env_id=ENV_ID,
+            ref_min_score=None,
+            ref_max_score=None,
+            metadata={"thesis_info": info},
+            path=path,
+        )
     return load(DATASET_ID)
 
 
@@ -324,12 +369,18 @@ class ReachDemos:
     """``(n_test, 6)`` initial joint angles of the test demonstrations."""
 
 
-def split_demonstrations(episodes: list, n_train: int = 80, n_val: int = 10, n_test: int = 10) -> ReachDemos:
+def split_demonstrations(
+    episodes: list, n_train: int = 80, n_val: int = 10, n_test: int = 10
+) -> ReachDemos:
     """Split in order: the first ``n_train`` train, the next ``n_val`` validate, the next ``n_test`` give starts."""
     need = n_train + n_val + n_test
     if len(episodes) < need:
-        raise ValueError(f"Need {need} demonstrations ({n_train} train + {n_val} validation + {n_test} test), "
-                         f"got {len(episodes)}.")
+        raise ValueError(
+            f"Need {need} demonstrations ({n_train} train + {n_val} validation + {n_test} test), "
+            f"got {len(episodes)}."
+        )
     eps = list(episodes)
-    starts = np.array([np.asarray(e.observations[0][:6], dtype=np.float64) for e in eps[n_train + n_val: need]])
-    return ReachDemos(eps[:n_train], eps[n_train:n_train + n_val], starts)
+    starts = np.array(
+        [np.asarray(e.observations[0][:6], dtype=np.float64) for e in eps[n_train + n_val : need]]
+    )
+    return ReachDemos(eps[:n_train], eps[n_train : n_train + n_val], starts)

@@ -7,6 +7,7 @@ chapter runs everywhere. :func:`plot_arm` draws one configuration into a 3-D mat
 
 Used in: UR3 deployment chapter (reaching pictures, dance playback).
 """
+
 from __future__ import annotations
 
 import os
@@ -18,8 +19,14 @@ import numpy as np
 __all__ = ["plot_arm", "render_frames", "save_gif"]
 
 
-def plot_arm(ax, q: np.ndarray, color: str = "tab:blue", alpha: float = 1.0, label: str | None = None,
-             kin=None) -> None:
+def plot_arm(
+    ax,
+    q: np.ndarray,
+    color: str = "tab:blue",
+    alpha: float = 1.0,
+    label: str | None = None,
+    kin=None,
+) -> None:
     """Draw the arm at ``q (6,)`` as its DH skeleton (base → joint origins → flange) on a 3-D axis."""
     from .model import UR3Kinematics
 
@@ -77,8 +84,13 @@ def _mujoco_frames(q: np.ndarray, width: int, height: int, camera: str) -> np.nd
     return np.stack(frames)
 
 
-def render_frames(q: np.ndarray, width: int = 320, height: int = 240, backend: Literal["auto", "mujoco", "matplotlib"] = "auto",
-                  camera: str = "front") -> np.ndarray:
+def render_frames(
+    q: np.ndarray,
+    width: int = 320,
+    height: int = 240,
+    backend: Literal["auto", "mujoco", "matplotlib"] = "auto",
+    camera: str = "front",
+) -> np.ndarray:
     """``(T, height, width, 3)`` uint8 pictures of the arm at each row of ``q (T, 6)``.
 
     Args:
@@ -100,7 +112,7 @@ def render_frames(q: np.ndarray, width: int = 320, height: int = 240, backend: L
     if backend == "mujoco" or (backend == "auto" and _mujoco_can_try()):
         try:
             return _mujoco_frames(q, width, height, camera)
-        except Exception as err:  # noqa: BLE001 - no OpenGL context here: fall back
+        except Exception as err:
             _MUJOCO_FAILED = True  # a second failed context can take the process down: never retry
             if backend == "mujoco":
                 raise RuntimeError(
@@ -139,5 +151,7 @@ def save_gif(frames: np.ndarray, path: str | Path, fps: float = 15.0) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     imgs = [Image.fromarray(f.astype(np.uint8)) for f in frames]
-    imgs[0].save(path, save_all=True, append_images=imgs[1:], duration=int(round(1000 / fps)), loop=0)
+    imgs[0].save(
+        path, save_all=True, append_images=imgs[1:], duration=int(round(1000 / fps)), loop=0
+    )
     return path

@@ -15,6 +15,7 @@ playback clips; the driver refuses (:class:`thesis_lib.ur3.driver.UR3Driver`).
 
 Used in: UR3 deployment chapter (dance playback, robot driver).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -23,13 +24,19 @@ import numpy as np
 
 from .model import MAX_SPEED, POSITION_LIMITS
 
-__all__ = ["SafetyLimits", "SafetyReport", "UnsafeTrajectoryError", "check_trajectory", "clip_trajectory"]
+__all__ = [
+    "SafetyLimits",
+    "SafetyReport",
+    "UnsafeTrajectoryError",
+    "check_trajectory",
+    "clip_trajectory",
+]
 
 
 class UnsafeTrajectoryError(ValueError):
     """A trajectory breaks a joint, speed or workspace limit; ``.report`` says which and where."""
 
-    def __init__(self, report: "SafetyReport") -> None:
+    def __init__(self, report: SafetyReport) -> None:
         super().__init__(f"Refused: {report.summary()}")
         self.report = report
 
@@ -59,7 +66,9 @@ class SafetyLimits:
         pos = np.asarray(self.position, dtype=np.float64)
         spd = np.asarray(self.max_speed, dtype=np.float64)
         if pos.shape != (6, 2) or np.any(pos[:, 0] >= pos[:, 1]):
-            raise ValueError(f"Expect position limits of shape (6, 2) with low < high, got {pos.tolist()}.")
+            raise ValueError(
+                f"Expect position limits of shape (6, 2) with low < high, got {pos.tolist()}."
+            )
         if spd.shape != (6,) or np.any(spd <= 0):
             raise ValueError(f"Expect 6 positive maximum speeds, got {spd.tolist()}.")
         if not 0 < self.speed_scale <= 1:
@@ -97,23 +106,37 @@ class SafetyReport:
     @property
     def ok(self) -> bool:
         """No violation of any kind."""
-        return not (len(self.position_frames) or len(self.speed_frames) or len(self.workspace_frames))
+        return not (
+            len(self.position_frames) or len(self.speed_frames) or len(self.workspace_frames)
+        )
 
     def counts(self) -> dict[str, int]:
         """Frames violating each limit."""
-        return {"position": len(self.position_frames), "speed": len(self.speed_frames),
-                "workspace": len(self.workspace_frames)}
+        return {
+            "position": len(self.position_frames),
+            "speed": len(self.speed_frames),
+            "workspace": len(self.workspace_frames),
+        }
 
     def summary(self) -> str:
         """One line: what is violated, how often, where first."""
         if self.ok:
             return f"{self.n_frames} frames within the joint, speed and workspace limits."
         parts = []
-        for name, frames in (("joint limits", self.position_frames), ("speed limits", self.speed_frames),
-                             ("workspace", self.workspace_frames)):
+        for name, frames in (
+            ("joint limits", self.position_frames),
+            ("speed limits", self.speed_frames),
+            ("workspace", self.workspace_frames),
+        ):
             if len(frames):
-                parts.append(f"{name} broken in {len(frames)} of {self.n_frames} frames (first at frame {int(frames[0])})")
-        extra = f"; peak speed {self.max_speed_ratio:.2f}x the allowed" if len(self.speed_frames) else ""
+                parts.append(
+                    f"{name} broken in {len(frames)} of {self.n_frames} frames (first at frame {int(frames[0])})"
+                )
+        extra = (
+            f"; peak speed {self.max_speed_ratio:.2f}x the allowed"
+            if len(self.speed_frames)
+            else ""
+        )
         return "; ".join(parts) + extra + "."
 
 
@@ -142,8 +165,9 @@ def _check_dt(dt: float) -> float:
     return float(dt)
 
 
-def check_trajectory(q: np.ndarray, dt: float, limits: SafetyLimits | None = None,
-                     current: np.ndarray | None = None) -> SafetyReport:
+def check_trajectory(
+    q: np.ndarray, dt: float, limits: SafetyLimits | None = None, current: np.ndarray | None = None
+) -> SafetyReport:
     """Check a ``(T, 6)`` trajectory sampled every ``dt`` s against ``limits``.
 
     Args:
@@ -161,19 +185,28 @@ def check_trajectory(q: np.ndarray, dt: float, limits: SafetyLimits | None = Non
 
     q, dt, lim = _as_traj(q), _check_dt(dt), limits or SafetyLimits()
     pos_bad = np.flatnonzero(((q < lim.position[:, 0]) | (q > lim.position[:, 1])).any(axis=1))
-    prev = np.vstack([q[:1] if current is None else np.asarray(current, dtype=np.float64).reshape(1, 6), q[:-1]])
+    prev = np.vstack(
+        [q[:1] if current is None else np.asarray(current, dtype=np.float64).reshape(1, 6), q[:-1]]
+    )
     ratio = np.abs(q - prev) / dt / lim.speed  # (T, 6)
     spd_bad = np.flatnonzero((ratio > 1.0 + 1e-9).any(axis=1))
     kin = UR3Kinematics()
     pts = kin.points_trajectory(q)  # (T, 8, 3): base, joint origins, flange
     tcp = pts[:, -1]
     shoulder = pts[:, 2]
-    ws = (np.linalg.norm(tcp - shoulder, axis=1) > lim.reach) | (tcp[:, 2] < lim.tcp_z_min) | (pts[:, 2:-1, 2] < lim.link_z_min).any(axis=1)
-    return SafetyReport(len(q), pos_bad, spd_bad, np.flatnonzero(ws), float(ratio.max()), float(tcp[:, 2].min()))
+    ws = (
+        (np.linalg.norm(tcp - shoulder, axis=1) > lim.reach)
+        | (tcp[:, 2] < lim.tcp_z_min)
+        | (pts[:, 2:-1, 2] < lim.link_z_min).any(axis=1)
+    )
+    return SafetyReport(
+        len(q), pos_bad, spd_bad, np.flatnonzero(ws), float(ratio.max()), float(tcp[:, 2].min())
+    )
 
 
-def clip_trajectory(q: np.ndarray, dt: float, limits: SafetyLimits | None = None,
-                    current: np.ndarray | None = None) -> np.ndarray:
+def clip_trajectory(
+    q: np.ndarray, dt: float, limits: SafetyLimits | None = None, current: np.ndarray | None = None
+) -> np.ndarray:
     """Clamp ``q`` into the joint limits, then rate-limit it to the allowed speeds.
 
     The rate limiter follows the clamped trajectory as closely as the speed allows

@@ -12,6 +12,7 @@ subprocess on a free localhost port and stops when done; no browser is needed.
 
 Used in: UR3 deployment chapter (dance viewer).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -35,7 +36,9 @@ def _geom_objects(model):
     import mujoco
 
     out = []
-    to_y = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1.0]])  # three.js cylinders run along y
+    to_y = np.array(
+        [[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1.0]]
+    )  # three.js cylinders run along y
     for i in range(model.ngeom):
         gtype, size = model.geom_type[i], model.geom_size[i]
         T = np.eye(4)
@@ -65,7 +68,9 @@ def _body_pose(data, b: int) -> np.ndarray:
     return T
 
 
-def trajectory_html(q: np.ndarray, fps: float = 30.0, max_frames: int = 600, title: str | None = None) -> str:
+def trajectory_html(
+    q: np.ndarray, fps: float = 30.0, max_frames: int = 600, title: str | None = None
+) -> str:
     """A self-contained HTML page with the UR3 playing ``q (T, 6)`` at ``fps``, looping.
 
     Args:
@@ -130,8 +135,12 @@ def trajectory_html(q: np.ndarray, fps: float = 30.0, max_frames: int = 600, tit
             proc.kill()
             proc.wait()
     if title:
-        page = page.replace("<body>", f'<body><div style="position:absolute;z-index:10;font:14px sans-serif;'
-                            f'padding:4px">{_html.escape(title)}</div>', 1)
+        page = page.replace(
+            "<body>",
+            f'<body><div style="position:absolute;z-index:10;font:14px sans-serif;'
+            f'padding:4px">{_html.escape(title)}</div>',
+            1,
+        )
     return page
 
 
@@ -145,12 +154,16 @@ def save_html(page: str, path: str | Path) -> Path:
 
 def iframe(page: str, height: int = 420):
     """An ``IPython.display.HTML`` holding ``page`` in an ``<iframe srcdoc>`` (works in the built book, offline)."""
-    from IPython.display import HTML
-
     import warnings
 
+    from IPython.display import HTML
+
     doc = _html.escape(page, quote=True)
-    with warnings.catch_warnings():  # IPython suggests IFrame, which needs a URL; srcdoc keeps it in the page
+    with (
+        warnings.catch_warnings()
+    ):  # IPython suggests IFrame, which needs a URL; srcdoc keeps it in the page
         warnings.filterwarnings("ignore", message="Consider using IPython.display.IFrame")
-        return HTML(f'<iframe srcdoc="{doc}" style="width:100%;height:{int(height)}px;border:1px solid #ccc" '
-                    f'title="UR3 3-D viewer"></iframe>')
+        return HTML(
+            f'<iframe srcdoc="{doc}" style="width:100%;height:{int(height)}px;border:1px solid #ccc" '
+            f'title="UR3 3-D viewer"></iframe>'
+        )
