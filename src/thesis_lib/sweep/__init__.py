@@ -1,0 +1,245 @@
+"""Grids of independent tasks, keyed by a hash of their config, resumable, local or on Ray.
+
+A chapter's grid (methods x settings x seeds, DEFENDER runs, CLfD encoder x loss, MDLT
+folds, UR3 demonstration counts) becomes a list of :class:`Task`. Each task is a module-level
+function and a JSON-able config; its key is a hash of both. :func:`run_tasks` runs the tasks
+that have no result in the store yet, writes each finished task's rows to
+``<store>/<key>.json`` at once (atomically), and returns all rows in task order. An
+interrupted run therefore resumes where it stopped, and a finished one is never recomputed
+unless ``force=True``.
+
+Executors: ``"inprocess"`` (one after the other, in this process), ``"local"`` (joblib
+processes, ``n_jobs`` of them) and ``"ray"`` (a Ray cluster at ``address`` or
+``$RAY_ADDRESS``; ``pip install ".[ray]"``). The defaults come from the environment that
+``thesis run`` sets for a chapter (``THESIS_EXECUTOR``, ``THESIS_JOBS``, ``RAY_ADDRESS``,
+``THESIS_SWEEP_FORCE``), so a notebook needs no parameter for them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+#: result rows a task function returns: a DataFrame or a list of flat dicts.
+Rows = pd.DataFrame | list[dict[str, Any]]
+
+EXECUTORS = ("inprocess", "local", "ray")
+
+
+def canonical_json(obj: Any) -> str:
+    """JSON with sorted keys and no spaces: the text a config hash is taken of.
+
+    Tuples become lists and numpy scalars plain numbers, so equal configs hash equal.
+
+    >>> canonical_json({"b": (1, 2), "a": 0.5})
+    '{"a":0.5,"b":[1,2]}'
+    """
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
+
+
+def _json_default(o: Any) -> Any:
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"config value {o!r} ({type(o).__name__}) is not JSON-able")
+
+
+def config_hash(obj: Any, n: int = 16) -> str:
+    """First ``n`` hex digits of the SHA-256 of :func:`canonical_json` of ``obj``.
+
+    >>> config_hash({"a": 1}) == config_hash({"a": 1.0 * 1})
+    True
+    """
+    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:n]
+
+
+def _fn_path(fn: Callable[..., Any]) -> str:
+    mod, qual = getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)
+    if not mod or not qual or "<" in qual:
+        raise ValueError(f"a task function must be a module-level function (picklable), got {fn!r}")
+    return f"{mod}:{qual}"
+
+
+@dataclass(frozen=True)
+class Task:
+    """One independent unit of a grid.
+
+    Attributes:
+        fn: a module-level function ``fn(config) -> rows`` (a DataFrame or a list of dicts).
+        config: everything the task depends on, JSON-able (method, setting, seed, sizes …).
+        resources: per-task resources for Ray (``{"num_cpus": 1, "num_gpus": 0}``).
+    """
+
+    fn: Callable[[dict[str, Any]], Rows]
+    config: Mapping[str, Any]
+    resources: Mapping[str, float] = field(default_factory=lambda: {"num_cpus": 1})
+
+    @property
+    def key(self) -> str:
+        """Hash of the function's import path and the config."""
+        return config_hash({"fn": _fn_path(self.fn), "config": dict(self.config)})
+
+
+def _rows_to_records(rows: Rows) -> list[dict[str, Any]]:
+    recs = rows.to_dict(orient="records") if isinstance(rows, pd.DataFrame) else list(rows)
+    return json.loads(json.dumps(recs, default=_json_default))
+
+
+def execute(task: Task) -> dict[str, Any]:
+    """Run one task and return its record (rows, config, timing). Used by every executor."""
+    t0, c0 = time.time(), time.process_time()
+    rows = task.fn(dict(task.config))
+    return {
+        "key": task.key,
+        "fn": _fn_path(task.fn),
+        "config": json.loads(canonical_json(dict(task.config))),
+        "rows": _rows_to_records(rows),
+        "wall_s": round(time.time() - t0, 3),
+        "cpu_s": round(time.process_time() - c0, 3),
+        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+
+
+class TaskStore:
+    """Finished tasks on disk: one ``<key>.json`` per task in ``root``."""
+
+    def __init__(self, root: str | Path):
+        self.root = Path(root)
+
+    def path(self, key: str) -> Path:
+        return self.root / f"{key}.json"
+
+    def has(self, key: str) -> bool:
+        return self.path(key).is_file()
+
+    def read(self, key: str) -> dict[str, Any]:
+        p = self.path(key)
+        try:
+            return json.loads(p.read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            raise RuntimeError(
+                f"Damaged task result {p}: {e}. Delete it and run again to recompute it."
+            ) from e
+
+    def write(self, record: dict[str, Any], extra: Mapping[str, Any] | None = None) -> Path:
+        self.root.mkdir(parents=True, exist_ok=True)
+        rec = {**record, **(extra or {})}
+        p = self.path(rec["key"])
+        tmp = p.with_name(p.name + ".tmp")
+        tmp.write_text(json.dumps(rec, indent=1, default=_json_default) + "\n")
+        os.replace(tmp, p)
+        return p
+
+
+def _env_default(name: str, default: str | None) -> str | None:
+    v = os.environ.get(name)
+    return v if v not in (None, "") else default
+
+
+def resolve_executor(executor: str | None, n_jobs: int | None) -> tuple[str, int]:
+    """The executor and job count, from the arguments or ``THESIS_EXECUTOR`` / ``THESIS_JOBS``."""
+    jobs = n_jobs if n_jobs is not None else int(_env_default("THESIS_JOBS", "1") or 1)
+    ex = executor or _env_default("THESIS_EXECUTOR", None)
+    if ex is None:
+        ex = "local" if jobs > 1 else "inprocess"
+    if ex not in EXECUTORS:
+        raise ValueError(f"unknown executor {ex!r}; choose one of {', '.join(EXECUTORS)}")
+    return ex, max(1, jobs)
+
+
+def run_tasks(
+    tasks: Sequence[Task] | Iterable[Task],
+    store: str | Path | None = None,
+    *,
+    executor: str | None = None,
+    n_jobs: int | None = None,
+    address: str | None = None,
+    force: bool | None = None,
+    desc: str = "tasks",
+    progress: bool | None = None,
+    provenance: Mapping[str, Any] | None = None,
+) -> pd.DataFrame:
+    """Run the tasks that have no stored result and return every task's rows, in task order.
+
+    Args:
+        tasks: the grid.
+        store: folder of finished tasks; ``None`` keeps nothing (no resume).
+        executor: ``inprocess``, ``local`` or ``ray`` (default: ``$THESIS_EXECUTOR``, else
+            ``local`` when ``n_jobs > 1``, else ``inprocess``).
+        n_jobs: parallel tasks for ``local`` (default ``$THESIS_JOBS`` or 1).
+        address: Ray cluster address (default ``$RAY_ADDRESS``; none starts a local Ray).
+        force: recompute finished tasks too (default ``$THESIS_SWEEP_FORCE``).
+        desc: the progress bar's label.
+        progress: show a progress bar with an ETA (default: unless ``TQDM_DISABLE`` is set).
+        provenance: extra fields written into each task's record (commit, versions …).
+
+    Returns:
+        The rows of all tasks, concatenated, with a ``task_key`` column.
+
+    Raises:
+        ValueError: two tasks with the same key, or an unknown executor.
+    """
+    tasks = list(tasks)
+    keys = [t.key for t in tasks]
+    if len(set(keys)) != len(keys):
+        dup = sorted({k for k in keys if keys.count(k) > 1})
+        raise ValueError(f"{len(dup)} task(s) appear twice in the grid (keys {dup[:3]} …)")
+    if force is None:
+        force = _env_default("THESIS_SWEEP_FORCE", "0") not in ("0", "false", "False")
+    ex, jobs = resolve_executor(executor, n_jobs)
+    st = TaskStore(store) if store is not None else None
+    done: dict[str, dict[str, Any]] = {}
+    if st is not None and not force:
+        done = {k: st.read(k) for k in keys if st.has(k)}
+    todo = [t for t in tasks if t.key not in done]
+    extra = dict(provenance or {})
+
+    def finished(rec: dict[str, Any]) -> None:
+        if st is not None:
+            st.write(rec, extra)
+        done[rec["key"]] = rec
+
+    from ._executors import run_pending
+
+    run_pending(
+        todo,
+        finished,
+        executor=ex,
+        n_jobs=jobs,
+        address=address or _env_default("RAY_ADDRESS", None),
+        desc=desc,
+        progress=progress,
+        n_total=len(tasks),
+        n_done=len(tasks) - len(todo),
+    )
+    frames = []
+    for k in keys:
+        df = pd.DataFrame(done[k]["rows"])
+        df["task_key"] = k
+        frames.append(df)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+__all__ = [
+    "EXECUTORS",
+    "Task",
+    "TaskStore",
+    "canonical_json",
+    "config_hash",
+    "execute",
+    "resolve_executor",
+    "run_tasks",
+]
