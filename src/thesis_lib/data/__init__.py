@@ -22,8 +22,16 @@ from .card import (
     plot_return_histograms,
     record_maze_experts,
 )
+from .deep_experts import (
+    DEEP_EXPERT_CONFIGS,
+    DeepExpertConfig,
+    MLPPolicy,
+    ship_deep_expert,
+    train_deep_expert,
+)
 from .experts import LinearPolicy, load_policy, load_policy_record, train_experts
-from .generate import (
+from .maze import WaypointExpert, bfs_distances
+from .recipe import (
     PROFILE_SIZES,
     action_noise_for,
     generate,
@@ -32,10 +40,10 @@ from .generate import (
     make_episodes,
     rollout,
 )
-from .maze import WaypointExpert, bfs_distances
 from .scores import normalized_score
 from .sequence import SequenceBatch, SequenceDataset, discounted_cumsum
 from .storage import (
+    DamagedDatasetError,
     Episode,
     EpisodeFormatError,
     OfflineDataset,
@@ -48,7 +56,13 @@ from .storage import (
 from .tasks import TASKS, TaskSpec, gen_dataset_id, get_task, parse_dataset_id
 
 __all__ = [
+    "DEEP_EXPERT_CONFIGS",
+    "DamagedDatasetError",
+    "DeepExpertConfig",
     "Episode",
+    "MLPPolicy",
+    "ship_deep_expert",
+    "train_deep_expert",
     "action_noise_for",
     "record_maze_experts",
     "EpisodeFormatError",

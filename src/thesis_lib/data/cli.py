@@ -1,4 +1,4 @@
-"""``thesis data generate | list | card | train-experts``.
+"""``thesis data generate | list | card | train-experts | train-expert``.
 
 The main CLI (``thesis_lib/cli.py``) calls :func:`register` with its sub-parsers; each
 sub-command's handler is set with ``set_defaults(func=...)`` and takes the parsed args.
@@ -12,7 +12,7 @@ import sys
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from .generate import generate
+    from .recipe import generate
     from .tasks import TASKS, get_task
 
     tasks = list(TASKS) if args.task == "all" else [args.task]
@@ -98,16 +98,71 @@ def _train(args: argparse.Namespace) -> int:
         if args.seed is not None:
             cfg = replace(cfg, seed=args.seed)
         rec = train_experts(
-            task, cfg, out_dir=args.out, n_eval_episodes=args.eval_episodes,
-            max_wall_s=args.max_wall_s, log=lambda s: print(s, flush=True),
+            task,
+            cfg,
+            out_dir=args.out,
+            n_eval_episodes=args.eval_episodes,
+            max_wall_s=args.max_wall_s,
+            log=lambda s: print(s, flush=True),
         )
-        print(json.dumps({"task": task, "expert": rec.expert_return_mean,
-                          "medium": rec.medium_return_mean}))
+        print(
+            json.dumps(
+                {"task": task, "expert": rec.expert_return_mean, "medium": rec.medium_return_mean}
+            )
+        )
+    return 0
+
+
+def _train_expert(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from .deep_experts import DEEP_EXPERT_CONFIGS, ship_deep_expert, train_deep_expert
+
+    if args.task not in DEEP_EXPERT_CONFIGS:
+        print(
+            f"No TQC/SAC recipe for '{args.task}'. Valid: {', '.join(DEEP_EXPERT_CONFIGS)}.",
+            file=sys.stderr,
+        )
+        return 2
+    cfg = DEEP_EXPERT_CONFIGS[args.task]
+    if args.steps is not None:
+        cfg = replace(cfg, total_steps=args.steps)
+    if args.seed is not None:
+        cfg = replace(cfg, seed=args.seed)
+    if not args.ship_only:
+        st = train_deep_expert(
+            args.task,
+            cfg,
+            run_dir=args.run_dir,
+            backend=args.backend,
+            max_wall_s=args.max_wall_s,
+            log=lambda s: print(s, flush=True),
+        )
+        if not st.done and not args.ship:
+            return 0
+    rec = ship_deep_expert(
+        args.task,
+        run_dir=args.run_dir,
+        out_dir=args.out,
+        n_eval_episodes=args.eval_episodes,
+        log=lambda s: print(s, flush=True),
+    )
+    print(
+        json.dumps(
+            {
+                "task": args.task,
+                "expert": rec.expert_return_mean,
+                "expert_normalized": rec.expert_normalized,
+                "medium": rec.medium_return_mean,
+            }
+        )
+    )
     return 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``data`` sub-command (``generate``, ``list``, ``card``, ``train-experts``)."""
+    """Add the ``data`` sub-command (``generate``, ``list``, ``card``, ``train-experts``,
+    ``train-expert``)."""
     p = subparsers.add_parser("data", help="demonstration data sets (Minari format)")
     sub = p.add_subparsers(dest="data_command", required=True)
 
@@ -116,8 +171,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument(
         "--tier", default="all", help="expert|medium|medium-replay|medium-expert|random|all"
     )
-    g.add_argument("--profile", choices=["smoke", "full"], default="smoke",
-                   help="smoke: 20k transitions; full: D4RL's 1M")
+    g.add_argument(
+        "--profile",
+        choices=["smoke", "full"],
+        default="smoke",
+        help="smoke: 20k transitions; full: D4RL's 1M",
+    )
     g.add_argument("--n-transitions", type=int, default=None, help="overrides --profile")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--action-noise", type=float, default=None, help="std; default per task kind")
@@ -135,15 +194,55 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.set_defaults(func=_card)
 
     t = sub.add_parser("train-experts", help="re-train the shipped ARS expert/medium policies")
-    t.add_argument("--task", default="all", help="an ARS task, 'maze2d' (measure the scripted "
-                   "expert) or 'all'")
+    t.add_argument(
+        "--task", default="all", help="an ARS task, 'maze2d' (measure the scripted expert) or 'all'"
+    )
     t.add_argument("--steps", type=int, default=None, help="override the recipe's step count")
     t.add_argument("--seed", type=int, default=None)
-    t.add_argument("--max-wall-s", type=float, default=None,
-                   help="stop at the first checkpoint past this time (record says where)")
+    t.add_argument(
+        "--max-wall-s",
+        type=float,
+        default=None,
+        help="stop at the first checkpoint past this time (record says where)",
+    )
     t.add_argument("--eval-episodes", type=int, default=100)
     t.add_argument("--out", default=None, help="output dir (default: the package's policies/)")
     t.set_defaults(func=_train)
+
+    te = sub.add_parser(
+        "train-expert",
+        help="train (or resume) a D4RL-grade TQC expert for walker2d, halfcheetah or ant, "
+        "then ship it (policies/<task>.npz)",
+    )
+    te.add_argument("--task", required=True, help="walker2d, halfcheetah or ant")
+    te.add_argument(
+        "--backend",
+        default="auto",
+        choices=["auto", "sbx", "sb3"],
+        help="sbx (JAX, faster; pip install '.[experts]') or sb3 (PyTorch)",
+    )
+    te.add_argument("--steps", type=int, default=None, help="override the recipe's step cap")
+    te.add_argument("--seed", type=int, default=None)
+    te.add_argument(
+        "--max-wall-s",
+        type=float,
+        default=None,
+        help="checkpoint and stop this call after that long (run again to resume)",
+    )
+    te.add_argument(
+        "--run-dir",
+        default=None,
+        help="the run's folder (default: $THESIS_CACHE_DIR/expert_runs/<task>)",
+    )
+    te.add_argument(
+        "--ship",
+        action="store_true",
+        help="ship the run's best snapshot even if the run is not finished",
+    )
+    te.add_argument("--ship-only", action="store_true", help="ship without training")
+    te.add_argument("--eval-episodes", type=int, default=100)
+    te.add_argument("--out", default=None, help="output dir (default: the package's policies/)")
+    te.set_defaults(func=_train_expert)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -124,6 +124,13 @@ class PolicyRecord:
     expert_normalized: float | None = None
     medium_normalized: float | None = None
     versions: dict[str, str] = field(default_factory=dict)
+    policy_kind: str = "linear"
+    """``linear`` (ARS, :class:`LinearPolicy`) or ``mlp`` (TQC/SAC,
+    :class:`thesis_lib.data.deep_experts.MLPPolicy`)."""
+    expert_step: int | None = None
+    """Training step of the expert snapshot (``mlp`` policies)."""
+    snapshot_returns: dict[str, float] | None = None
+    """Quick return of every snapshot of the training run, by step (``mlp`` policies)."""
 
 
 def _bounds(task: str) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +158,7 @@ def load_policy_record(task: str) -> PolicyRecord:
     return PolicyRecord(**json.loads(path.read_text()))
 
 
-def load_policy(task: str, which: str = "expert") -> LinearPolicy:
+def load_policy(task: str, which: str = "expert") -> Any:
     """Load a shipped policy.
 
     Args:
@@ -159,7 +166,8 @@ def load_policy(task: str, which: str = "expert") -> LinearPolicy:
         which: ``expert``, ``medium`` or ``ckpt<i>`` (the i-th training checkpoint).
 
     Returns:
-        The :class:`LinearPolicy`.
+        A :class:`LinearPolicy` (ARS) or :class:`thesis_lib.data.deep_experts.MLPPolicy`
+        (TQC/SAC), whichever the task ships; both map observations to actions.
     """
     path = POLICY_DIR / f"{task}.npz"
     if not path.exists():
@@ -169,6 +177,18 @@ def load_policy(task: str, which: str = "expert") -> LinearPolicy:
         )
     z = np.load(path)
     rec = load_policy_record(task)
+    if rec.policy_kind == "mlp":
+        from .deep_experts import MLPPolicy
+
+        low, high = _bounds(task)
+        if which == "medium":
+            which = f"ckpt{rec.medium_checkpoint}"
+        prefix = "expert_" if which == "expert" else f"{which}_"
+        if prefix != "expert_" and f"{prefix}w0" not in z:
+            raise ValueError(
+                f"Checkpoint '{which}' not shipped for {task}; ckpt0..ckpt{rec.medium_checkpoint} are."
+            )
+        return MLPPolicy.from_arrays(z, low, high, prefix=prefix)
     if which == "expert":
         i = rec.expert_checkpoint
         w, m, v = z["expert_weights"], z["expert_obs_mean"], z["expert_obs_var"]

@@ -29,7 +29,7 @@ def normalized_score(
         task: task name (``hopper``, ``maze2d-umaze`` …).
         returns: undiscounted episode return(s), any shape.
         missing: what to do when the task has no D4RL reference
-            (``inverted-double-pendulum``, ``maze2d-open``): raise or return ``None``.
+            (``inverted-double-pendulum``): raise or return ``None``.
 
     Returns:
         Score(s) of the same shape as ``returns``; ``None`` when ``missing="none"`` and

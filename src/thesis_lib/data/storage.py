@@ -20,6 +20,8 @@ import contextlib
 import json
 import os
 import re
+import shutil
+import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -238,12 +240,44 @@ def load(dataset_id: str, validate: bool = True) -> OfflineDataset:
     Raises:
         FileNotFoundError: no such data set; the message says how to make it.
         EpisodeFormatError: an episode's observations are not actions + 1 (names it).
+        DamagedDatasetError: the files cannot be read (truncated, half-written); the message
+            names the id and the command that rebuilds it.
     """
-    from minari import MinariDataset
 
     path = find_dataset(dataset_id)
     if path is None:
         raise FileNotFoundError(_missing_message(dataset_id))
+    try:
+        return _read(dataset_id, path, validate)
+    except (OSError, KeyError, ValueError, json.JSONDecodeError) as e:
+        if isinstance(e, EpisodeFormatError):
+            raise
+        raise DamagedDatasetError(_damaged_message(dataset_id, path, e)) from e
+
+
+class DamagedDatasetError(OSError):
+    """A data set's files exist but cannot be read (a truncated or half-written HDF5 file)."""
+
+
+def _damaged_message(dataset_id: str, path: Path, err: BaseException) -> str:
+    msg = f"Data set '{dataset_id}' at {path} is damaged and cannot be read ({err})."
+    try:
+        ns, task, tier, _ = parse_dataset_id(dataset_id)
+    except ValueError:
+        ns = task = tier = ""
+    if ns == NAMESPACE and task in TASKS:
+        msg += (
+            f" Rebuild it with 'thesis data generate --task {task} --tier {tier}' "
+            f"(or thesis_lib.data.generate('{task}', '{tier}'))."
+        )
+    else:
+        msg += f" Delete {path} and copy or download the data set again."
+    return msg
+
+
+def _read(dataset_id: str, path: Path, validate: bool) -> OfflineDataset:
+    from minari import MinariDataset
+
     mds = MinariDataset(path / "data")
     md = dict(mds.storage.metadata)
     episodes = []
@@ -321,18 +355,57 @@ def write_dataset(
     Returns:
         The data set's directory.
     """
-    import shutil
+    root = Path(root) if root is not None else data_dir()
+    path = root / dataset_id
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"Data set '{dataset_id}' exists at {path}.")
+    # Written into a staging root, then renamed into place: an interrupted write never
+    # leaves a half-written data set under its id.
+    staging_root = Path(tempfile.mkdtemp(prefix=".staging-", dir=_mkdirs(root)))
+    try:
+        _write(
+            staging_root,
+            dataset_id,
+            episodes,
+            env_id,
+            ref_min_score,
+            ref_max_score,
+            description,
+            info,
+        )
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if path.exists():
+            trash = Path(tempfile.mkdtemp(prefix=".trash-", dir=root))
+            os.replace(path, trash / "old")
+            os.replace(staging_root / dataset_id, path)
+            shutil.rmtree(trash, ignore_errors=True)
+        else:
+            os.replace(staging_root / dataset_id, path)
+    finally:
+        shutil.rmtree(staging_root, ignore_errors=True)
+    return path
 
+
+def _mkdirs(p: Path) -> Path:
+    p.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _write(
+    root: Path,
+    dataset_id: str,
+    episodes: Sequence[Episode],
+    env_id: Any,
+    ref_min_score: float | None,
+    ref_max_score: float | None,
+    description: str,
+    info: dict[str, Any] | None,
+) -> None:
     import gymnasium as gym
     from minari import create_dataset_from_buffers
     from minari.data_collector import EpisodeBuffer
 
-    root = Path(root) if root is not None else data_dir()
     path = root / dataset_id
-    if path.exists():
-        if not overwrite:
-            raise FileExistsError(f"Data set '{dataset_id}' exists at {path}.")
-        shutil.rmtree(path)
     env = gym.make(env_id)
     dict_obs = isinstance(env.observation_space, gym.spaces.Dict)
     buffers = []
@@ -368,7 +441,7 @@ def write_dataset(
             eval_env=env_id,
             algorithm_name=(info or {}).get("algorithm", "thesis_lib.data"),
             author="thesis_lib",
-            code_permalink="thesis_lib.data.generate (this project)",
+            code_permalink="thesis_lib.data.recipe (this project)",
             ref_min_score=ref_min_score if has_ref else None,
             ref_max_score=ref_max_score if has_ref else None,
             description=description or dataset_id,
@@ -381,7 +454,6 @@ def write_dataset(
             {"thesis_info": json.dumps(info, default=float)}
         )
     env.close()
-    return path
 
 
 def list_datasets() -> list[str]:
@@ -391,7 +463,10 @@ def list_datasets() -> list[str]:
         if not root.exists():
             continue
         for meta in root.glob("**/data/metadata.json"):
-            did = str(meta.parent.parent.relative_to(root))
+            rel = meta.parent.parent.relative_to(root)
+            if any(part.startswith(".") for part in rel.parts):
+                continue  # a staging or trash folder of an unfinished write
+            did = str(rel)
             if did not in found:
                 found.append(did)
     return sorted(found)

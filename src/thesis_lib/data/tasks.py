@@ -81,8 +81,9 @@ TASKS: dict[str, TaskSpec] = {
     "maze2d-large": TaskSpec(
         "maze2d-large", "PointMaze_Large-v3", "maze", MAZE_TIERS, 6.7, 273.99, 800
     ),
+    # D4RL's infos.py: maze2d-open-v0 min 0.01, max 20.66 (its episodes last 150 steps).
     "maze2d-open": TaskSpec(
-        "maze2d-open", "PointMaze_Open-v3", "maze", MAZE_TIERS, None, None, 150
+        "maze2d-open", "PointMaze_Open-v3", "maze", MAZE_TIERS, 0.01, 20.66, 150
     ),
     # Environment checks + random data only: no scripted or trained expert is feasible here
     # on 2 CPU cores (see the data card). References are D4RL's; gymnasium-robotics'

@@ -2,20 +2,27 @@
 
 Tiers (D4RL, Fu et al. 2020):
 
-- ``expert``: the shipped expert policy, with Gaussian action noise.
-- ``medium``: a policy at about one third of the expert's return (an earlier checkpoint
-  of the same seeded ARS training), with the same noise.
-- ``medium-replay``: the experience of training up to medium: the zero policy ARS starts
-  from and every shipped checkpoint up to the medium one, each rolled out with ARS's own
-  ± weight perturbations (its exploration), in training order.
-- ``medium-expert``: the ``medium`` and ``expert`` episodes concatenated (each of the
-  full requested size, as D4RL's 2M-transition sets).
+- ``expert``: the shipped expert policy (deterministic actions plus Gaussian action noise
+  of :func:`action_noise_for`, which is 0 for the MuJoCo tasks: the reset noise alone
+  makes the episodes differ).
+- ``medium``: a policy of the same training run at about one third of the expert's
+  return, rolled out like the expert.
+- ``medium-replay``: the experience of training up to medium. For the TQC experts
+  (Walker2d, HalfCheetah, Ant): uniform random actions for the run's warm-up steps, then
+  the shipped snapshots up to the medium one, each sampling from its own Gaussian (SAC's
+  exploration), for as many transitions as the training steps it stands for. For the ARS
+  experts (Hopper, InvertedDoublePendulum): the zero policy ARS starts from and every
+  shipped checkpoint up to the medium one, each with ARS's own ± weight perturbations.
+- ``medium-expert``: the ``medium`` and ``expert`` sets concatenated (each of the full
+  requested size, as D4RL's 2M-transition sets), so its halves are exactly those sets.
 - ``random``: uniform random actions.
 - Maze2D ``expert``: the BFS + PD waypoint planner of :mod:`thesis_lib.data.maze` with
   action noise; ``random``: uniform random actions.
 
-Everything is drawn from one ``np.random.default_rng(seed)``, so the same seed gives the
-same arrays, byte for byte.
+Each tier draws from its own ``np.random.default_rng`` seeded by ``(seed, tier)``, so the
+same seed gives the same arrays, byte for byte, and no two tiers share initial states (as
+D4RL collected them independently). :data:`GENERATOR_VERSION` is stored with every set; a
+cached set of another version is made again.
 
 Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3 (InvertedDoublePendulum).
 """
@@ -33,6 +40,24 @@ from .storage import Episode, OfflineDataset, find_dataset, load, write_dataset
 from .tasks import TaskSpec, check_tier, gen_dataset_id, get_task
 
 Profile = Literal["smoke", "full"]
+
+#: version of the recipe, stored in each set's ``thesis_info``. 2: TQC experts for
+#: Walker2d/HalfCheetah/Ant, one seed per tier (medium-expert's halves independent).
+GENERATOR_VERSION = 2
+
+#: order of the tiers in the per-tier seed (never reorder: it would change every set).
+_TIER_INDEX = {"expert": 0, "medium": 1, "medium-replay": 2, "medium-expert": 3, "random": 4}
+
+
+def tier_seed(seed: int, tier: str) -> int:
+    """The seed of one tier's generator, derived from the data-set seed and the tier.
+
+    >>> tier_seed(0, "medium") != tier_seed(0, "expert")
+    True
+    """
+    ss = np.random.SeedSequence([int(seed), _TIER_INDEX[tier]])
+    return int(ss.generate_state(1)[0])
+
 
 #: transitions per data set by profile (D4RL's full size is 1M; medium-expert doubles).
 PROFILE_SIZES: dict[str, int] = {"smoke": 20_000, "full": 1_000_000}
@@ -212,11 +237,12 @@ def make_episodes(
         "seed": seed,
         "n_transitions": n_transitions,
         "action_noise": noise,
+        "generator_version": GENERATOR_VERSION,
     }
     env = make_env(task)
     low = env.action_space.low.astype(np.float64)
     high = env.action_space.high.astype(np.float64)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(tier_seed(seed, tier))
     if tier == "random":
         info["algorithm"] = "uniform random actions"
         info["action_noise"] = 0.0
@@ -233,7 +259,7 @@ def make_episodes(
         env.close()
         med, _ = make_episodes(task, "medium", n_transitions, seed, action_noise)
         exp, _ = make_episodes(task, "expert", n_transitions, seed, action_noise)
-        info["algorithm"] = "medium episodes then expert episodes (same seed as each)"
+        info["algorithm"] = "the medium set's episodes, then the expert set's"
         return _renumber(med + exp), info
     else:
         from .experts import load_policy, load_policy_record
@@ -246,10 +272,14 @@ def make_episodes(
             "expert_return_mean": rec.expert_return_mean,
             "medium_return_mean": rec.medium_return_mean,
         }
+        kind = "ARS linear" if rec.policy_kind == "linear" else rec.algorithm.split(",")[0]
         if tier in ("expert", "medium"):
             pol = load_policy(task, tier)
-            info["algorithm"] = f"ARS linear {tier} policy + N(0, {noise}) action noise"
+            info["algorithm"] = f"{kind} {tier} policy + N(0, {noise}) action noise"
             eps = rollout(env, _noisy(pol, noise, low, high), n_transitions, rng)
+        elif tier == "medium-replay" and rec.policy_kind == "mlp":
+            info["action_noise"] = 0.0  # the actor's own Gaussian is the exploration
+            eps = _mlp_replay(task, env, rec, n_transitions, rng, info)
         elif tier == "medium-replay":
             std = float(rec.config["delta_std"])
             n_ck = rec.medium_checkpoint + 1
@@ -290,6 +320,33 @@ def make_episodes(
             raise ValueError(tier)
     env.close()
     return eps, info
+
+
+def _mlp_replay(
+    task: str, env: object, rec: object, n_transitions: int, rng: np.random.Generator, info: dict
+) -> list[Episode]:
+    """medium-replay for a TQC/SAC run: warm-up random actions, then the snapshots sampled."""
+    from .experts import load_policy
+
+    steps = list(rec.checkpoint_steps)  # type: ignore[attr-defined]
+    warm = int(rec.config.get("learning_starts", 0))  # type: ignore[attr-defined]
+    edges = [0, min(warm, steps[0]), *steps]
+    seg = np.diff(edges).astype(float)
+    share = np.floor(n_transitions * seg / seg.sum()).astype(int)
+    share[-1] += n_transitions - share.sum()
+    pols: list[Policy] = [_random_policy(env)]
+    for i in range(len(steps)):
+        p = load_policy(task, f"ckpt{i}")
+        pols.append(lambda obs, r, p=p: p.sample(obs, r))
+    info["algorithm"] = (
+        f"training replay: {warm} warm-up steps of uniform random actions, then snapshots "
+        f"at steps {steps} sampling from the actor's Gaussian, {list(share)} transitions each"
+    )
+    eps: list[Episode] = []
+    for pol, n in zip(pols, share):
+        if n > 0:
+            eps += rollout(env, pol, int(n), rng, first_id=len(eps))
+    return eps
 
 
 def generate(
@@ -352,7 +409,8 @@ def get_dataset(
     seed: int = 0,
     n_transitions: int | None = None,
 ) -> OfflineDataset:
-    """Load ``thesis/<task>/<tier>-v0``, generating it first if missing or of another size/seed.
+    """Load ``thesis/<task>/<tier>-v0``, generating it first if missing or of another
+    size, seed or :data:`GENERATOR_VERSION`.
 
     This is what chapter notebooks call: on a fresh machine the data set is made on first
     use at the chosen scale and cached under :func:`thesis_lib.data.storage.data_dir`.
@@ -362,10 +420,24 @@ def get_dataset(
     if find_dataset(dataset_id) is not None:
         ds = load(dataset_id)
         ti = ds.metadata.get("thesis_info", {})
-        if isinstance(ti, dict) and ti.get("n_transitions") == n and ti.get("seed") == seed:
+        if (
+            isinstance(ti, dict)
+            and ti.get("n_transitions") == n
+            and ti.get("seed") == seed
+            and ti.get("generator_version") == GENERATOR_VERSION
+        ):
             return ds
     generate(task, tier, n_transitions=n, seed=seed)
     return load(dataset_id)
 
 
-__all__ = ["generate", "get_dataset", "make_env", "make_episodes", "rollout", "PROFILE_SIZES"]
+__all__ = [
+    "GENERATOR_VERSION",
+    "PROFILE_SIZES",
+    "generate",
+    "get_dataset",
+    "make_env",
+    "make_episodes",
+    "rollout",
+    "tier_seed",
+]

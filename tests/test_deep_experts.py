@@ -1,0 +1,143 @@
+"""D4RL-grade expert recipe (TQC/SAC exported to NumPy) and the data-set faults it fixed."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from thesis_lib import data
+from thesis_lib.data import deep_experts, experts, recipe
+from thesis_lib.data.deep_experts import DeepExpertConfig, MLPPolicy, export_actor
+
+
+@pytest.fixture(autouse=True)
+def _data_dirs(tmp_path, monkeypatch):
+    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path / "thesis"))
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "minari"))
+    monkeypatch.setenv("THESIS_CACHE_DIR", str(tmp_path / "cache"))
+
+
+TINY = DeepExpertConfig(
+    algorithm="tqc",
+    total_steps=600,
+    learning_starts=100,
+    snapshot_every=200,
+    checkpoint_every=200,
+    snapshot_eval_episodes=1,
+    target_normalized=None,
+    buffer_size=2_000,
+    net_arch=(32, 32),
+)
+
+
+def test_mlp_policy_matches_a_hand_computed_squashed_gaussian():
+    rng = np.random.default_rng(0)
+    w = [rng.standard_normal((3, 4)), rng.standard_normal((4, 2)), rng.standard_normal((4, 2))]
+    b = [rng.standard_normal(4), rng.standard_normal(2), rng.standard_normal(2)]
+    pol = MLPPolicy(w, b, np.array([-2.0, 0.0]), np.array([2.0, 1.0]))
+    obs = rng.standard_normal(3)
+    h = np.maximum(obs @ w[0] + b[0], 0)
+    u = np.tanh(h @ w[1] + b[1])
+    expected = np.array([-2.0, 0.0]) + 0.5 * (u + 1) * np.array([4.0, 1.0])
+    np.testing.assert_allclose(pol(obs), expected, rtol=1e-12)
+    a = pol.sample(obs, np.random.default_rng(1))
+    assert a.shape == (2,) and np.all(a >= [-2, 0]) and np.all(a <= [2, 1])
+    assert not np.allclose(a, expected)  # sampling adds the actor's noise
+    back = MLPPolicy.from_arrays(pol.to_arrays("x_"), pol.low, pol.high, prefix="x_")
+    np.testing.assert_allclose(back(obs), pol(obs), rtol=1e-6)
+    with pytest.raises(ValueError, match="No MLP policy"):
+        MLPPolicy.from_arrays({}, pol.low, pol.high)
+
+
+def test_training_resumes_from_its_checkpoint_and_export_equals_the_model(tmp_path):
+    run = tmp_path / "run"
+    st = deep_experts.train_deep_expert(
+        "walker2d", TINY, run_dir=run, backend="sb3", max_wall_s=0.0, log=lambda s: None
+    )
+    assert (st.steps, st.checkpoint_steps, st.done) == (200, 200, False)
+    assert (run / "model.zip").exists() and (run / "replay.pkl").exists()
+    st = deep_experts.train_deep_expert(
+        "walker2d", TINY, run_dir=run, backend="sb3", log=lambda s: None
+    )
+    assert st.done and st.stopped_by == "steps"
+    assert [s["step"] for s in st.snapshots] == [200, 400, 600]
+    # another config on the same folder is refused rather than mixed
+    with pytest.raises(ValueError, match="another config"):
+        deep_experts.train_deep_expert(
+            "walker2d", DeepExpertConfig(total_steps=10), run_dir=run, backend="sb3"
+        )
+    from sb3_contrib import TQC
+
+    model = TQC.load(run / "model.zip")
+    pol = export_actor(model, "sb3")
+    obs = np.random.default_rng(0).standard_normal((4, 17)).astype(np.float32)
+    np.testing.assert_allclose(pol(obs), model.predict(obs, deterministic=True)[0], atol=1e-5)
+
+
+def test_shipped_run_makes_every_tier_with_independent_halves(tmp_path, monkeypatch):
+    run = tmp_path / "run"
+    deep_experts.train_deep_expert("walker2d", TINY, run_dir=run, backend="sb3", log=lambda s: None)
+    out = tmp_path / "policies"
+    rec = deep_experts.ship_deep_expert(
+        "walker2d",
+        run_dir=run,
+        out_dir=out,
+        n_eval_episodes=2,
+        n_select_episodes=1,
+        log=lambda s: None,
+    )
+    assert rec.policy_kind == "mlp" and rec.steps_trained == 600
+    assert rec.checkpoint_steps[-1] < rec.expert_step
+    saved = json.loads((out / "walker2d.json").read_text())
+    assert saved["expert_step"] == rec.expert_step
+    monkeypatch.setattr(experts, "POLICY_DIR", out)
+    assert isinstance(data.load_policy("walker2d", "expert"), MLPPolicy)
+    with pytest.raises(ValueError, match="not shipped"):
+        data.load_policy("walker2d", "ckpt99")
+
+    med, _ = recipe.make_episodes("walker2d", "medium", 300, seed=0)
+    exp, _ = recipe.make_episodes("walker2d", "expert", 300, seed=0)
+    both, _ = recipe.make_episodes("walker2d", "medium-expert", 300, seed=0)
+    assert sum(len(e) for e in both) == 600
+    np.testing.assert_array_equal(both[0].observations, med[0].observations)
+    np.testing.assert_array_equal(both[len(med)].observations, exp[0].observations)
+    # D4RL collected the two halves independently: no shared initial state
+    assert not np.allclose(med[0].observations[0], exp[0].observations[0])
+
+    replay, info = recipe.make_episodes("walker2d", "medium-replay", 500, seed=0)
+    assert sum(len(e) for e in replay) == 500
+    assert "warm-up" in info["algorithm"] and info["generator_version"] == 2
+
+
+def test_a_truncated_set_names_its_id_and_the_rebuild_command():
+    did = data.generate("hopper", "random", n_transitions=50)
+    h5 = data.storage.find_dataset(did) / "data" / "main_data.hdf5"
+    raw = h5.read_bytes()
+    h5.write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(data.DamagedDatasetError) as err:
+        data.load(did)
+    msg = str(err.value)
+    assert did in msg and "thesis data generate --task hopper --tier random" in msg
+
+
+def test_an_interrupted_write_leaves_no_set_and_keeps_the_old_one(monkeypatch):
+    did = data.generate("hopper", "random", n_transitions=50)
+    before = data.load(did).n_transitions
+
+    def boom(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(data.storage, "_write", boom)
+    with pytest.raises(KeyboardInterrupt):
+        data.generate("hopper", "random", n_transitions=80)
+    assert data.load(did).n_transitions == before  # the old set is intact
+    root = data.data_dir()
+    assert not [p for p in root.iterdir() if p.name.startswith(".staging")]
+    assert data.list_datasets() == [did]
+
+
+def test_maze2d_open_has_d4rls_reference_returns():
+    assert data.normalized_score("maze2d-open", 20.66) == pytest.approx(100.0)
+    assert data.normalized_score("maze2d-open", 0.01) == pytest.approx(0.0)
