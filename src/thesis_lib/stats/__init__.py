@@ -1,0 +1,273 @@
+"""The evidence rules of ``CLAIMS.md`` over tidy per-run rows.
+
+Definitions are rliable's (Agarwal et al. 2021, "Deep RL at the edge of the statistical
+precipice"), computed here with NumPy/SciPy and tested against rliable's own numbers on a
+fixture (``tests/test_stats.py``):
+
+- **IQM**: the mean of the middle 50% of all (run, setting) scores,
+  ``scipy.stats.trim_mean(scores, 0.25)``.
+- **Stratified bootstrap**: each method's runs are resampled with replacement *within each
+  setting*, independently per method; the 95% interval is the percentile interval of the
+  statistic over the resamples.
+- **Probability of improvement** ``P(X > Y)``: per setting, the Mann-Whitney U statistic
+  over all (x, y) pairs of runs divided by their number (ties count one half), averaged
+  over settings.
+
+Why not rliable itself: its last release (1.2.0) needs ``arch < 8``; ``arch`` 7.2 does not
+import under the project's pandas 3.1 and ``arch`` 8 rejects rliable's ``random_state``.
+Pinning pandas 2.3 for one statistics package would move the whole stack, so the same
+definitions are written here (about 100 lines) and checked against rliable's output.
+
+A comparison's **verdict** follows CLAIMS.md: *holds* when the interval excludes "no effect"
+in the claimed direction; *fails* when it excludes it in the opposite direction, or when the
+claimed effect is absent with an interval too narrow to hide it (inside ``±margin``, the
+smallest effect that matters, fixed in the study's parameter file); *inconclusive* otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+from scipy import stats as _st
+
+Claim = Literal["superior", "noninferior"]
+VERDICTS = ("holds", "fails", "inconclusive")
+
+
+def iqm(scores: np.ndarray | Sequence[float]) -> float:
+    """Interquartile mean of all scores (rliable's ``aggregate_iqm``).
+
+    >>> iqm([1, 2, 3, 4, 5, 6, 7, 100])
+    4.5
+    """
+    return float(_st.trim_mean(np.asarray(scores, dtype=float).ravel(), 0.25))
+
+
+def mean(scores: np.ndarray | Sequence[float]) -> float:
+    """Mean of all scores."""
+    return float(np.mean(np.asarray(scores, dtype=float)))
+
+
+AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {"mean": mean, "iqm": iqm}
+
+
+def probability_of_improvement(x: np.ndarray, y: np.ndarray) -> float:
+    """``P(X > Y)`` for score matrices ``(runs, settings)``, averaged over settings.
+
+    >>> probability_of_improvement(np.array([[1.0], [2.0], [3.0]]), np.array([[0.0], [2.0], [4.0]]))
+    0.5
+    """
+    x, y = _matrix(x), _matrix(y)
+    if x.shape[1] != y.shape[1]:
+        raise ValueError(f"x has {x.shape[1]} settings, y has {y.shape[1]}")
+    diff = x[:, None, :] - y[None, :, :]  # (n_x, n_y, S)
+    wins = (diff > 0).mean(axis=(0, 1)) + 0.5 * (diff == 0).mean(axis=(0, 1))
+    return float(wins.mean())
+
+
+def _matrix(a: Any) -> np.ndarray:
+    m = np.asarray(a, dtype=float)
+    if m.ndim == 1:
+        m = m[:, None]
+    if m.ndim != 2 or m.shape[0] == 0:
+        raise ValueError(f"scores must be a (runs, settings) matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("scores contain NaN or inf")
+    return m
+
+
+def _resample(m: np.ndarray, rng: np.random.Generator, reps: int) -> np.ndarray:
+    """``(reps, runs, settings)``: runs drawn with replacement within each setting."""
+    n, s = m.shape
+    idx = rng.integers(0, n, size=(reps, n, s))
+    return np.take_along_axis(np.broadcast_to(m, (reps, n, s)), idx, axis=1)
+
+
+def bootstrap_ci(
+    stat: Callable[..., float],
+    *matrices: np.ndarray,
+    reps: int = 10_000,
+    alpha: float = 0.05,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """``(point, low, high)``: ``stat(*matrices)`` and its stratified percentile interval.
+
+    Each ``(runs, settings)`` matrix is resampled independently, runs within settings.
+    """
+    ms = [_matrix(m) for m in matrices]
+    rng = np.random.default_rng(seed)
+    point = float(stat(*ms))
+    boots = [_resample(m, rng, reps) for m in ms]
+    vals = np.array([stat(*(b[r] for b in boots)) for r in range(reps)])
+    lo, hi = np.percentile(vals, [100 * alpha / 2, 100 * (1 - alpha / 2)])
+    return point, float(lo), float(hi)
+
+
+def verdict(ci_low: float, ci_high: float, claim: Claim = "superior", margin: float = 0.0) -> str:
+    """The verdict of CLAIMS.md for an effect ``X - Y`` with interval ``[ci_low, ci_high]``.
+
+    ``superior`` claims ``X > Y``: holds if ``ci_low > 0``; fails if ``ci_high < 0`` or the
+    whole interval lies inside ``[-margin, margin]`` (no effect that matters).
+    ``noninferior`` claims ``X >= Y - margin`` ("needs no RTG", "at least as good"): holds if
+    ``ci_low > -margin``; fails if ``ci_high < -margin``.
+
+    >>> verdict(0.5, 2.0), verdict(-2.0, -0.5), verdict(-1.0, 1.0)
+    ('holds', 'fails', 'inconclusive')
+    >>> verdict(-0.4, 0.3, margin=0.5), verdict(-0.4, 0.3, "noninferior", 0.5)
+    ('fails', 'holds')
+    """
+    if not (np.isfinite(ci_low) and np.isfinite(ci_high)) or ci_low > ci_high:
+        raise ValueError(f"bad interval [{ci_low}, {ci_high}]")
+    if margin < 0:
+        raise ValueError("margin must be >= 0")
+    if claim == "superior":
+        if ci_low > 0:
+            return "holds"
+        if ci_high < 0 or (margin > 0 and -margin <= ci_low and ci_high <= margin):
+            return "fails"
+        return "inconclusive"
+    if claim == "noninferior":
+        if ci_low > -margin:
+            return "holds"
+        if ci_high < -margin:
+            return "fails"
+        return "inconclusive"
+    raise ValueError(f"claim must be 'superior' or 'noninferior', got {claim!r}")
+
+
+@dataclass
+class Comparison:
+    """One comparison of method ``x`` against method ``y`` over settings and seeds."""
+
+    x: str
+    y: str
+    metric: str
+    aggregate: str
+    effect: float
+    """``aggregate(x) - aggregate(y)``."""
+    ci_low: float
+    ci_high: float
+    prob_improvement: float
+    pi_low: float
+    pi_high: float
+    x_score: float
+    y_score: float
+    seeds: int
+    settings: int
+    claim: str
+    margin: float
+    verdict: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def score_matrix(
+    rows: pd.DataFrame,
+    method: str,
+    metric: str,
+    settings: Sequence[str] | None = None,
+    method_col: str = "method",
+    setting_col: str = "setting",
+    seed_col: str = "seed",
+) -> tuple[np.ndarray, list[str]]:
+    """``(seeds, settings)`` matrix of ``metric`` for ``method`` from tidy rows.
+
+    Raises:
+        ValueError: the method is missing, a (setting, seed) appears twice, or settings have
+            different seed counts (the grid is incomplete: finish the study first).
+    """
+    sub = rows[rows[method_col] == method]
+    if sub.empty:
+        known = sorted(rows[method_col].unique())
+        raise ValueError(f"no rows for method {method!r}; methods: {known}")
+    if sub.duplicated([setting_col, seed_col]).any():
+        raise ValueError(f"{method}: a (setting, seed) appears more than once")
+    wide = sub.pivot(index=seed_col, columns=setting_col, values=metric)
+    if settings is not None:
+        missing = [s for s in settings if s not in wide.columns]
+        if missing:
+            raise ValueError(f"{method}: no rows for settings {missing}")
+        wide = wide[list(settings)]
+    if wide.isna().any().any():
+        counts = sub.groupby(setting_col)[seed_col].nunique().to_dict()
+        raise ValueError(f"{method}: unequal seeds per setting {counts}; the grid is incomplete")
+    return wide.to_numpy(dtype=float), [str(c) for c in wide.columns]
+
+
+def compare(
+    rows: pd.DataFrame,
+    x: str,
+    y: str,
+    metric: str,
+    *,
+    settings: Sequence[str] | None = None,
+    aggregate: str = "mean",
+    claim: Claim = "superior",
+    margin: float = 0.0,
+    reps: int = 10_000,
+    seed: int = 0,
+    method_col: str = "method",
+    setting_col: str = "setting",
+    seed_col: str = "seed",
+) -> Comparison:
+    """Compare methods ``x`` and ``y`` on ``metric``: effect, interval, P(X > Y), verdict.
+
+    The effect is ``aggregate(x) - aggregate(y)`` over all (seed, setting) scores of the
+    settings both methods ran (``settings`` to choose), with a stratified bootstrap interval.
+    """
+    if aggregate not in AGGREGATES:
+        raise ValueError(f"aggregate must be one of {sorted(AGGREGATES)}, got {aggregate!r}")
+    kw = dict(method_col=method_col, setting_col=setting_col, seed_col=seed_col)
+    known = set(rows[method_col].unique())
+    for m in (x, y):
+        if m not in known:
+            raise ValueError(f"no rows for method {m!r}; methods: {sorted(known)}")
+    if settings is None:
+        sx = set(rows.loc[rows[method_col] == x, setting_col])
+        sy = set(rows.loc[rows[method_col] == y, setting_col])
+        settings = sorted(sx & sy)
+        if not settings:
+            raise ValueError(f"{x} and {y} share no setting")
+    mx, cols = score_matrix(rows, x, metric, settings, **kw)
+    my, _ = score_matrix(rows, y, metric, settings, **kw)
+    agg = AGGREGATES[aggregate]
+    eff, lo, hi = bootstrap_ci(lambda a, b: agg(a) - agg(b), mx, my, reps=reps, seed=seed)
+    pi, pl, ph = bootstrap_ci(probability_of_improvement, mx, my, reps=reps, seed=seed)
+    return Comparison(
+        x=x,
+        y=y,
+        metric=metric,
+        aggregate=aggregate,
+        effect=eff,
+        ci_low=lo,
+        ci_high=hi,
+        prob_improvement=pi,
+        pi_low=pl,
+        pi_high=ph,
+        x_score=agg(mx),
+        y_score=agg(my),
+        seeds=int(min(mx.shape[0], my.shape[0])),
+        settings=len(cols),
+        claim=claim,
+        margin=float(margin),
+        verdict=verdict(lo, hi, claim, margin),
+    )
+
+
+__all__ = [
+    "AGGREGATES",
+    "VERDICTS",
+    "Comparison",
+    "bootstrap_ci",
+    "compare",
+    "iqm",
+    "mean",
+    "probability_of_improvement",
+    "score_matrix",
+    "verdict",
+]

@@ -1,0 +1,108 @@
+"""thesis_lib.stats: rliable's definitions, checked against rliable 1.2.0's own output."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from thesis_lib import stats
+
+# Scores drawn once and run through rliable 1.2.0 (pandas 2.3.3, arch 7.2.0, numpy 2.4.6) in a
+# separate environment: aggregate_iqm, probability_of_improvement and get_interval_estimates
+# (percentile, 20,000 stratified bootstrap replications).
+REF = json.loads((Path(__file__).parent / "fixtures" / "rliable_reference.json").read_text())
+X, Y = np.array(REF["x"]), np.array(REF["y"])
+RL = REF["rliable_1_2_0"]
+
+
+def test_point_estimates_equal_rliables():
+    assert stats.iqm(X) == pytest.approx(RL["iqm_x"], rel=1e-12)
+    assert stats.probability_of_improvement(X, Y) == pytest.approx(RL["pi"], rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("name", "fn", "args"),
+    [
+        ("iqm_ci", stats.iqm, (X,)),
+        ("mean_ci", stats.mean, (X,)),
+        ("pi_ci", stats.probability_of_improvement, (X, Y)),
+    ],
+)
+def test_stratified_intervals_agree_with_rliable_to_monte_carlo_error(name, fn, args):
+    _, lo, hi = stats.bootstrap_ci(fn, *args, reps=20_000, seed=0)
+    tol = 0.02 if name == "pi_ci" else 0.3  # two independent 20k-replication bootstraps
+    assert lo == pytest.approx(RL[name][0], abs=tol)
+    assert hi == pytest.approx(RL[name][1], abs=tol)
+
+
+def test_probability_of_improvement_by_hand():
+    # pairs (x > y): 1:0 2:0.5 3:1 ... 4.5 of 9; second setting: x always better
+    x = np.array([[1.0, 10.0], [2.0, 11.0], [3.0, 12.0]])
+    y = np.array([[0.0, 0.0], [2.0, 1.0], [4.0, 2.0]])
+    assert stats.probability_of_improvement(x, y) == pytest.approx((4.5 / 9 + 1.0) / 2)
+
+
+def test_resampling_stays_within_each_setting():
+    # one setting only ever scores 0, the other 100: any within-setting resample keeps the
+    # mean at 50 exactly; resampling across settings would not
+    m = np.array([[0.0, 100.0]] * 5)
+    _, lo, hi = stats.bootstrap_ci(stats.mean, m, reps=500)
+    assert lo == hi == 50.0
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi", "claim", "margin", "expected"),
+    [
+        (0.5, 2.0, "superior", 0.0, "holds"),
+        (-2.0, -0.5, "superior", 0.0, "fails"),
+        (-1.0, 1.0, "superior", 0.0, "inconclusive"),
+        (-0.4, 0.3, "superior", 0.5, "fails"),  # absent, interval too narrow to hide it
+        (-0.4, 0.8, "superior", 0.5, "inconclusive"),
+        (-0.4, 0.3, "noninferior", 0.5, "holds"),
+        (-3.0, -0.6, "noninferior", 0.5, "fails"),
+        (-0.7, 0.3, "noninferior", 0.5, "inconclusive"),
+    ],
+)
+def test_verdict_rule(lo, hi, claim, margin, expected):
+    assert stats.verdict(lo, hi, claim, margin) == expected
+
+
+def test_verdict_rejects_bad_input():
+    with pytest.raises(ValueError, match="bad interval"):
+        stats.verdict(1.0, 0.0)
+    with pytest.raises(ValueError, match="claim"):
+        stats.verdict(0.0, 1.0, "better")  # type: ignore[arg-type]
+
+
+def _rows(x: np.ndarray, y: np.ndarray) -> pd.DataFrame:
+    out = []
+    for name, m in (("HDT", x), ("DT", y)):
+        for seed in range(m.shape[0]):
+            for s in range(m.shape[1]):
+                out.append({"method": name, "setting": f"s{s}", "seed": seed, "score": m[seed, s]})
+    return pd.DataFrame(out)
+
+
+def test_compare_on_tidy_rows():
+    c = stats.compare(_rows(X, Y), "HDT", "DT", "score", reps=2_000)
+    assert c.effect == pytest.approx(X.mean() - Y.mean())
+    assert c.ci_low < c.effect < c.ci_high
+    assert c.prob_improvement == pytest.approx(RL["pi"])
+    assert (c.seeds, c.settings) == (5, 4)
+    assert c.verdict == stats.verdict(c.ci_low, c.ci_high)
+    same = stats.compare(_rows(X, X), "HDT", "DT", "score", reps=500)
+    assert same.effect == 0.0 and same.prob_improvement == 0.5
+
+
+def test_incomplete_grid_and_bad_scores_are_errors():
+    rows = _rows(X, Y)
+    with pytest.raises(ValueError, match="incomplete"):
+        stats.compare(rows.drop(index=0), "HDT", "DT", "score")
+    with pytest.raises(ValueError, match="no rows for method 'BC'"):
+        stats.compare(rows, "BC", "DT", "score")
+    with pytest.raises(ValueError, match="NaN"):
+        stats.probability_of_improvement(np.array([[np.nan]]), np.array([[1.0]]))
