@@ -74,14 +74,15 @@ def _scan_fwd_kernel(u, delta, dA, B, C, y, hs, h_last, store):  # pragma: no co
 
 @njit(cache=True, fastmath=True)
 def _scan_bwd_kernel(
-    gy, u, delta, AT, dA, B, C, hs, gu, gdelta, gA_rows, gB, gC
+    gy, u, delta, AT, dA, B, C, hs, g_last, gu, gdelta, gA_rows, gB, gC
 ):  # pragma: no cover
     # gy, u, delta, gu, gdelta: (Bt, L, D); dA, hs: (Bt, L, N, D); B, C, gB, gC: (Bt, L, N);
-    # AT: (N, D) = A transposed; gA_rows: (Bt, N, D), summed over rows by the caller.
+    # AT: (N, D) = A transposed; gA_rows: (Bt, N, D), summed over rows by the caller;
+    # g_last: (Bt, N, D) = ∂loss/∂h_last, the adjoint the backward recursion starts from.
     n_batch, L, D = u.shape
     N = B.shape[2]
     for b in range(n_batch):
-        g = np.zeros((N, D), dtype=u.dtype)  # exp(Δ[t+1] A) * g[t+1], carried backwards
+        g = g_last[b].copy()  # exp(Δ[t+1] A) * g[t+1], carried backwards
         accB = np.empty(D, dtype=u.dtype)
         accA = np.empty(D, dtype=u.dtype)
         du = np.empty(D, dtype=u.dtype)
@@ -204,8 +205,8 @@ def scan_cpu_forward(u, delta, A, B, C, store: bool = False):
 class SelectiveScanCPU(torch.autograd.Function):
     """``y = scan(u, Δ, A, B, C)`` on CPU tensors of one float dtype; layout ``(B, L, ·)``.
 
-    Returns ``(y (B, L, Din), h_last (B, Din, N))``; ``h_last`` is not differentiable.
-    Saves only its inputs: the backward reruns the forward kernel chunk by chunk to get the
+    Returns ``(y (B, L, Din), h_last (B, Din, N))``, both differentiable (the gradient of
+    ``h_last`` seeds the backward recursion). Saves only its inputs: the backward reruns the forward kernel chunk by chunk to get the
     states ``h[t]`` back (cheaper here than writing and re-reading ``(B, L, N, Din)`` tensors).
     """
 
@@ -213,13 +214,12 @@ class SelectiveScanCPU(torch.autograd.Function):
     def forward(ctx, u, delta, A, B, C):
         y, h_last = scan_cpu_forward(u, delta, A, B, C)
         ctx.save_for_backward(u, delta, A, B, C)
-        ctx.mark_non_differentiable(h_last)
         return y, h_last
 
     @staticmethod
-    def backward(ctx, gy, _g_h_last):
+    def backward(ctx, gy, g_h_last):
         u, delta, A, B, C = (t.detach().contiguous() for t in ctx.saved_tensors)
-        gy = gy.contiguous()
+        gy = torch.zeros_like(u) if gy is None else gy.contiguous()
         AT = A.T.contiguous()
         n_batch, L, D = u.shape
         N = AT.shape[0]
@@ -231,6 +231,10 @@ class SelectiveScanCPU(torch.autograd.Function):
         y = torch.empty((n_batch, L, D), dtype=u.dtype)
         h_last = torch.empty((n_batch, N, D), dtype=u.dtype)
         AT_log2e = AT * LOG2E
+        if g_h_last is None:
+            g_last = torch.zeros((n_batch, N, D), dtype=u.dtype)
+        else:  # (B, Din, N) -> the kernel's state-major (B, N, Din)
+            g_last = g_h_last.to(u.dtype).transpose(1, 2).contiguous()
         for b0, b1 in _chunks(n_batch, L, N, D, u.element_size()):
             dA = _exp_delta_A(delta[b0:b1], AT_log2e)
             hs = _workspace(1, dA.numel(), u.dtype).view(dA.shape)
@@ -253,6 +257,7 @@ class SelectiveScanCPU(torch.autograd.Function):
                 B[b0:b1].numpy(),
                 C[b0:b1].numpy(),
                 hs.numpy(),
+                g_last[b0:b1].numpy(),
                 gu[b0:b1].numpy(),
                 gdelta[b0:b1].numpy(),
                 gA_rows[b0:b1].numpy(),
@@ -279,14 +284,15 @@ class SelectiveScanTorch(torch.autograd.Function):
             hs[t].addcmul_(dA[t], hs[t - 1])
         y = (hs * Ct.unsqueeze(2)).sum(-1)  # (L, B, Din)
         ctx.save_for_backward(ut, dt, A, Bt, Ct, dA, hs)
-        ctx.mark_non_differentiable(hs)
         return y.transpose(0, 1), hs[-1].clone()
 
     @staticmethod
-    def backward(ctx, gy, _g_h_last):
+    def backward(ctx, gy, g_h_last):
         ut, dt, A, Bt, Ct, dA, hs = ctx.saved_tensors
-        gyt = gy.transpose(0, 1)  # (L, B, Din)
+        gyt = torch.zeros_like(ut) if gy is None else gy.transpose(0, 1)  # (L, B, Din)
         g = gyt.unsqueeze(-1) * Ct.unsqueeze(2)  # (L, B, Din, N), becomes ∂loss/∂h[t]
+        if g_h_last is not None:  # the last state is an output too
+            g[-1] += g_h_last
         for t in range(g.shape[0] - 2, -1, -1):
             g[t].addcmul_(dA[t + 1], g[t + 1])
         gC = torch.einsum("lbd,lbdn->lbn", gyt, hs)

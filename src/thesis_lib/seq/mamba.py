@@ -136,7 +136,8 @@ def selective_scan(
         z: Optional gate ``(B, L, Din)``.
         delta_bias: Optional ``(Din,)`` added to ``delta`` before the softplus.
         delta_softplus: Apply softplus to ``delta`` (after the bias), as Mamba does.
-        return_last_state: Also return the final state ``h`` (not differentiable).
+        return_last_state: Also return the final state ``h`` (differentiable with the
+            ``numba`` and ``torch`` backends; ``mamba_ssm`` returns it without a gradient).
         backend: ``"auto"`` (see :func:`resolve_scan_backend`), ``"numba"`` (CPU kernel),
             ``"torch"`` (vectorised loop), ``"mamba_ssm"`` (CUDA) or ``"reference"`` (slow).
         check: Validate shapes and finiteness (what ``selective_scan_reference`` checks).
