@@ -11,14 +11,15 @@ from thesis_lib.data import Episode, SequenceDataset
 from thesis_lib.seq.subgoals import select_subgoal_indices, select_subgoals, subgoal_fn
 
 
-def _reference(rewards, n_states, paper_compat=False):
-    """The rule written straight from its definition, with Python floats and lists."""
+def _reference(rewards, n_states, paper_compat=False, keep=None):
+    """The rules written straight from their definitions, with Python floats and lists."""
+    keep = paper_compat if keep is None else keep
     T = len(rewards)
     out, goal = [], 0
     for i in range(T):
         if paper_compat and i == T - 1:
             goal = 0
-        elif goal == i:
+        elif goal == i or not keep:
             cands = list(range(i + 1, n_states))
             if not cands:
                 goal = i
@@ -33,11 +34,24 @@ def _reference(rewards, n_states, paper_compat=False):
 
 
 def test_hand_made_dense_rewards():
-    # i=0: W(1)=0, W(2)=0, W(3)=5/3, W(4)=6/4, W(5)=6/5 -> 3, kept for states 0..2.
-    # i=3: W(4)=1, W(5)=1/2 -> 4.  i=4: only the final observation 5.
-    np.testing.assert_array_equal(
-        select_subgoal_indices([0.0, 0.0, 5.0, 1.0, 0.0]), [3, 3, 3, 4, 5]
-    )
+    # i=0: W(1)=0, W(2)=0, W(3)=5/3, W(4)=6/4, W(5)=6/5 -> 3.  i=1: W(3)=5/2 > W(4)=2 -> 3.
+    # i=2: W(3)=5 -> 3.  i=3: W(4)=1, W(5)=1/2 -> 4.  i=4: only the final observation 5.
+    r = [0.0, 0.0, 5.0, 1.0, 0.0]
+    np.testing.assert_array_equal(select_subgoal_indices(r), [3, 3, 3, 4, 5])
+    np.testing.assert_array_equal(select_subgoal_indices(r, rule="keep"), [3, 3, 3, 4, 5])
+
+
+def test_the_thesis_selects_per_state_and_the_authors_code_keeps_until_reached():
+    # Thesis 5.2.2: "for each state-action pair, we select the state with the highest
+    # associated weight". i=0: W(2)=1, W(5)=5.1/5=1.02 -> 5; i=1: W(2)=2 beats W(5)=5.1/4 -> 2;
+    # i=2..4 -> 5 (3.1 ahead); i=5 -> the final observation 6.
+    r = [0.0, 2.0, 0.0, 0.0, 3.1, 0.0]
+    np.testing.assert_array_equal(select_subgoal_indices(r), [5, 2, 5, 5, 5, 6])
+    # The authors' code keeps state 5 from state 0 until it is reached.
+    np.testing.assert_array_equal(select_subgoal_indices(r, rule="keep"), [5, 5, 5, 5, 5, 6])
+    np.testing.assert_array_equal(select_subgoal_indices(r, paper_compat=True), [5, 5, 5, 5, 5, 0])
+    with pytest.raises(ValueError, match="Unknown sub-goal rule"):
+        select_subgoal_indices(r, rule="first")
 
 
 def test_ties_go_to_the_earliest_state():
@@ -57,8 +71,10 @@ def test_sparse_reward_at_the_goal_selects_the_end():
     idx = select_subgoal_indices(r)
     # Before the goal W(j) = (j - 6) / (j - i) grows with j: the final observation.
     np.testing.assert_array_equal(idx[:6], [10] * 6)
-    # Kept until reached; never re-selected before step 10.
-    np.testing.assert_array_equal(idx, [10] * 10)
+    # Inside the goal region every weight is 1: the next state (thesis rule) ...
+    np.testing.assert_array_equal(idx[6:], [7, 8, 9, 10])
+    # ... while the authors' code keeps the end, selected at step 0, until it is reached.
+    np.testing.assert_array_equal(select_subgoal_indices(r, rule="keep"), [10] * 10)
     # Starting inside the goal region all weights are 1: the next state.
     np.testing.assert_array_equal(select_subgoal_indices(np.ones(3)), [1, 2, 3])
 
@@ -70,9 +86,9 @@ def test_last_state():
     assert select_subgoal_indices(r, paper_compat=True)[-1] == 0  # the authors' bug
 
 
-@pytest.mark.parametrize("paper_compat", [False, True])
+@pytest.mark.parametrize(("paper_compat", "rule"), [(False, None), (False, "keep"), (True, None)])
 @pytest.mark.parametrize("with_final", [True, False])
-def test_kernel_matches_the_definition(paper_compat, with_final):
+def test_kernel_matches_the_definition(paper_compat, rule, with_final):
     rng = np.random.default_rng(0)
     for trial in range(200):
         T = int(rng.integers(1, 25))
@@ -80,9 +96,10 @@ def test_kernel_matches_the_definition(paper_compat, with_final):
         r = rng.integers(0, 3, T).astype(float) if trial % 2 else rng.normal(size=T)
         n_states = T + 1 if with_final and not paper_compat else T
         got = select_subgoal_indices(
-            r, n_states=None if with_final else T, paper_compat=paper_compat
+            r, n_states=None if with_final else T, paper_compat=paper_compat, rule=rule
         )
-        np.testing.assert_array_equal(got, _reference(r, n_states, paper_compat))
+        keep = None if rule is None else rule == "keep"
+        np.testing.assert_array_equal(got, _reference(r, n_states, paper_compat, keep))
 
 
 def test_select_subgoals_returns_the_states():
