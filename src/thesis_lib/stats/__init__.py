@@ -158,7 +158,8 @@ class Comparison:
     y_score: float
     seeds: int
     settings: int
-    claim: str
+    kind: str
+    """``superior`` or ``noninferior`` (see :func:`verdict`)."""
     margin: float
     verdict: str
 
@@ -253,7 +254,7 @@ def compare(
         y_score=agg(my),
         seeds=int(min(mx.shape[0], my.shape[0])),
         settings=len(cols),
-        claim=claim,
+        kind=claim,
         margin=float(margin),
         verdict=verdict(lo, hi, claim, margin),
     )

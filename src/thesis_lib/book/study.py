@@ -1,0 +1,351 @@
+"""Pre-registered studies: ``params/<chapter>.study.yml`` run into ``studies/<chapter>/``.
+
+A study file fixes, before anything runs, the chapter config (settings, seeds, sizes), the
+metric, and the comparisons that test the thesis's claims (``CLAIMS.md``). ``thesis study
+<chapter>`` builds the chapter's :class:`Config` from it, asks the chapter module for its
+tasks (``study_tasks(cfg) -> list[Task]``) and runs them through :mod:`thesis_lib.sweep`
+with the store ``studies/<chapter>/tasks/``: each finished task is written at once and is
+committed with the project, so a study resumes across working sessions. ``rows.csv`` and
+``run.json`` (study id, the study file's hash, commits, versions, CPU-hours, progress) are
+rewritten after each run. ``thesis claims`` turns every study's rows into
+``studies/claims.csv``, one verdict per claim, by :mod:`thesis_lib.stats.claims`.
+
+The book renders ``studies/``; it never recomputes a study.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from thesis_lib.book.paths import project_root
+
+STUDY_KEYS = {
+    "study",
+    "chapter",
+    "description",
+    "config",
+    "metric",
+    "secondary",
+    "columns",
+    "comparisons",
+    "budget_cpu_hours",
+    "scale_check",
+    "notes",
+}
+REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
+DEFAULT_COLUMNS = {"method": "method", "setting": "setting", "seed": "seed"}
+
+#: chapter notebook -> module of ``thesis_lib.chapters`` holding its ``Config`` and tasks.
+CHAPTER_MODULES: dict[str, str] = {
+    "01_background": "background",
+    "survey": "survey",
+    "02_clfd": "clfd",
+    "03_defender": "defender",
+    "04_hdt": "hdt",
+    "05_decision_mamba": "decision_mamba",
+    "06_mdlt": "mdlt",
+    "07_ur3_deployment": "ur3",
+}
+
+
+@dataclass
+class Study:
+    """One pre-registered study, as read from its parameter file."""
+
+    study: str
+    chapter: str
+    config: dict[str, Any]
+    metric: str
+    comparisons: list[dict[str, Any]]
+    description: str = ""
+    secondary: str | None = None
+    columns: dict[str, str] = field(default_factory=lambda: dict(DEFAULT_COLUMNS))
+    budget_cpu_hours: float | None = None
+    scale_check: dict[str, Any] | None = None
+    notes: str = ""
+    path: Path | None = None
+
+    @property
+    def hash(self) -> str:
+        """Hash of everything pre-registered (all fields but the file's path)."""
+        from thesis_lib.sweep import config_hash
+
+        d = dataclasses.asdict(self)
+        d.pop("path")
+        return config_hash(d)
+
+
+def study_path(chapter: str) -> Path:
+    """``params/<chapter>.study.yml`` of the checkout."""
+    return project_root() / "params" / f"{chapter}.study.yml"
+
+
+def studies_dir(chapter: str | None = None) -> Path:
+    """``<project>/studies`` or ``<project>/studies/<chapter>`` (committed evidence)."""
+    base = project_root() / "studies"
+    return base / chapter if chapter else base
+
+
+def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
+    """Validate a study mapping (unknown or missing keys, unknown claims are errors)."""
+    from thesis_lib.stats.claims import check_comparison
+
+    where = f" in {path}" if path else ""
+    unknown = set(data) - STUDY_KEYS
+    if unknown:
+        raise ValueError(
+            f"unknown study key(s) {sorted(unknown)}{where}; valid: {sorted(STUDY_KEYS)}"
+        )
+    missing = [k for k in REQUIRED_KEYS if k not in data]
+    if missing:
+        raise ValueError(f"study file{where} lacks {missing}")
+    if not data["comparisons"]:
+        raise ValueError(f"study file{where} pre-registers no comparison")
+    for c in data["comparisons"]:
+        check_comparison(c)
+    cols = {**DEFAULT_COLUMNS, **(data.get("columns") or {})}
+    return Study(
+        study=str(data["study"]),
+        chapter=str(data["chapter"]),
+        config=dict(data["config"] or {}),
+        metric=str(data["metric"]),
+        comparisons=[dict(c) for c in data["comparisons"]],
+        description=str(data.get("description", "")),
+        secondary=data.get("secondary"),
+        columns=cols,
+        budget_cpu_hours=data.get("budget_cpu_hours"),
+        scale_check=data.get("scale_check"),
+        notes=str(data.get("notes", "")),
+        path=path,
+    )
+
+
+def load_study(chapter_or_path: str | Path) -> Study:
+    """Read ``params/<chapter>.study.yml`` (or a path) and validate it."""
+    import yaml
+
+    p = Path(chapter_or_path)
+    if p.suffix not in (".yml", ".yaml"):
+        p = study_path(str(chapter_or_path))
+    if not p.is_file():
+        have = sorted(x.name for x in (project_root() / "params").glob("*.study.yml"))
+        raise FileNotFoundError(f"No study file {p}. Study files here: {have or 'none'}.")
+    return parse_study(yaml.safe_load(p.read_text()) or {}, p)
+
+
+def chapter_module(chapter: str) -> Any:
+    """The ``thesis_lib.chapters`` module of a chapter notebook name (imported lazily)."""
+    if chapter not in CHAPTER_MODULES:
+        raise ValueError(f"unknown chapter {chapter!r}; valid: {', '.join(CHAPTER_MODULES)}")
+    return importlib.import_module(f"thesis_lib.chapters.{CHAPTER_MODULES[chapter]}")
+
+
+def study_config(study: Study) -> Any:
+    """The chapter's ``Config`` with the study's overrides (an unknown field is an error)."""
+    from thesis_lib.book.params import config_from_namespace
+
+    mod = chapter_module(study.chapter)
+    return config_from_namespace(mod.Config, study.config, f"{study.chapter} (study {study.study})")
+
+
+def study_tasks(study: Study) -> list[Any]:
+    """The study's tasks, from the chapter module's ``study_tasks(cfg)``."""
+    mod = chapter_module(study.chapter)
+    if not hasattr(mod, "study_tasks"):
+        raise NotImplementedError(
+            f"thesis_lib.chapters.{CHAPTER_MODULES[study.chapter]} has no study_tasks(cfg) yet"
+        )
+    return list(mod.study_tasks(study_config(study)))
+
+
+def run_study(
+    chapter: str,
+    *,
+    executor: str | None = None,
+    n_jobs: int | None = None,
+    address: str | None = None,
+    force: bool = False,
+    progress: bool | None = None,
+) -> pd.DataFrame:
+    """Run (or resume) the study of ``chapter``; returns its rows and rewrites its files."""
+    from thesis_lib.book.results import git_commit
+    from thesis_lib.sweep import run_tasks
+
+    study = load_study(chapter)
+    tasks = study_tasks(study)
+    out = studies_dir(chapter)
+    rows = run_tasks(
+        tasks,
+        out / "tasks",
+        executor=executor,
+        n_jobs=n_jobs,
+        address=address,
+        force=force,
+        desc=f"study {study.study}",
+        progress=progress,
+        provenance={"study": study.study, "study_hash": study.hash, "commit": git_commit()},
+    )
+    write_study_summary(study, [t.key for t in tasks])
+    return rows
+
+
+def _records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]]:
+    root = studies_dir(study.chapter) / "tasks"
+    recs = []
+    for p in sorted(root.glob("*.json")) if root.is_dir() else []:
+        rec = json.loads(p.read_text())
+        if rec.get("study_hash") == study.hash and (keys is None or rec["key"] in keys):
+            recs.append(rec)
+    return recs
+
+
+def study_rows(study: Study, keys: list[str] | None = None) -> pd.DataFrame:
+    """Tidy rows of a study's finished tasks (those written under this study's hash)."""
+    frames = []
+    for rec in _records(study, keys):
+        df = pd.DataFrame(rec["rows"])
+        df["task_key"] = rec["key"]
+        frames.append(df)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def write_study_summary(study: Study, keys: list[str]) -> dict[str, Any]:
+    """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks."""
+    from thesis_lib.book.results import package_versions
+
+    out = studies_dir(study.chapter)
+    out.mkdir(parents=True, exist_ok=True)
+    recs = _records(study, keys)
+    rows = study_rows(study, keys)
+    rows.to_csv(out / "rows.csv", index=False)
+    info = {
+        "study": study.study,
+        "chapter": study.chapter,
+        "study_file": f"params/{study.chapter}.study.yml",
+        "study_hash": study.hash,
+        "tasks_total": len(keys),
+        "tasks_done": len(recs),
+        "complete": len(recs) == len(keys),
+        "commits": sorted({r.get("commit", "unknown") for r in recs}),
+        "cpu_hours": round(sum(float(r.get("cpu_s", 0.0)) for r in recs) / 3600, 3),
+        "wall_hours": round(sum(float(r.get("wall_s", 0.0)) for r in recs) / 3600, 3),
+        "versions": package_versions(),
+        "budget_cpu_hours": study.budget_cpu_hours,
+    }
+    (out / "run.json").write_text(json.dumps(info, indent=1) + "\n")
+    return info
+
+
+def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
+    """The pre-registered comparisons of a finished study (raises if it is incomplete)."""
+    from thesis_lib.stats.claims import evaluate_comparisons
+
+    study = load_study(chapter)
+    info_p = studies_dir(chapter) / "run.json"
+    info = json.loads(info_p.read_text()) if info_p.exists() else {}
+    if not info.get("complete") or info.get("study_hash") != study.hash:
+        raise RuntimeError(
+            f"study {study.study} of {chapter} is not complete "
+            f"({info.get('tasks_done', 0)}/{info.get('tasks_total', '?')} tasks); "
+            f"run 'thesis study {chapter}' first"
+        )
+    rows = study_rows(study)
+    c = study.columns
+    res = evaluate_comparisons(
+        rows,
+        study.comparisons,
+        metric=study.metric,
+        method_col=c["method"],
+        setting_col=c["setting"],
+        seed_col=c["seed"],
+        reps=reps,
+    )
+    res.insert(0, "study", study.study)
+    res.insert(1, "chapter", chapter)
+    return res
+
+
+CLAIMS_COLUMNS = [
+    "claim",
+    "statement",
+    "verdict",
+    "effect",
+    "ci_low",
+    "ci_high",
+    "prob_improvement",
+    "seeds",
+    "settings",
+    "chapter",
+    "study",
+    "study_commit",
+    "comparisons",
+]
+
+
+def write_claims(reps: int = 10_000) -> pd.DataFrame:
+    """``studies/claims.csv``: one row per claim of CLAIMS.md, ``pending`` where no study
+    (or no complete one) answers it yet."""
+    from thesis_lib.stats.claims import CLAIMS, claim_verdicts
+
+    root = project_root() / "params"
+    rows: dict[str, dict[str, Any]] = {}
+    for p in sorted(root.glob("*.study.yml")):
+        chapter = p.name.removesuffix(".study.yml")
+        study = load_study(p)
+        info_p = studies_dir(chapter) / "run.json"
+        info = json.loads(info_p.read_text()) if info_p.exists() else {}
+        claims = dict.fromkeys(c["claim"] for c in study.comparisons)
+        if not info.get("complete") or info.get("study_hash") != study.hash:
+            for cl in claims:
+                done = info.get("tasks_done", 0) if info.get("study_hash") == study.hash else 0
+                rows[cl] = {
+                    "claim": cl,
+                    "verdict": "pending",
+                    "chapter": chapter,
+                    "study": study.study,
+                    "comparisons": f"{done}/{len(study_tasks(study))} tasks done",
+                }
+            continue
+        verdicts = claim_verdicts(evaluate_study(chapter, reps=reps))
+        for r in verdicts.to_dict("records"):
+            rows[r["claim"]] = {
+                **r,
+                "chapter": chapter,
+                "study": study.study,
+                "study_commit": ",".join(info.get("commits", [])),
+            }
+    table = []
+    for cid, (_sec, statement) in CLAIMS.items():
+        r = rows.get(cid, {"claim": cid, "verdict": "pending", "comparisons": "no study yet"})
+        table.append({**{k: None for k in CLAIMS_COLUMNS}, **r, "statement": statement})
+    df = pd.DataFrame(table, columns=CLAIMS_COLUMNS)
+    out = studies_dir()
+    out.mkdir(parents=True, exist_ok=True)
+    df.to_csv(out / "claims.csv", index=False)
+    return df
+
+
+__all__ = [
+    "CHAPTER_MODULES",
+    "Study",
+    "chapter_module",
+    "evaluate_study",
+    "load_study",
+    "parse_study",
+    "run_study",
+    "studies_dir",
+    "study_config",
+    "study_path",
+    "study_rows",
+    "study_tasks",
+    "write_claims",
+    "write_study_summary",
+]

@@ -1,0 +1,163 @@
+"""The thesis's fourteen claims (``CLAIMS.md``) and their verdicts from a study's rows.
+
+A study's parameter file (``params/<chapter>.study.yml``) pre-registers, for each claim it
+tests, the comparisons: methods ``x`` and ``y``, the metric, the kind of claim
+(``superior``: x beats y; ``noninferior``: x is at least as good as y, within ``margin``),
+the margin and the aggregate. :func:`evaluate_comparisons` applies :func:`thesis_lib.stats.compare`
+to the study's tidy rows; :func:`claim_verdicts` folds several comparisons of one claim into
+one verdict (it holds only if every comparison holds; it fails if any fails).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import pandas as pd
+
+from . import compare
+
+#: id -> (thesis section, statement), as in CLAIMS.md.
+CLAIMS: dict[str, tuple[str, str]] = {
+    "C1": ("5.2.5.1", "The DT depends on the RTG input: without it, it cannot learn the task."),
+    "C2": ("5.2.5.2", "The HDT needs no RTG: adding it to the low level does not help."),
+    "C3": (
+        "5.2.5.3",
+        "The HDT beats the DT and BC in most settings, most of all on long / sparse-reward tasks.",
+    ),
+    "C4": ("5.3.3", "The DM needs no RTG; the DM without it is at least as good."),
+    "C5": ("5.3.3", "DM beats DT (15/27) and HDM beats HDT (22/27)."),
+    "C6": (
+        "5.3.4",
+        "Mamba models act faster than their Transformer predecessors; HDT/HDM cost "
+        "about twice to train.",
+    ),
+    "C7": (
+        "4.3.3",
+        "DEFENDER cuts the crash rate during training while keeping or improving the return.",
+    ),
+    "C8": (
+        "4.3.3",
+        "State trajectories beat state-action trajectories: fewer crashes, less compute.",
+    ),
+    "C9": ("4.3.3", "More demonstrations make DEFENDER safer."),
+    "C10": ("4.2.2.1", "CLfD aligns views better than TCN in all setups and than CMC in 3 of 4."),
+    "C11": (
+        "4.2.2.1",
+        "CLfD features are viewpoint-invariant: stage accuracy on unseen cameras "
+        "is about that on seen ones.",
+    ),
+    "C12": (
+        "4.2.2.2",
+        "RL with CLfD features and rewards learns the pick stage; with TCN / CMC "
+        "features it does not.",
+    ),
+    "C13": (
+        "6.5",
+        "MDLT translates unseen music into dance better than trivial answers; a single "
+        "genre is easier than all genres.",
+    ),
+    "C14": ("5.2.5.4", "HDT reaches more UR3 goals than DT, with few demonstrations."),
+}
+
+COMPARISON_KEYS = {
+    "claim",
+    "x",
+    "y",
+    "metric",
+    "kind",
+    "margin",
+    "aggregate",
+    "settings",
+    "label",
+    "note",
+}
+
+
+def check_comparison(spec: Mapping[str, Any]) -> None:
+    """Raise ``ValueError`` for an unknown key, claim or kind in one comparison spec."""
+    unknown = set(spec) - COMPARISON_KEYS
+    if unknown:
+        raise ValueError(
+            f"unknown comparison key(s) {sorted(unknown)}; valid: {sorted(COMPARISON_KEYS)}"
+        )
+    for k in ("claim", "x", "y"):
+        if k not in spec:
+            raise ValueError(f"comparison {dict(spec)} lacks '{k}'")
+    if spec["claim"] not in CLAIMS:
+        raise ValueError(f"unknown claim {spec['claim']!r}; valid: {', '.join(CLAIMS)}")
+    if spec.get("kind", "superior") not in ("superior", "noninferior"):
+        raise ValueError(f"kind must be 'superior' or 'noninferior', got {spec['kind']!r}")
+
+
+def evaluate_comparisons(
+    rows: pd.DataFrame,
+    comparisons: Sequence[Mapping[str, Any]],
+    *,
+    metric: str,
+    method_col: str = "method",
+    setting_col: str = "setting",
+    seed_col: str = "seed",
+    reps: int = 10_000,
+) -> pd.DataFrame:
+    """One row per comparison: effect, 95% interval, P(X > Y), verdict."""
+    out = []
+    for spec in comparisons:
+        check_comparison(spec)
+        c = compare(
+            rows,
+            spec["x"],
+            spec["y"],
+            spec.get("metric", metric),
+            settings=spec.get("settings"),
+            aggregate=spec.get("aggregate", "mean"),
+            claim=spec.get("kind", "superior"),
+            margin=float(spec.get("margin", 0.0)),
+            reps=reps,
+            method_col=method_col,
+            setting_col=setting_col,
+            seed_col=seed_col,
+        )
+        out.append({"claim": spec["claim"], "label": spec.get("label", ""), **c.to_dict()})
+    return pd.DataFrame(out)
+
+
+def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
+    """Fold comparisons into one row per claim.
+
+    A claim *holds* when every comparison of it holds, *fails* when any fails, and is
+    *inconclusive* otherwise. Its effect and interval are those of its first comparison
+    (the study file lists the headline comparison first).
+    """
+    rows = []
+    for claim, grp in comparisons.groupby("claim", sort=False):
+        v = grp["verdict"].tolist()
+        verdict = (
+            "fails"
+            if "fails" in v
+            else "holds"
+            if all(x == "holds" for x in v)
+            else ("inconclusive")
+        )
+        head = grp.iloc[0]
+        rows.append(
+            {
+                "claim": claim,
+                "statement": CLAIMS[str(claim)][1],
+                "verdict": verdict,
+                "effect": head["effect"],
+                "ci_low": head["ci_low"],
+                "ci_high": head["ci_high"],
+                "prob_improvement": head["prob_improvement"],
+                "seeds": int(grp["seeds"].min()),
+                "settings": int(grp["settings"].max()),
+                "comparisons": "; ".join(
+                    f"{r.x} vs {r.y} ({r.metric}): {r.verdict} [{r.ci_low:.3g}, {r.ci_high:.3g}]"
+                    for r in grp.itertuples()
+                ),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+__all__ = ["CLAIMS", "check_comparison", "claim_verdicts", "evaluate_comparisons"]

@@ -1,0 +1,150 @@
+"""Pre-registered studies: parameter file -> sweep -> committed rows -> claims.csv."""
+
+from __future__ import annotations
+
+import json
+import types
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from thesis_lib.book import study as st
+from thesis_lib.sweep import Task
+
+CALLS: list[str] = []
+
+
+def fake_task(cfg: dict) -> list[dict]:
+    """A 'training run': method HDT scores 10 above DT, seeds add noise."""
+    CALLS.append(f"{cfg['method']}/{cfg['setting']}/{cfg['seed']}")
+    base = {"HDT": 60.0, "DT": 50.0}[cfg["method"]] + cfg["offset"]
+    return [{**cfg, "score": base + (cfg["seed"] % 3) - 1.0}]
+
+
+@dataclass
+class FakeConfig:
+    settings: list[str] = field(default_factory=lambda: ["a", "b"])
+    seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
+    offset: float = 0.0
+
+
+def fake_study_tasks(cfg: FakeConfig) -> list[Task]:
+    return [
+        Task(fake_task, {"method": m, "setting": s, "seed": k, "offset": cfg.offset})
+        for m in ("HDT", "DT")
+        for s in cfg.settings
+        for k in cfg.seeds
+    ]
+
+
+STUDY = {
+    "study": "fake-v1",
+    "chapter": "04_hdt",
+    "description": "a test study",
+    "config": {"seeds": [0, 1, 2, 3, 4], "offset": 1.0},
+    "metric": "score",
+    "comparisons": [
+        {"claim": "C3", "x": "HDT", "y": "DT", "kind": "superior", "margin": 2.0},
+        {"claim": "C2", "x": "DT", "y": "HDT", "kind": "noninferior", "margin": 2.0},
+    ],
+}
+
+
+@pytest.fixture
+def project(tmp_path, monkeypatch):
+    (tmp_path / "_toc.yml").write_text("root: intro\n")
+    (tmp_path / "notebooks").mkdir()
+    (tmp_path / "params").mkdir()
+    (tmp_path / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(STUDY))
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    mod = types.SimpleNamespace(Config=FakeConfig, study_tasks=fake_study_tasks)
+    monkeypatch.setattr(st, "chapter_module", lambda chapter: mod)
+    CALLS.clear()
+    return tmp_path
+
+
+def test_study_runs_resumes_and_records_its_hash(project):
+    rows = st.run_study("04_hdt", progress=False)
+    assert len(rows) == 2 * 2 * 5 and len(CALLS) == 20
+    info = json.loads((project / "studies" / "04_hdt" / "run.json").read_text())
+    assert info["complete"] and info["tasks_done"] == 20
+    assert info["study_hash"] == st.load_study("04_hdt").hash
+    assert len(list((project / "studies" / "04_hdt" / "tasks").glob("*.json"))) == 20
+    # a second run finds every task stored and runs none
+    st.run_study("04_hdt", progress=False)
+    assert len(CALLS) == 20
+    csv = pd.read_csv(project / "studies" / "04_hdt" / "rows.csv")
+    assert sorted(csv["method"].unique()) == ["DT", "HDT"]
+
+
+def test_verdicts_follow_from_the_rows(project):
+    st.run_study("04_hdt", progress=False)
+    res = st.evaluate_study("04_hdt", reps=500)
+    c3 = res[res.claim == "C3"].iloc[0]
+    assert c3.effect == pytest.approx(10.0) and c3.verdict == "holds"
+    c2 = res[res.claim == "C2"].iloc[0]
+    assert c2.verdict == "fails"  # DT is 10 worse: far outside the 2-point margin
+    claims = st.write_claims(reps=500)
+    assert len(claims) == 14 and list(claims.claim[:3]) == ["C1", "C2", "C3"]
+    got = claims.set_index("claim").verdict
+    assert (got["C3"], got["C2"], got["C1"]) == ("holds", "fails", "pending")
+    assert (project / "studies" / "claims.csv").exists()
+
+
+def test_an_unfinished_study_is_pending_not_judged(project, monkeypatch):
+    st.run_study("04_hdt", progress=False)
+    info_p = project / "studies" / "04_hdt" / "run.json"
+    info = json.loads(info_p.read_text())
+    info_p.write_text(json.dumps({**info, "complete": False, "tasks_done": 7}))
+    with pytest.raises(RuntimeError, match="not complete"):
+        st.evaluate_study("04_hdt")
+    claims = st.write_claims(reps=200).set_index("claim")
+    assert claims.verdict["C3"] == "pending" and "7/20" in claims.comparisons["C3"]
+
+
+def test_a_changed_study_file_does_not_reuse_old_rows(project):
+    st.run_study("04_hdt", progress=False)
+    changed = {**STUDY, "config": {**STUDY["config"], "offset": 2.0}}
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(changed))
+    new = st.load_study("04_hdt")
+    assert st.study_rows(new).empty  # old task files carry the old study hash
+
+
+@pytest.mark.parametrize(
+    ("patch", "match"),
+    [
+        ({"seeds_per_setting": 5}, "unknown study key"),
+        ({"comparisons": []}, "no comparison"),
+        ({"comparisons": [{"claim": "C99", "x": "a", "y": "b"}]}, "unknown claim"),
+        ({"comparisons": [{"claim": "C1", "x": "a", "y": "b", "kind": "better"}]}, "kind"),
+        ({"comparisons": [{"claim": "C1", "x": "a"}]}, "lacks 'y'"),
+    ],
+)
+def test_bad_study_files_are_errors(patch, match):
+    with pytest.raises(ValueError, match=match):
+        st.parse_study({**STUDY, **patch})
+
+
+def test_unknown_config_field_is_an_error(project):
+    bad = {**STUDY, "config": {"seedz": [0]}}
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(bad))
+    with pytest.raises(ValueError, match="Unknown parameter 'seedz'"):
+        st.study_tasks(st.load_study("04_hdt"))
+
+
+REPO = Path(__file__).resolve().parents[1]
+COMMITTED = sorted((REPO / "studies").glob("*/run.json"))
+
+
+@pytest.mark.skipif(not COMMITTED, reason="no study committed yet")
+@pytest.mark.parametrize("run_json", COMMITTED, ids=lambda p: p.parent.name)
+def test_committed_studies_match_their_parameter_files(run_json, monkeypatch):
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    info = json.loads(run_json.read_text())
+    assert info["study_hash"] == st.load_study(run_json.parent.name).hash, (
+        f"{run_json} was computed from another {info['study_file']}: the study file changed "
+        "after the study started (start a new study id instead)"
+    )
