@@ -7,12 +7,14 @@ PY     := $(VENV)/bin/python
 JOBS   ?= 2
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv book chapter test test-fast lint format bench clean help
+.PHONY: venv book chapter study claims test test-fast lint format bench clean help
 
 help:
 	@echo "make book      run every chapter (smoke profile) and build the HTML book"
 	@echo "make test      run the whole test suite (what CI runs)"
 	@echo "make chapter CHAPTER=01_background [PROFILE=full]   run one chapter"
+	@echo "make study CHAPTER=04_hdt [JOBS=2]   run or resume a pre-registered study"
+	@echo "make claims    studies/claims.csv from the committed studies"
 	@echo "make test-fast unit tests only (no notebook runs, no book build)"
 	@echo "make lint      ruff (lint + format check) and the type checker"
 	@echo "make format    ruff format + safe fixes"
@@ -32,6 +34,12 @@ book: $(STAMP)
 
 chapter: $(STAMP)
 	$(VENV)/bin/thesis run $(CHAPTER) --profile $(or $(PROFILE),smoke)
+
+study: $(STAMP)
+	nice $(VENV)/bin/thesis study $(CHAPTER) -j $(JOBS)
+
+claims: $(STAMP)
+	$(VENV)/bin/thesis claims
 
 test: $(STAMP)
 	$(PY) -m pytest

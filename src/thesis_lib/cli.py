@@ -121,7 +121,12 @@ def build_parser() -> argparse.ArgumentParser:
     bench.set_defaults(func=_cmd_bench)
 
     # Sub-packages contribute their own commands (e.g. 'thesis data').
-    for module in ("thesis_lib.data.cli", "thesis_lib.mdlt.cli", "thesis_lib.ur3.cli"):
+    for module in (
+        "thesis_lib.data.cli",
+        "thesis_lib.mdlt.cli",
+        "thesis_lib.ur3.cli",
+        "thesis_lib.book.study_cli",
+    ):
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as err:  # that package is not written yet

@@ -1,0 +1,70 @@
+"""``thesis study <chapter>`` and ``thesis claims``: run pre-registered studies, judge claims.
+
+thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
+thesis study 04_hdt --executor local -j 2
+thesis study 04_hdt --status          # tasks done / total, CPU-hours so far
+thesis claims                         # studies/claims.csv from every committed study
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    from thesis_lib.book import study as st
+
+    if args.status:
+        s = st.load_study(args.chapter)
+        keys = [t.key for t in st.study_tasks(s)]
+        info = st.write_study_summary(s, keys)
+        print(
+            json.dumps(
+                {
+                    k: info[k]
+                    for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")
+                },
+                indent=1,
+            )
+        )
+        return 0
+    rows = st.run_study(
+        args.chapter,
+        executor=args.executor,
+        n_jobs=args.jobs,
+        address=args.address,
+        force=args.force,
+    )
+    print(f"{args.chapter}: {len(rows)} rows in {st.studies_dir(args.chapter)}")
+    return 0
+
+
+def _cmd_claims(args: argparse.Namespace) -> int:
+    from thesis_lib.book.study import studies_dir, write_claims
+
+    df = write_claims(reps=args.reps)
+    print(df[["claim", "verdict", "effect", "ci_low", "ci_high", "chapter"]].to_string(index=False))
+    print(f"-> {studies_dir() / 'claims.csv'}", file=sys.stderr)
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``study`` and ``claims`` to the ``thesis`` command."""
+    p = subparsers.add_parser("study", help="run or resume a chapter's pre-registered study")
+    p.add_argument("chapter", help="e.g. 04_hdt (reads params/<chapter>.study.yml)")
+    p.add_argument(
+        "--executor",
+        choices=["inprocess", "local", "ray"],
+        default=None,
+        help="where tasks run (default: in this process; local with -j > 1)",
+    )
+    p.add_argument("-j", "--jobs", type=int, default=None, help="parallel tasks (local)")
+    p.add_argument("--address", default=None, help="Ray cluster address (or $RAY_ADDRESS)")
+    p.add_argument("--force", action="store_true", help="recompute finished tasks")
+    p.add_argument("--status", action="store_true", help="print progress; run nothing")
+    p.set_defaults(func=_cmd_study)
+    c = subparsers.add_parser("claims", help="write studies/claims.csv from the studies")
+    c.add_argument("--reps", type=int, default=10_000, help="bootstrap replications")
+    c.set_defaults(func=_cmd_claims)
