@@ -20,11 +20,12 @@ import shutil
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm.auto import tqdm
 
-from thesis_lib.clfd.env import CAMERAS, MultiViewPickPlace, run_demonstration
+from thesis_lib.clfd.env import CAMERAS, Demonstration, MultiViewPickPlace, run_demonstration
 
 FORMAT_VERSION = 2
 
@@ -109,7 +110,10 @@ class MultiViewVideos:
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
         for i, name in enumerate(self.names):
-            arrays = {"frames": self.videos[i], **{k: v[i] for k, v in self.extras.items()}}
+            arrays: dict[str, Any] = {
+                "frames": self.videos[i],
+                **{k: v[i] for k, v in self.extras.items()},
+            }
             if self.stages is not None:
                 arrays["stages"] = self.stages[i]
             np.savez(folder / f"{name}.npz", **arrays)
@@ -134,7 +138,9 @@ class MultiViewVideos:
                 "videos use read_multiview_folder()."
             )
         meta = json.loads(meta_path.read_text())
-        videos, stages, extras = [], [], {k: [] for k in meta["extras"]}
+        videos: list[np.ndarray] = []
+        stages: list[np.ndarray] = []
+        extras: dict[str, list[np.ndarray]] = {k: [] for k in meta["extras"]}
         for name in meta["names"]:
             with np.load(folder / f"{name}.npz") as z:
                 videos.append(z["frames"])
@@ -201,18 +207,23 @@ def make_pick_place_dataset(
     sizes = split_sizes(n_demos)
     folder = None
     if cache_dir is not False:
-        base = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        base = Path(cache_dir) if isinstance(cache_dir, (str, Path)) else default_cache_dir()
         folder = base / f"pick_place_v{FORMAT_VERSION}_{n_demos}demos_{image_size}px_seed{seed}"
         if all((folder / s / "meta.json").is_file() for s in SPLITS):
             return {s: MultiViewVideos.load(folder / s) for s in SPLITS}
     env = MultiViewPickPlace(image_size=image_size)
-    demos, i = [], 0
+    demos: list[Demonstration] = []
+    videos: list[np.ndarray] = []
+    i = 0
     bar = tqdm(total=n_demos, desc="pick-and-place demonstrations", disable=not progress)
     while len(demos) < n_demos:
         d = run_demonstration(env, seed * 100_000 + i, render=True)
         i += 1
         if d.success:
+            if d.frames is None:
+                raise RuntimeError("run_demonstration(render=True) returned no frames.")
             demos.append(d)
+            videos.append(d.frames)
             bar.update(1)
         if i > 2 * n_demos + 20:
             raise RuntimeError(
@@ -221,7 +232,7 @@ def make_pick_place_dataset(
     bar.close()
     env.close()
     full = MultiViewVideos(
-        videos=[d.frames for d in demos],
+        videos=videos,
         cameras=CAMERAS,
         names=[f"demo_{k:03d}" for k in range(n_demos)],
         stages=[d.stages for d in demos],

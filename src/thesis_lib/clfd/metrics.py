@@ -106,7 +106,7 @@ def classifier_accuracy(mlp: nn.Module, features: np.ndarray, labels: np.ndarray
     """Accuracy (%) of :func:`train_stage_classifier`'s model on ``features``."""
     x = torch.as_tensor(np.asarray(features), dtype=torch.float32)
     with torch.no_grad():
-        pred = mlp((x - mlp.mean) / mlp.std).argmax(1).numpy()
+        pred = mlp((x - mlp.get_buffer("mean")) / mlp.get_buffer("std")).argmax(1).numpy()
     return float((pred == np.asarray(labels)).mean() * 100.0)
 
 

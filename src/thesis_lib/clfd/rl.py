@@ -63,6 +63,8 @@ class EmbeddingRewardEnv(gym.Env):
             raise RuntimeError(
                 f"The demonstration with seed {demo_seed} failed; pick another seed."
             )
+        if demo.frames is None:
+            raise RuntimeError("run_demonstration(render=True) returned no frames.")
         s = STAGES.index(stage)
         last = int(np.flatnonzero(demo.stages == s)[-1])
         self.goal_frame = demo.frames[last, 0]

@@ -178,8 +178,8 @@ class CLfD:
                 far = np.r_[0 : max(0, t - gap + 1), min(n, t + gap) : n]
                 t_neg = int(rng.choice(far)) if len(far) else (t + n // 2) % n
                 rows.append((v, t, a, p, t_neg))
-        rows = np.array(rows)
-        return rows[rng.permutation(len(rows))]
+        arr = np.array(rows)
+        return arr[rng.permutation(len(arr))]
 
     def _loss(self, data: MultiViewVideos, batch: np.ndarray) -> torch.Tensor:
         def frames(t_col: int, c_col: int) -> torch.Tensor:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -308,6 +308,14 @@ def check_environments(n_steps: int = 50, tasks: Sequence[str] | None = None) ->
     return pd.DataFrame(rows)
 
 
+@overload
+def maze_success_rate(
+    task: str, n_episodes: int = ..., seed: int = ..., return_returns: Literal[False] = ...
+) -> float: ...
+@overload
+def maze_success_rate(
+    task: str, n_episodes: int = ..., seed: int = ..., *, return_returns: Literal[True]
+) -> tuple[float, np.ndarray]: ...
 def maze_success_rate(
     task: str, n_episodes: int = 100, seed: int = 0, return_returns: bool = False
 ) -> float | tuple[float, np.ndarray]:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -228,7 +228,7 @@ def evaluate_policy(
     return out
 
 
-def _atomic_save(save: Callable[[Path], None], dest: Path) -> None:
+def _atomic_save(save: Callable[[Path], object], dest: Path) -> None:
     """Write via ``save(tmp)`` then rename over ``dest``: never a half-written file."""
     tmp = dest.with_name(dest.name + ".tmp")
     save(tmp)
@@ -353,7 +353,7 @@ def train_deep_expert(
         st.wall_s = round(wall0 + time.time() - t0, 1)
         pol = export_actor(model, backend)
         name = f"step{st.steps:08d}.npz"
-        np.savez_compressed(folder / "snapshots" / name, **pol.to_arrays())
+        _savez(folder / "snapshots" / name, pol.to_arrays())
         r = evaluate_policy(pol, task, cfg.snapshot_eval_episodes, seed=0)
         score = normalized_score(task, float(r.mean()), missing="none")
         snap = {
@@ -518,9 +518,10 @@ def ship_deep_expert(
     return rec
 
 
-def _savez(path: Path, arrays: dict[str, np.ndarray]) -> None:
+def _savez(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
+    kwds: dict[str, Any] = dict(arrays)  # Any: savez_compressed(**dict[str, ndarray]) trips mypy
     with open(path, "wb") as f:
-        np.savez_compressed(f, **arrays)
+        np.savez_compressed(f, **kwds)
 
 
 def _jsonable(d: dict[str, Any]) -> dict[str, Any]:

@@ -137,7 +137,10 @@ def _bounds(task: str) -> tuple[np.ndarray, np.ndarray]:
     import gymnasium as gym
 
     env = gym.make(get_task(task).env_id)
-    low, high = env.action_space.low.astype(np.float64), env.action_space.high.astype(np.float64)
+    space = env.action_space
+    if not isinstance(space, gym.spaces.Box):
+        raise TypeError(f"Task '{task}' has a {space} action space; expect a Box.")
+    low, high = space.low.astype(np.float64), space.high.astype(np.float64)
     env.close()
     return low, high
 
@@ -369,8 +372,11 @@ def _train(
         model.learn(cfg.checkpoint_every, reset_num_timesteps=False)
         w, m, v = _snapshot(model, venv)
         r = evaluate(LinearPolicy(w, m, v, low, high), task, n_ckpt_eval_episodes, eval_seed)
-        ws.append(w), ms.append(m), vs.append(v)
-        steps.append(int(model.num_timesteps)), rets.append(float(r.mean()))
+        ws.append(w)
+        ms.append(m)
+        vs.append(v)
+        steps.append(int(model.num_timesteps))
+        rets.append(float(r.mean()))
         log(
             f"{task} step {model.num_timesteps} return {r.mean():.1f} ± {r.std():.1f} "
             f"({time.time() - t0:.0f}s)"

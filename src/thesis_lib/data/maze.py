@@ -69,7 +69,8 @@ class WaypointExpert:
         u = env.unwrapped  # type: ignore[attr-defined]
         self._maze = u.maze
         self._goal = np.asarray(u.goal[:2], dtype=np.float64).copy()
-        gcell = tuple(int(x) for x in self._maze.cell_xy_to_rowcol(self._goal))
+        row, col = self._maze.cell_xy_to_rowcol(self._goal)
+        gcell = (int(row), int(col))
         self._dist = bfs_distances(self._maze.maze_map, gcell)
         self._goal_cell = gcell
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -113,7 +113,7 @@ def _register_robotics() -> None:
     _ROBOTICS_NOTICE = _ROBOTICS_NOTICE or buf.getvalue().strip()
 
 
-Policy = Callable[[object, np.random.Generator], np.ndarray]
+Policy = Callable[[Any, np.random.Generator], np.ndarray]
 
 
 def rollout(
@@ -149,7 +149,10 @@ def rollout(
         obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)))  # type: ignore[attr-defined]
         if on_reset is not None:
             on_reset(env)
-        obs_l, dg_l, ag_l, act_l, rew_l, term_l, trunc_l = [], [], [], [], [], [], []
+        obs_l: list[Any] = []
+        dg_l: list[Any] = []
+        ag_l: list[Any] = []
+        act_l, rew_l, term_l, trunc_l = [], [], [], []
 
         def keep(o: object, obs_l=obs_l, dg_l=dg_l, ag_l=ag_l) -> None:
             if isinstance(o, dict):
@@ -165,7 +168,9 @@ def rollout(
             a = np.asarray(policy(obs, rng), dtype=np.float32)
             obs, r, term, trunc, _ = env.step(a)  # type: ignore[attr-defined]
             keep(obs)
-            act_l.append(a), rew_l.append(r), term_l.append(term)
+            act_l.append(a)
+            rew_l.append(r)
+            term_l.append(term)
             total += 1
             cut = total >= n_transitions
             trunc_l.append(bool(trunc) or (cut and not term))
@@ -337,7 +342,7 @@ def _mlp_replay(
     pols: list[Policy] = [_random_policy(env)]
     for i in range(len(steps)):
         p = load_policy(task, f"ckpt{i}")
-        pols.append(lambda obs, r, p=p: p.sample(obs, r))
+        pols.append(p.sample)
     info["algorithm"] = (
         f"training replay: {warm} warm-up steps of uniform random actions, then snapshots "
         f"at steps {steps} sampling from the actor's Gaussian, {list(share)} transitions each"

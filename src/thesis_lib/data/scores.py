@@ -6,13 +6,21 @@ The reference returns are D4RL's (``d4rl/infos.py``), listed in
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Literal, overload
 
 import numpy as np
 
 from .tasks import get_task
 
 
+@overload
+def normalized_score(task: str, returns: float, missing: Literal["raise"] = "raise") -> float: ...
+@overload
+def normalized_score(task: str, returns: float, missing: Literal["none"]) -> float | None: ...
+@overload
+def normalized_score(
+    task: str, returns: float | np.ndarray, missing: Literal["raise", "none"] = "raise"
+) -> float | np.ndarray | None: ...
 def normalized_score(
     task: str,
     returns: float | np.ndarray,

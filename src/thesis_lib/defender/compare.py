@@ -16,8 +16,8 @@ Used in: DEFENDER (thesis 4.3).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Literal
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -210,7 +210,12 @@ class GroupCost:
             backend=backend,
             radius=radius,
         )
-        self._agg = {"Min": np.min, "Max": np.max, "Mean": np.mean}[self.method.aggregation]
+        aggs: dict[str, Callable[[np.ndarray], Any]] = {
+            "Min": np.min,
+            "Max": np.max,
+            "Mean": np.mean,
+        }
+        self._agg = aggs[self.method.aggregation]
 
     @property
     def incremental(self) -> bool:

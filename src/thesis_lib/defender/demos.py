@@ -377,7 +377,10 @@ def _policy_rollout(
 
     From step ``switch_at`` on (if given) the noise std becomes ``switch_noise``.
     """
-    low, high = env.action_space.low.astype(np.float64), env.action_space.high.astype(np.float64)
+    space = env.action_space
+    if not isinstance(space, gym.spaces.Box):
+        raise TypeError(f"Expect a Box action space, got {space}.")
+    low, high = space.low.astype(np.float64), space.high.astype(np.float64)
     half = (high - low) / 2
     obs, _ = env.reset(seed=seed)
     observations, actions, rewards = [np.asarray(obs, dtype=np.float64)], [], []
@@ -536,7 +539,7 @@ def save_demonstrations(demoset: DemoSet, path: str | Path) -> Path:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays: dict[str, np.ndarray] = {}
+    arrays: dict[str, Any] = {}  # Any: np.savez_compressed(**dict[str, ndarray]) trips mypy
     for group in ("safe", "unsafe"):
         for i, d in enumerate(getattr(demoset, group)):
             arrays[f"{group}/{i}/observations"] = d.observations
@@ -587,7 +590,8 @@ class _DataDir:
     """Temporarily point ``thesis_lib.data`` at ``root`` (``THESIS_DATA_DIR``); no-op for None."""
 
     def __init__(self, root: str | Path | None) -> None:
-        self.root, self.old = root, None
+        self.root = root
+        self.old: str | None = None
 
     def __enter__(self) -> None:
         import os

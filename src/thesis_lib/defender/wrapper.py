@@ -14,7 +14,7 @@ Used in: DEFENDER (thesis 4.3).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any, SupportsFloat
+from typing import Any, Literal, SupportsFloat, cast
 
 import gymnasium as gym
 import numpy as np
@@ -134,8 +134,9 @@ class DefenderWrapper(gym.Wrapper):
             max_trajectory = PAPER_MAX_TRAJECTORY
         self.max_trajectory = max_trajectory
         self.metric = "l1" if self.paper_compat else metric
-        backend = "fastdtw" if self.paper_compat else "exact"
-        self.obs_dim, self.act_dim = int(obs_space.shape[0]), int(act_space.shape[0])
+        backend: Literal["exact", "fastdtw"] = "fastdtw" if self.paper_compat else "exact"
+        obs_box, act_box = cast(gym.spaces.Box, obs_space), cast(gym.spaces.Box, act_space)
+        self.obs_dim, self.act_dim = int(obs_box.shape[0]), int(act_box.shape[0])
         n_features = self.obs_dim + (self.act_dim if trajectory == "state_action" else 0)
 
         groups = {}
@@ -165,9 +166,20 @@ class DefenderWrapper(gym.Wrapper):
             groups[group] = _dtw.pack_references(features)
         self.n_safe, self.n_unsafe = groups["safe"].n_sequences, groups["unsafe"].n_sequences
         self.filter_reward = float(min_reward if filter_reward is None else filter_reward)
-        kw = dict(metric=self.metric, max_trajectory=self.max_trajectory, backend=backend)
-        self._safe = GroupCost(groups["safe"], self.safe_method, **kw)
-        self._unsafe = GroupCost(groups["unsafe"], self.unsafe_method, **kw)
+        self._safe = GroupCost(
+            groups["safe"],
+            self.safe_method,
+            metric=self.metric,
+            max_trajectory=self.max_trajectory,
+            backend=backend,
+        )
+        self._unsafe = GroupCost(
+            groups["unsafe"],
+            self.unsafe_method,
+            metric=self.metric,
+            max_trajectory=self.max_trajectory,
+            backend=backend,
+        )
         if dynamics is None:
             kwargs = dict(dynamics_kwargs or {})
             if dynamics_train_every is not None and "train_every" in kwargs:
@@ -219,6 +231,7 @@ class DefenderWrapper(gym.Wrapper):
         cost_unsafe = self._unsafe.append(self._step)
         # Algorithm 2: step only if Safe(tau) < Unsafe(tau); the authors' code filtered only on ">".
         fire = cost_safe > cost_unsafe if self.paper_compat else not cost_safe < cost_unsafe
+        reward: SupportsFloat
         if fire:
             next_obs = self.dynamics.predict(self._obs, action_arr).astype(
                 self.observation_space.dtype

@@ -246,11 +246,12 @@ def pose_to_ur3_angles(
     [[0.0, 0.0, 0.0, 0.0], [0.0, 0.0, -90.0, 0.0]]
     """
     joints = _check_joints(joints)
-    hand_pt = (
-        joints[:, R_HAND] if hand is None else np.asarray(hand, dtype=np.float64).reshape(-1, 3)
-    )
-    if hand_pt.shape[0] != joints.shape[0]:
-        raise ValueError(f"hand must have shape ({joints.shape[0]}, 3), got {np.shape(hand)}.")
+    if hand is None:
+        hand_pt = joints[:, R_HAND]
+    else:
+        hand_pt = np.asarray(hand, dtype=np.float64).reshape(-1, 3)
+        if hand_pt.shape[0] != joints.shape[0]:
+            raise ValueError(f"hand must have shape ({joints.shape[0]}, 3), got {np.shape(hand)}.")
     if paper_compat:
         return _paper_angles(joints, hand_pt)
     mid = 0.5 * (joints[:, L_SHOULDER] + joints[:, R_SHOULDER])
@@ -345,9 +346,9 @@ def smplx_fingertip_joints(
         raise ImportError(
             "smplx_fingertip_joints needs 'pip install smplx' and the SMPL model files."
         ) from e
-    poses = torch.as_tensor(np.asarray(poses, dtype=np.float32).reshape(-1, 72))
-    model = smplx.SMPL(model_path=model_path, gender=gender.upper(), batch_size=poses.shape[0])
-    out = model(global_orient=poses[:, :3], body_pose=poses[:, 3:],
+    poses_t = torch.as_tensor(np.asarray(poses, dtype=np.float32).reshape(-1, 72))
+    model = smplx.SMPL(model_path=model_path, gender=gender.upper(), batch_size=poses_t.shape[0])
+    out = model(global_orient=poses_t[:, :3], body_pose=poses_t[:, 3:],
                 transl=None if trans is None else torch.as_tensor(np.asarray(trans, np.float32) / scaling))  # fmt: skip
     joints = out.joints.detach().numpy() * scaling
     return joints[:, :45]

@@ -34,7 +34,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from thesis_lib.seq.mamba import Mamba, MambaConfig
+from thesis_lib.seq.mamba import Mamba, MambaConfig, ScanBackend
 from thesis_lib.seq.models import SeqOutput, masked_mse
 
 __all__ = [
@@ -126,7 +126,7 @@ class MDLTConfig:
             raise ValueError(f"Expect 0 <= dropout < 1, actually: {self.dropout!r}.")
 
 
-def _check_batch(model: nn.Module, batch: Tensors) -> tuple[int, int]:
+def _check_batch(model: MDLTTransformer | MDLTMamba, batch: Tensors) -> tuple[int, int]:
     """Check the batch keys and shapes against the config; return ``(B, L)``."""
     cfg = model.config
     for key in ("audio", "poses_in", "mask"):
@@ -153,7 +153,7 @@ def _head(d_model: int, act_dim: int) -> nn.Linear:
     return nn.Linear(d_model, act_dim)
 
 
-def init_output_at(model: nn.Module, pose: np.ndarray) -> None:
+def init_output_at(model: MDLTTransformer | MDLTMamba, pose: np.ndarray) -> None:
     """Start the output head at ``pose`` (4,): weights scaled by 0.1, bias ``atanh(pose / pi)``.
 
     The output is ``tanh(head(h)) * pi``; from the default initialisation it starts near the
@@ -337,8 +337,8 @@ class MDLTTransformer(nn.Module):
                 preds[:, t] = out[:, n - 1]
                 bar.update(1)
         bar.close()
-        out = [preds[i, : lengths[i]].cpu().numpy() for i in range(n_songs)]
-        return out[0] if single else out
+        songs_out = [preds[i, : lengths[i]].cpu().numpy() for i in range(n_songs)]
+        return songs_out[0] if single else songs_out
 
 
 def _window_index(T: int, K: int, device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -391,7 +391,7 @@ class MDLTMamba(nn.Module):
         (10, 4)
     """
 
-    def __init__(self, config: MDLTConfig, scan_backend: str = "auto") -> None:
+    def __init__(self, config: MDLTConfig, scan_backend: ScanBackend = "auto") -> None:
         super().__init__()
         if config.variant != "mamba":
             raise ValueError(f"MDLTMamba needs variant='mamba', got {config.variant!r}.")
@@ -411,7 +411,7 @@ class MDLTMamba(nn.Module):
         )
         self.head = _head(c.d_model, c.act_dim)
 
-    def embed(self, audio: torch.Tensor, poses_in: torch.Tensor) -> torch.Tensor:
+    def embed(self, audio: torch.Tensor, poses_in: torch.Tensor | None) -> torch.Tensor:
         """Tokens ``(..., d_model)`` from audio ``(..., 438)`` and previous poses ``(..., 4)``."""
         x = self.audio_emb(audio)
         if self.pose_emb is not None:

@@ -47,6 +47,7 @@ import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -152,8 +153,8 @@ def _osc(wave: str, f: float, t: np.ndarray) -> np.ndarray:
     if wave == "sine":
         return np.sin(ph)
     if wave == "square":  # first odd harmonics: band-limited enough at bass pitches
-        return sum(np.sin(k * ph) / k for k in (1, 3, 5, 7)) * 0.8
-    return sum(np.sin(k * ph) / k for k in range(1, 8)) * 0.6  # saw
+        return cast(np.ndarray, sum(np.sin(k * ph) / k for k in (1, 3, 5, 7))) * 0.8
+    return cast(np.ndarray, sum(np.sin(k * ph) / k for k in range(1, 8))) * 0.6  # saw
 
 
 def _kick(sr: int, accent: float) -> np.ndarray:
@@ -234,14 +235,14 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
         # harmony: a pad chord for the bar, a bass note per beat
         third = 3 if g.minor else 4
         chord = 48 + roots[b] + np.array([0, third, 7, 12])
-        t = np.arange(int(4 * spb * sr)) / sr
-        env = np.minimum(1.0, t / 0.03) * np.exp(-t * (0.4 + 0.6 * g.brightness))
-        pad = np.zeros_like(t)
+        tpad = np.arange(int(4 * spb * sr)) / sr
+        env = np.minimum(1.0, tpad / 0.03) * np.exp(-tpad * (0.4 + 0.6 * g.brightness))
+        pad = np.zeros_like(tpad)
         for m in chord:
             f = float(_midi_hz(m))
             for k, a in enumerate(g.pad_partials, start=1):
                 if f * k < sr / 2:
-                    pad += a * np.sin(2 * np.pi * f * k * t + k)
+                    pad += a * np.sin(2 * np.pi * f * k * tpad + k)
         _add(out, bar_t, 0.05 * gain * pad * env, sr)
         fb = float(_midi_hz(36 + roots[b]))
         tb = np.arange(int(0.9 * spb * sr)) / sr
@@ -361,19 +362,20 @@ def choreograph(
     center = np.r_[np.array(g.center), 0.0]
     spb = 60.0 / piece.bpm
     k = 2 * g.per_beat
-    kf_t, kf_v = [], []
+    kf_ts: list[np.ndarray] = []
+    kf_vs: list[np.ndarray] = []
     for b, root in enumerate(piece.bar_roots):
         m = 1 if piece.bar_chorus[b] else 0
         if rng.random() < dancer.improvise:
             m = int(rng.choice([1 - m, 2]))
         v = center + dancer.amplitude * (moves[m] - center) + offsets[root] + dancer.bias
         for half in range(2):  # the two-beat move, twice per bar
-            kf_v.append(v)
-            kf_t.append(
+            kf_vs.append(v)
+            kf_ts.append(
                 piece.beat_times[4 * b + 2 * half] + np.arange(k) * spb / g.per_beat + dancer.lag
             )
-    kf_t = np.concatenate(kf_t)
-    kf_v = np.concatenate(kf_v)
+    kf_t = np.concatenate(kf_ts)
+    kf_v = np.concatenate(kf_vs)
     rest = np.array([0.05, -0.1, 0.2, 0.1, 0.0])  # arm hanging loosely before the first key pose
     kf_t = np.r_[kf_t[0] - spb, kf_t]
     kf_v = np.vstack([rest, kf_v])
@@ -525,8 +527,8 @@ def write_aist_layout(root: str | Path, per_genre: int = 6, seconds: float = 8.0
     (the reader keeps the first by name unless ``all_sequences=True``).
     """
     root = Path(root)
-    for d in ("motions", "keypoints3d", "keypoints2d", "splits", "wav"):
-        (root / d).mkdir(parents=True, exist_ok=True)
+    for sub in ("motions", "keypoints3d", "keypoints2d", "splits", "wav"):
+        (root / sub).mkdir(parents=True, exist_ok=True)
     genres = tuple(genres or GENRES)
     splits: dict[str, list[str]] = {"train": [], "val": [], "test": []}
     ignore: list[str] = []
@@ -683,15 +685,15 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
         if layout == "aist":
             write_aist_layout(
                 tmp,
-                per_genre=p["per_genre"],
+                per_genre=int(p["per_genre"]),
                 seconds=p["seconds"],
-                dancers=p["dancers"],
+                dancers=int(p["dancers"]),
                 seed=seed,
                 progress=progress,
             )
         else:
             write_phantomdance_layout(
-                tmp, n=p["n"], seconds=p["seconds"], seed=seed, progress=progress
+                tmp, n=int(p["n"]), seconds=p["seconds"], seed=seed, progress=progress
             )
         (tmp / ".complete.json").write_text(json.dumps(spec))
         if root.exists():

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from thesis_lib.mdlt.models import MDLTConfig, build_model
+from thesis_lib.mdlt.models import MDLTConfig, MDLTMamba, MDLTTransformer, build_model
 from thesis_lib.seq.trainer import TrainConfig, Trainer
 
 __all__ = ["DanceBatch", "DanceWindows", "MDLTTrainer", "load_checkpoint", "save_checkpoint"]
@@ -210,7 +210,10 @@ class MDLTTrainer(Trainer):
 
 
 def save_checkpoint(
-    path: str | Path, model: torch.nn.Module, scaler: Any = None, meta: dict | None = None
+    path: str | Path,
+    model: MDLTTransformer | MDLTMamba,
+    scaler: Any = None,
+    meta: dict | None = None,
 ) -> Path:
     """Write a model-only checkpoint that :func:`load_checkpoint` (and ``thesis mdlt dance``) reads.
 

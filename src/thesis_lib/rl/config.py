@@ -22,7 +22,7 @@ NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
 AUTO_NOISE: dict[str, str | None] = {"SAC": None, "TD3": "normal", "DDPG": "ornstein-uhlenbeck"}
 
 
-def _algo_class(algo: str) -> type:
+def _algo_class(algo: str) -> type[Any]:
     """The stable-baselines3 class for `algo` (imported lazily: SB3 imports torch)."""
     import stable_baselines3
 

@@ -382,9 +382,12 @@ class UR3Driver:
         """
         if self.stopped:
             raise RobotStopped("Emergency stop in force: call clear_stop() before moving again.")
-        if (dt is None) == (fps is None):
+        if dt is not None and fps is None:
+            dt = float(dt)
+        elif dt is None and fps is not None:
+            dt = 1.0 / float(fps)
+        else:
             raise ValueError("Give exactly one of dt (seconds per frame) or fps.")
-        dt = float(dt) if dt is not None else 1.0 / float(fps)
         q = np.atleast_2d(np.asarray(q, dtype=np.float64))
         cur = current if current is not None else self.current()
         if cur is None and not (self.dry_run or allow_unchecked_approach):

@@ -292,7 +292,11 @@ def make_demonstrations(
             obs, r, te, tr, _ = env.step(a)
             hold += bool(env.reached.all())
             tr = tr or hold > hold_steps  # the operator stops recording
-            obs_l.append(obs), A.append(a), R.append(r), term.append(te), trunc.append(tr)
+            obs_l.append(obs)
+            A.append(a)
+            R.append(r)
+            term.append(te)
+            trunc.append(tr)
             done = te or tr
         episodes.append(
             Episode(
