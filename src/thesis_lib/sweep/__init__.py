@@ -20,16 +20,18 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import socket
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import pandas as pd
 
 #: result rows a task function returns: a DataFrame or a list of flat dicts.
-Rows = pd.DataFrame | list[dict[str, Any]]
+Rows: TypeAlias = pd.DataFrame | list[dict[str, Any]]
 
 EXECUTORS = ("inprocess", "local", "ray")
 
@@ -60,8 +62,10 @@ def _json_default(o: Any) -> Any:
 def config_hash(obj: Any, n: int = 16) -> str:
     """First ``n`` hex digits of the SHA-256 of :func:`canonical_json` of ``obj``.
 
-    >>> config_hash({"a": 1}) == config_hash({"a": 1.0 * 1})
+    >>> config_hash({"a": 1, "b": [2]}) == config_hash({"b": (2,), "a": 1})
     True
+    >>> config_hash({"a": 1}) == config_hash({"a": 1.0})  # 1 and 1.0 are different configs
+    False
     """
     return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:n]
 
@@ -93,6 +97,59 @@ class Task:
         return config_hash({"fn": _fn_path(self.fn), "config": dict(self.config)})
 
 
+class TaskFailed(RuntimeError):
+    """A task of a grid raised.
+
+    The message names the task (key, function, config) and the original error; where the task
+    ran in this process the original exception is the ``__cause__``, where it ran in another
+    process or on a Ray node the message carries its traceback. Tasks that finished before the
+    failure are already in the store, so a rerun resumes after them.
+    """
+
+    def __init__(self, task: Task, error: str, traceback_text: str = "") -> None:
+        self.key = task.key
+        self.fn = _fn_path(task.fn)
+        self.config = dict(task.config)
+        self.error = error
+        msg = f"Task {self.key} failed: {self.fn}({canonical_json(self.config)}) raised {error}"
+        if traceback_text:
+            msg += f"\n\nTraceback of the task:\n{traceback_text.rstrip()}"
+        super().__init__(msg)
+
+    def __reduce__(self) -> tuple[Any, ...]:  # picklable as a plain RuntimeError
+        return (RuntimeError, (str(self),))
+
+
+RAY_MISSING = (
+    'The Ray executor needs Ray, an optional extra of thesis_lib: pip install ".[ray]" '
+    '(from the checkout) or pip install "ray>=2.9".'
+)
+
+
+def require_ray() -> Any:
+    """Import and return :mod:`ray`.
+
+    Raises:
+        ImportError: Ray is not installed; the message says ``pip install ".[ray]"``.
+    """
+    try:
+        import ray
+    except ImportError as e:
+        raise ImportError(RAY_MISSING) from e
+    return ray
+
+
+def default_provenance() -> dict[str, Any]:
+    """What every stored task record carries: the git commit and the package versions.
+
+    The same helpers write ``run.json`` (:mod:`thesis_lib.book.results`), so a task can be
+    traced to the code that computed it. Each record also gets ``stored_utc`` when written.
+    """
+    from thesis_lib.book.results import git_commit, package_versions
+
+    return {"git_commit": git_commit(), "versions": package_versions()}
+
+
 def _rows_to_records(rows: Rows) -> list[dict[str, Any]]:
     recs = rows.to_dict(orient="records") if isinstance(rows, pd.DataFrame) else list(rows)
     return json.loads(json.dumps(recs, default=_json_default))
@@ -110,6 +167,7 @@ def execute(task: Task) -> dict[str, Any]:
         "wall_s": round(time.time() - t0, 3),
         "cpu_s": round(time.process_time() - c0, 3),
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "host": socket.gethostname(),
     }
 
 
@@ -126,13 +184,37 @@ class TaskStore:
         return self.path(key).is_file()
 
     def read(self, key: str) -> dict[str, Any]:
+        """The stored record of task ``key``.
+
+        Raises:
+            RuntimeError: the file cannot be read, is not JSON, or is not a task record of
+                ``key`` (a ``rows`` list, the same ``key``); the message names the file and says
+                to delete it.
+        """
         p = self.path(key)
         try:
-            return json.loads(p.read_text())
-        except (OSError, json.JSONDecodeError) as e:
+            rec = json.loads(p.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
             raise RuntimeError(
                 f"Damaged task result {p}: {e}. Delete it and run again to recompute it."
             ) from e
+        if not isinstance(rec, dict) or not isinstance(rec.get("rows"), list):
+            raise RuntimeError(
+                f"Damaged task result {p}: not a task record (no 'rows' list). "
+                "Delete it and run again to recompute it."
+            )
+        if rec.get("key") != key:
+            raise RuntimeError(
+                f"Damaged task result {p}: it holds task {rec.get('key')!r}, not {key!r}. "
+                "Delete it and run again to recompute it."
+            )
+        return rec
+
+    def keys(self) -> list[str]:
+        """Keys of every stored task (sorted)."""
+        if not self.root.is_dir():
+            return []
+        return sorted(p.stem for p in self.root.glob("*.json"))
 
     def write(self, record: dict[str, Any], extra: Mapping[str, Any] | None = None) -> Path:
         self.root.mkdir(parents=True, exist_ok=True)
@@ -151,7 +233,13 @@ def _env_default(name: str, default: str | None) -> str | None:
 
 def resolve_executor(executor: str | None, n_jobs: int | None) -> tuple[str, int]:
     """The executor and job count, from the arguments or ``THESIS_EXECUTOR`` / ``THESIS_JOBS``."""
-    jobs = n_jobs if n_jobs is not None else int(_env_default("THESIS_JOBS", "1") or 1)
+    if n_jobs is None:
+        text = _env_default("THESIS_JOBS", "1") or "1"
+        try:
+            n_jobs = int(text)
+        except ValueError:
+            raise ValueError(f"THESIS_JOBS must be a whole number, got {text!r}") from None
+    jobs = n_jobs
     ex = executor or _env_default("THESIS_EXECUTOR", None)
     if ex is None:
         ex = "local" if jobs > 1 else "inprocess"
@@ -184,13 +272,18 @@ def run_tasks(
         force: recompute finished tasks too (default ``$THESIS_SWEEP_FORCE``).
         desc: the progress bar's label.
         progress: show a progress bar with an ETA (default: unless ``TQDM_DISABLE`` is set).
-        provenance: extra fields written into each task's record (commit, versions …).
+        provenance: extra fields written into each stored record, on top of the git commit,
+            the package versions (:func:`default_provenance`) and ``stored_utc``.
 
     Returns:
         The rows of all tasks, concatenated, with a ``task_key`` column.
 
     Raises:
         ValueError: two tasks with the same key, or an unknown executor.
+        TaskFailed: a task raised (its config is in the message); the tasks that finished
+            before it are stored.
+        RuntimeError: a stored result is damaged (the message names the file).
+        ImportError: ``executor="ray"`` without Ray installed.
     """
     tasks = list(tasks)
     keys = [t.key for t in tasks]
@@ -205,11 +298,16 @@ def run_tasks(
     if st is not None and not force:
         done = {k: st.read(k) for k in keys if st.has(k)}
     todo = [t for t in tasks if t.key not in done]
-    extra = dict(provenance or {})
+    extra: dict[str, Any] = {}
+    if st is not None and todo:
+        extra = {**default_provenance(), **(provenance or {})}
+    elif provenance:
+        extra = dict(provenance)
 
     def finished(rec: dict[str, Any]) -> None:
         if st is not None:
-            st.write(rec, extra)
+            stamp = datetime.now(UTC).isoformat(timespec="seconds")
+            st.write(rec, {**extra, "stored_utc": stamp})
         done[rec["key"]] = rec
 
     from ._executors import run_pending
@@ -235,11 +333,15 @@ def run_tasks(
 
 __all__ = [
     "EXECUTORS",
+    "RAY_MISSING",
     "Task",
+    "TaskFailed",
     "TaskStore",
     "canonical_json",
     "config_hash",
+    "default_provenance",
     "execute",
+    "require_ray",
     "resolve_executor",
     "run_tasks",
 ]

@@ -1,15 +1,30 @@
-"""The executors behind :func:`thesis_lib.sweep.run_tasks`: in-process, joblib, Ray."""
+"""The executors behind :func:`thesis_lib.sweep.run_tasks`: in-process, joblib, Ray.
+
+Each executor runs the pending tasks and hands every finished task's record to ``finished``
+in this process as soon as it arrives (the store writes it at once), advancing one progress
+bar over the whole grid. The first task that raises stops the grid: the executor cancels what
+has not started and raises :class:`~thesis_lib.sweep.TaskFailed` naming the task's config.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
+import os
+import pickle
+import traceback
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from tqdm.auto import tqdm
 
+if TYPE_CHECKING:
+    from . import Task
+
+#: ``Task.resources`` keys that are Ray task options; any other key is a custom Ray resource.
+RAY_OPTION_KEYS = ("num_cpus", "num_gpus", "memory")
+
 
 def run_pending(
-    todo: list[Any],
+    todo: list[Task],
     finished: Callable[[dict[str, Any]], None],
     *,
     executor: str,
@@ -20,23 +35,157 @@ def run_pending(
     n_total: int,
     n_done: int,
 ) -> None:
-    """Run ``todo`` and call ``finished(record)`` as each task ends (in this process)."""
-    from . import execute
+    """Run ``todo`` and call ``finished(record)`` as each task ends (in this process).
 
-    bar = tqdm(total=n_total, initial=n_done, desc=desc, unit="task", disable=progress is False)
+    Args:
+        todo: the tasks without a stored result.
+        finished: called with each task's record as it arrives.
+        executor: ``inprocess``, ``local`` or ``ray``.
+        n_jobs: processes for ``local``; for ``ray`` without ``address``, the CPUs of the local
+            Ray instance it starts (when > 1).
+        address: the Ray cluster (``None``: a local instance, or the one already initialised).
+        desc: the progress bar's label.
+        progress: ``False`` hides the bar, ``None`` shows it unless ``TQDM_DISABLE`` is set.
+        n_total: tasks in the grid; n_done: those already stored (the bar starts there).
+
+    Raises:
+        TaskFailed: the first task that raised.
+    """
+    if progress is None:
+        progress = os.environ.get("TQDM_DISABLE", "").lower() in ("", "0", "false")
+    bar = tqdm(
+        total=n_total,
+        initial=n_done,
+        desc=desc,
+        unit="task",
+        disable=not progress,
+        dynamic_ncols=True,
+    )
     try:
-        if executor == "inprocess" or not todo:
-            for t in todo:
-                finished(execute(t))
-                bar.update()
+        if not todo:
+            return
+        if executor == "inprocess":
+            _run_inprocess(todo, finished, bar)
         elif executor == "local":
-            from joblib import Parallel, delayed
-
-            par = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-            for rec in par(delayed(execute)(t) for t in todo):
-                finished(rec)
-                bar.update()
+            _run_joblib(todo, finished, bar, n_jobs)
+        elif executor == "ray":
+            _run_ray(todo, finished, bar, n_jobs, address)
         else:
-            raise NotImplementedError(f"executor {executor!r}")
+            raise ValueError(f"unknown executor {executor!r}")
     finally:
         bar.close()
+
+
+def _run_inprocess(todo: list[Task], finished: Callable[..., None], bar: Any) -> None:
+    from . import TaskFailed, execute
+
+    for t in todo:
+        try:
+            rec = execute(t)
+        except Exception as e:
+            raise TaskFailed(t, f"{type(e).__name__}: {e}") from e
+        finished(rec)
+        bar.update()
+
+
+def _guarded(task: Task) -> dict[str, Any]:
+    """Run ``task`` in a worker; return ``{"record": …}`` or ``{"error": …, "traceback": …}``.
+
+    A worker returns its failure instead of raising it, so the parent knows which task failed.
+    """
+    from . import execute
+
+    try:
+        return {"key": task.key, "record": execute(task)}
+    except Exception as e:
+        err: BaseException = e
+        try:
+            pickle.dumps(e)
+        except Exception:
+            err = RuntimeError(f"{type(e).__name__}: {e}")
+        return {
+            "key": task.key,
+            "error": err,
+            "message": f"{type(e).__name__}: {e}",
+            "traceback": traceback.format_exc(),
+        }
+
+
+def _run_joblib(todo: list[Task], finished: Callable[..., None], bar: Any, n_jobs: int) -> None:
+    from joblib import Parallel, delayed
+
+    from . import TaskFailed
+
+    by_key = {t.key: t for t in todo}
+    par = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
+    results = par(delayed(_guarded)(t) for t in todo)
+    try:
+        for out in results:
+            if "error" in out:
+                raise TaskFailed(by_key[out["key"]], out["message"], out["traceback"]) from out[
+                    "error"
+                ]
+            finished(out["record"])
+            bar.update()
+    finally:
+        close = getattr(results, "close", None)
+        if close is not None:  # stops the tasks not yet started
+            close()
+
+
+def _ray_options(resources: Mapping[str, float]) -> dict[str, Any]:
+    """``Task.resources`` as ``ray.remote`` options: ``num_cpus``/``num_gpus``/``memory`` as
+    they are, any other key as a custom resource.
+
+    >>> _ray_options({"num_cpus": 2, "num_gpus": 0.5, "TPU": 1})
+    {'num_cpus': 2, 'num_gpus': 0.5, 'resources': {'TPU': 1}}
+    """
+    opts: dict[str, Any] = {k: resources[k] for k in RAY_OPTION_KEYS if k in resources}
+    custom = {k: v for k, v in resources.items() if k not in RAY_OPTION_KEYS}
+    if custom:
+        opts["resources"] = custom
+    return opts
+
+
+def _ray_execute(task: Task) -> dict[str, Any]:
+    return _guarded(task)
+
+
+def _run_ray(
+    todo: list[Task],
+    finished: Callable[..., None],
+    bar: Any,
+    n_jobs: int,
+    address: str | None,
+) -> None:
+    from . import TaskFailed, require_ray
+
+    ray = require_ray()
+    if not ray.is_initialized():
+        if address:
+            ray.init(address=address)
+        else:  # a local instance, kept for later grids of this process (Ray stops it at exit)
+            ray.init(num_cpus=n_jobs if n_jobs > 1 else None, include_dashboard=False)
+    remote = ray.remote(_ray_execute)
+    by_ref: dict[Any, Task] = {}
+    for t in todo:
+        by_ref[remote.options(**_ray_options(t.resources)).remote(t)] = t
+    try:
+        while by_ref:
+            ready, _ = ray.wait(list(by_ref), num_returns=1)
+            for ref in ready:
+                t = by_ref.pop(ref)
+                try:
+                    out = ray.get(ref)
+                except ray.exceptions.RayError as e:  # the worker died, was cancelled …
+                    raise TaskFailed(t, f"{type(e).__name__}: {e}") from e
+                if "error" in out:
+                    raise TaskFailed(t, out["message"], out["traceback"]) from out["error"]
+                finished(out["record"])
+                bar.update()
+    finally:
+        for ref in by_ref:  # after a failure or Ctrl-C: stop what is still queued or running
+            try:
+                ray.cancel(ref, force=True)
+            except Exception:
+                pass

@@ -1,0 +1,248 @@
+"""thesis_lib.sweep: task keys, the on-disk store, resume, force, executors (in-process, joblib,
+Ray), failures and damaged results."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from thesis_lib.sweep import Task, TaskFailed, TaskStore, config_hash, execute, run_tasks
+
+HERE = Path(__file__).resolve().parent
+
+
+def square(config: dict) -> list[dict]:
+    """A toy task: two rows per config; appends one line to ``config['log']`` per call."""
+    if config.get("log"):
+        with open(config["log"], "a") as f:
+            f.write(f"{config['x']}\n")
+    if config["x"] == config.get("fail_at"):
+        raise ValueError(f"x={config['x']} is cursed")
+    return [
+        {"x": config["x"], "seed": config.get("seed", 0), "y": config["x"] ** 2},
+        {"x": config["x"], "seed": config.get("seed", 0), "y": -config["x"]},
+    ]
+
+
+def frame_task(config: dict) -> pd.DataFrame:
+    return pd.DataFrame({"x": [config["x"]], "half": [config["x"] / 2]})
+
+
+def calls(log: Path) -> list[int]:
+    return [int(v) for v in log.read_text().split()] if log.exists() else []
+
+
+def grid(log: Path | None = None, n: int = 5, **extra) -> list[Task]:
+    return [
+        Task(square, {"x": x, "seed": 0, "log": str(log) if log else None, **extra})
+        for x in range(n)
+    ]
+
+
+def test_keys_are_stable_and_change_with_the_config():
+    t = Task(square, {"x": 1, "seed": 0})
+    # the same config in another key order, and a fresh Task, give the same key
+    assert Task(square, {"seed": 0, "x": 1}).key == t.key
+    assert len(t.key) == 16 and int(t.key, 16) >= 0
+    # a fixed value: the key of a config must not drift between versions (stored results)
+    assert config_hash({"a": 1, "b": [1, 2]}) == config_hash({"b": (1, 2), "a": 1})
+    assert config_hash({"a": 1}) == "015abd7f5cc57a2d"
+    # any change of the config, or another function, changes the key
+    assert Task(square, {"x": 2, "seed": 0}).key != t.key
+    assert Task(square, {"x": 1, "seed": 1}).key != t.key
+    assert Task(square, {"x": 1, "seed": 0, "extra": None}).key != t.key
+    assert Task(frame_task, {"x": 1, "seed": 0}).key != t.key
+
+
+def test_task_function_must_be_module_level():
+    with pytest.raises(ValueError, match="module-level"):
+        _ = Task(lambda c: [], {"x": 1}).key
+
+
+def test_execute_record_and_rows(tmp_path):
+    rec = execute(Task(frame_task, {"x": 3}))
+    assert rec["rows"] == [{"x": 3, "half": 1.5}]
+    assert rec["config"] == {"x": 3}
+    assert rec["fn"] == f"{__name__}:frame_task"
+
+
+def test_run_tasks_stores_every_task_with_provenance(tmp_path):
+    df = run_tasks(grid(), store=tmp_path, progress=False)
+    assert list(df.columns) == ["x", "seed", "y", "task_key"]
+    assert df["x"].tolist() == [0, 0, 1, 1, 2, 2, 3, 3, 4, 4]
+    assert df["y"].tolist() == [0, 0, 1, -1, 4, -2, 9, -3, 16, -4]
+    store = TaskStore(tmp_path)
+    assert store.keys() == sorted(t.key for t in grid())
+    rec = store.read(grid()[2].key)
+    assert rec["config"]["x"] == 2 and len(rec["rows"]) == 2
+    assert rec["git_commit"]  # a sha (maybe -dirty) or "unknown" outside a checkout
+    assert rec["versions"]["pandas"] == pd.__version__
+    assert rec["stored_utc"].endswith("+00:00")
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_resume_after_an_interruption_runs_only_the_rest(tmp_path):
+    log = tmp_path / "calls.txt"
+    store = tmp_path / "tasks"
+    with pytest.raises(TaskFailed) as info:
+        run_tasks(grid(log, fail_at=3), store=store, progress=False)
+    # the message names the task's config; the original error is the cause
+    msg = str(info.value)
+    assert '"fail_at":3' in msg and '"x":3' in msg and "cursed" in msg
+    assert isinstance(info.value.__cause__, ValueError)
+    assert calls(log) == [0, 1, 2, 3]
+    assert len(TaskStore(store).keys()) == 3  # the three finished tasks stayed stored
+
+    # the rerun (the failure fixed: the same grid without the cursed value) has other keys,
+    # so use a grid whose first three tasks are the stored ones
+    log.unlink()
+    fixed = grid(log, fail_at=3)[:3] + grid(log, fail_at=99)[3:]
+    df = run_tasks(fixed, store=store, progress=False)
+    assert calls(log) == [3, 4]  # only the missing tasks ran
+    assert df["x"].drop_duplicates().tolist() == [0, 1, 2, 3, 4]
+    # a third run computes nothing
+    log.unlink()
+    again = run_tasks(fixed, store=store, progress=False)
+    assert calls(log) == []
+    pd.testing.assert_frame_equal(again, df)
+
+
+def test_force_recomputes(tmp_path, monkeypatch):
+    log = tmp_path / "calls.txt"
+    run_tasks(grid(log, n=3), store=tmp_path / "s", progress=False)
+    run_tasks(grid(log, n=3), store=tmp_path / "s", progress=False, force=True)
+    assert calls(log) == [0, 1, 2, 0, 1, 2]
+    monkeypatch.setenv("THESIS_SWEEP_FORCE", "1")  # what `thesis run --force` sets
+    run_tasks(grid(log, n=3), store=tmp_path / "s", progress=False)
+    assert calls(log) == [0, 1, 2, 0, 1, 2, 0, 1, 2]
+
+
+def test_no_store_keeps_nothing(tmp_path):
+    log = tmp_path / "calls.txt"
+    a = run_tasks(grid(log, n=2), progress=False)
+    b = run_tasks(grid(log, n=2), progress=False)
+    assert calls(log) == [0, 1, 0, 1]
+    pd.testing.assert_frame_equal(a, b)
+
+
+def test_inprocess_and_local_executors_give_the_same_rows(tmp_path):
+    tasks = grid(n=6) + [Task(frame_task, {"x": x}) for x in (1, 2)]
+    a = run_tasks(tasks, store=tmp_path / "a", executor="inprocess", progress=False)
+    b = run_tasks(tasks, store=tmp_path / "b", executor="local", n_jobs=2, progress=False)
+    pd.testing.assert_frame_equal(a, b)
+    assert a["task_key"].drop_duplicates().tolist() == [t.key for t in tasks]  # task order
+
+
+def test_local_executor_failure_names_the_config_and_keeps_finished_tasks(tmp_path):
+    tasks = grid(n=4, fail_at=0)  # the first task fails; the others may or may not finish
+    with pytest.raises(TaskFailed, match=r'"x":0.*cursed') as info:
+        run_tasks(tasks, store=tmp_path, executor="local", n_jobs=2, progress=False)
+    assert "Traceback of the task" in str(info.value)
+    store = TaskStore(tmp_path)
+    assert tasks[0].key not in store.keys()
+    for key in store.keys():  # whatever finished first is stored and readable
+        assert len(store.read(key)["rows"]) == 2
+
+
+def test_environment_selects_executor_and_jobs(monkeypatch):
+    from thesis_lib.sweep import resolve_executor
+
+    assert resolve_executor(None, None) == ("inprocess", 1)
+    assert resolve_executor(None, 3) == ("local", 3)
+    monkeypatch.setenv("THESIS_JOBS", "2")
+    assert resolve_executor(None, None) == ("local", 2)
+    monkeypatch.setenv("THESIS_EXECUTOR", "inprocess")
+    assert resolve_executor(None, None) == ("inprocess", 2)
+    assert resolve_executor("local", 1) == ("local", 1)
+    with pytest.raises(ValueError, match="unknown executor 'dask'"):
+        resolve_executor("dask", None)
+    monkeypatch.setenv("THESIS_JOBS", "two")
+    with pytest.raises(ValueError, match="THESIS_JOBS"):
+        resolve_executor(None, None)
+
+
+def test_duplicate_tasks_are_rejected(tmp_path):
+    tasks = [*grid(n=2), Task(square, {"seed": 0, "x": 1, "log": None})]
+    with pytest.raises(ValueError, match="appear twice"):
+        run_tasks(tasks, store=tmp_path, progress=False)
+    assert TaskStore(tmp_path).keys() == []  # rejected before anything ran
+
+
+@pytest.mark.parametrize(
+    "content, match",
+    [
+        ('{"key": "x", "rows": [', "Damaged task result .*Delete it"),
+        ('["not", "a", "record"]', "not a task record"),
+        ("{KEY_OTHER}", "holds task 'other'"),
+    ],
+)
+def test_damaged_result_is_a_clear_error(tmp_path, content, match):
+    tasks = grid(n=2)
+    run_tasks(tasks, store=tmp_path, progress=False)
+    path = TaskStore(tmp_path).path(tasks[1].key)
+    if content == "{KEY_OTHER}":
+        rec = json.loads(path.read_text())
+        content = json.dumps({**rec, "key": "other"})
+    path.write_text(content)
+    with pytest.raises(RuntimeError, match=match) as info:
+        run_tasks(tasks, store=tmp_path, progress=False)
+    assert str(path) in str(info.value)
+    # force recomputes it and repairs the file
+    run_tasks(tasks, store=tmp_path, progress=False, force=True)
+    assert TaskStore(tmp_path).read(tasks[1].key)["rows"][0]["x"] == 1
+
+
+def test_ray_missing_is_a_clear_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    with pytest.raises(ImportError, match=r'pip install "\.\[ray\]"'):
+        run_tasks(grid(n=1), executor="ray", progress=False)
+
+
+def test_ray_resources_become_remote_options():
+    from thesis_lib.sweep._executors import _ray_options
+
+    assert _ray_options({"num_cpus": 1}) == {"num_cpus": 1}
+    assert _ray_options({"num_cpus": 4, "num_gpus": 1, "memory": 2e9, "node:x": 0.1}) == {
+        "num_cpus": 4,
+        "num_gpus": 1,
+        "memory": 2e9,
+        "resources": {"node:x": 0.1},
+    }
+
+
+@pytest.mark.slow
+def test_ray_local_instance_gives_the_same_rows_as_local(tmp_path, monkeypatch):
+    ray = pytest.importorskip("ray", reason="Ray is an optional extra: pip install '.[ray]'")
+    # Ray workers import this module by name: put tests/ (and the caller's path) on their path
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.setenv("RAY_ADDRESS", "")  # never join a cluster from a test
+    log = tmp_path / "calls.txt"
+    tasks = grid(log, n=4) + [
+        Task(frame_task, {"x": 5}, resources={"num_cpus": 1, "num_gpus": 0}),
+    ]
+    local = run_tasks(tasks, store=tmp_path / "local", executor="local", n_jobs=2, progress=False)
+    log.unlink()
+    ray_tmp = tempfile.mkdtemp(prefix="ray-")  # short: Ray's socket paths must stay < 108 chars
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, _temp_dir=ray_tmp)
+    try:
+        on_ray = run_tasks(tasks, store=tmp_path / "ray", executor="ray", progress=False)
+        pd.testing.assert_frame_equal(on_ray, local)
+        assert sorted(calls(log)) == [0, 1, 2, 3]
+        stored = TaskStore(tmp_path / "ray")
+        assert stored.keys() == sorted(t.key for t in tasks)
+        # a failing task on Ray: its config in the message, finished tasks stay stored
+        bad = grid(n=3, fail_at=2)
+        with pytest.raises(TaskFailed, match=r'"x":2.*cursed'):
+            run_tasks(bad, store=tmp_path / "bad", executor="ray", progress=False)
+        assert bad[2].key not in TaskStore(tmp_path / "bad").keys()
+    finally:
+        ray.shutdown()
+        shutil.rmtree(ray_tmp, ignore_errors=True)  # leave no session folder behind
