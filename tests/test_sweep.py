@@ -246,3 +246,84 @@ def test_ray_local_instance_gives_the_same_rows_as_local(tmp_path, monkeypatch):
     finally:
         ray.shutdown()
         shutil.rmtree(ray_tmp, ignore_errors=True)  # leave no session folder behind
+
+
+# --- thesis run / thesis book: the options reach the chapter's kernel -------------------------
+
+ENV_NAMES = ["THESIS_EXECUTOR", "THESIS_JOBS", "RAY_ADDRESS", "THESIS_SWEEP_FORCE", "TQDM_DISABLE"]
+
+
+def _fake_project(root: Path) -> None:
+    """A one-chapter project whose notebook writes its kernel's sweep environment to a file."""
+    import nbformat
+
+    (root / "notebooks").mkdir()
+    (root / "params").mkdir()
+    (root / "_toc.yml").write_text(
+        "format: jb-book\nroot: intro\nchapters:\n- file: book/generated/99_env\n"
+    )
+    params = nbformat.v4.new_code_cell('out = "env.json"')
+    params.metadata["tags"] = ["parameters"]
+    dump = nbformat.v4.new_code_cell(
+        "import json, os\n"
+        f"names = {ENV_NAMES!r}\n"
+        "json.dump({k: os.environ.get(k) for k in names}, open(out, 'w'))"
+    )
+    nb = nbformat.v4.new_notebook(cells=[params, dump])
+    nb.metadata["kernelspec"] = {
+        "name": "python3",
+        "display_name": "Python 3",
+        "language": "python",
+    }
+    nbformat.write(nb, root / "notebooks" / "99_env.ipynb")
+    (root / "params" / "99_env.smoke.yml").write_text('out: "env.json"\n')
+
+
+def test_thesis_run_options_reach_the_kernel(tmp_path, monkeypatch):
+    from thesis_lib.cli import main
+
+    _fake_project(tmp_path)
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    for name in ENV_NAMES:
+        monkeypatch.delenv(name, raising=False)
+    out = tmp_path / "env.json"
+    rc = main(["run", "99_env", "-q", "-p", "out", str(out), "-j", "3", "--force"])
+    assert rc == 0
+    assert json.loads(out.read_text()) == {
+        "THESIS_EXECUTOR": None,  # not given: run_tasks picks local for 3 jobs
+        "THESIS_JOBS": "3",
+        "RAY_ADDRESS": None,
+        "THESIS_SWEEP_FORCE": "1",
+        "TQDM_DISABLE": "1",
+    }
+    assert all(name not in os.environ for name in ENV_NAMES)  # the caller's env is restored
+    rc = main(["run", "99_env", "-q", "-p", "out", str(out), "--executor", "inprocess"])
+    assert rc == 0
+    assert json.loads(out.read_text())["THESIS_EXECUTOR"] == "inprocess"
+    assert json.loads(out.read_text())["THESIS_JOBS"] is None
+
+
+def test_thesis_run_option_errors(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from thesis_lib.cli import main
+
+    _fake_project(tmp_path)
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    assert main(["run", "99_env", "-j", "0"]) == 1
+    assert "at least 1" in capsys.readouterr().err
+    assert main(["run", "99_env", "--executor", "local", "--address", "head:6379"]) == 1
+    assert "needs the Ray executor" in capsys.readouterr().err
+    monkeypatch.setitem(sys.modules, "ray", None)  # Ray not installed
+    assert main(["run", "99_env", "--executor", "ray"]) == 1
+    assert 'pip install ".[ray]"' in capsys.readouterr().err
+    assert not (tmp_path / "env.json").exists()  # failed before the notebook ran
+
+
+def test_thesis_book_keeps_j_for_chapters():
+    from thesis_lib.cli import build_parser
+
+    args = build_parser().parse_args(["book", "-j", "2", "--task-jobs", "4", "--executor", "local"])
+    assert (args.jobs, args.task_jobs, args.executor, args.force) == (2, 4, "local", False)
+    args = build_parser().parse_args(["run", "04_hdt", "--task-jobs", "2", "--address", "h:1"])
+    assert (args.task_jobs, args.address) == (2, "h:1")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import pickle
 import traceback
+import warnings
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -129,8 +130,10 @@ def _run_joblib(todo: list[Task], finished: Callable[..., None], bar: Any, n_job
             bar.update()
     finally:
         close = getattr(results, "close", None)
-        if close is not None:  # stops the tasks not yet started
-            close()
+        if close is not None:  # cancels the tasks not finished (after a failure or Ctrl-C)
+            with warnings.catch_warnings():  # joblib's "tasks ... have been cancelled" hint
+                warnings.simplefilter("ignore", UserWarning)
+                close()
 
 
 def _ray_options(resources: Mapping[str, float]) -> dict[str, Any]:
