@@ -1,5 +1,7 @@
 """The ``thesis`` command: run chapters, build the book, make data sets, run benchmarks.
 
+The CLI and the notebooks are the only code that imports ``thesis_lib.chapters``.
+
     thesis run 01_background -p rl_timesteps 20000      # one chapter, papermill underneath
     thesis run 01_background -f params/01_background.full.yml
     thesis book -j 2                                    # every chapter, then the HTML book
@@ -85,6 +87,75 @@ def _cmd_list(args: argparse.Namespace) -> int:
         params = notebook_parameters(chapter)
         print(f"{chapter}: " + ", ".join(f"{k}={v!r}" for k, v in params.items()))
     return 0
+
+
+def chapter_config(chapter: str) -> type:
+    """The ``Config`` dataclass of ``chapter``'s chapters module (the one source of its
+    parameters; see :data:`thesis_lib.book.params.CHAPTER_MODULES`).
+
+    Raises:
+        ValueError: no module for the chapter, the module is missing, or has no dataclass
+            ``Config``.
+    """
+    import dataclasses
+
+    from thesis_lib.book.params import chapter_module
+
+    name = chapter_module(chapter)
+    try:
+        module = importlib.import_module(name)
+    except ModuleNotFoundError as err:
+        if err.name and name.startswith(err.name):
+            raise ValueError(
+                f"{chapter}: no module {name} (its Config defines the parameters)"
+            ) from None
+        raise
+    cls = getattr(module, "Config", None)
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
+        raise ValueError(f"{chapter}: {name} has no dataclass Config")
+    return cls
+
+
+def _cmd_params(args: argparse.Namespace) -> int:
+    from thesis_lib.book import list_chapters, project_root, resolve_chapter
+    from thesis_lib.book.params import (
+        CHAPTER_MODULES,
+        check_chapter,
+        parameters_source,
+        write_chapter,
+    )
+
+    root = project_root()
+    if args.chapters:
+        chapters = [resolve_chapter(c, root) for c in args.chapters]
+    else:
+        chapters = [c for c in list_chapters(root) if c in CHAPTER_MODULES]
+    status = 0
+    for chapter in chapters:
+        try:
+            cls = chapter_config(chapter)
+        except ValueError as err:
+            print(f"thesis params: {err}", file=sys.stderr)
+            status = 1
+            continue
+        if args.write:
+            changed = write_chapter(chapter, cls, root)
+            for path in changed:
+                print(f"{chapter}: wrote {path.relative_to(root)}")
+            if not changed:
+                print(f"{chapter}: up to date")
+        elif args.check:
+            problems = check_chapter(chapter, cls, root)
+            for problem in problems:
+                print(f"{chapter}: {problem}", file=sys.stderr)
+            if problems:
+                status = 1
+            else:
+                print(f"{chapter}: parameters cell and params/ match {cls.__name__}")
+        else:
+            print(f"# {chapter}: the parameters cell generated from {CHAPTER_MODULES[chapter]}")
+            print(parameters_source(cls))
+    return status
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -181,6 +252,26 @@ def build_parser() -> argparse.ArgumentParser:
 
     lst = sub.add_parser("list", help="list the chapters and their parameters")
     lst.set_defaults(func=_cmd_list)
+
+    params = sub.add_parser(
+        "params",
+        help="the parameters cell and params/ files from each chapter's Config",
+        description="Each chapter's Config dataclass (thesis_lib.chapters.<name>.Config) is "
+        "the one source of its notebook's parameters cell and params/<chapter>.smoke.yml; "
+        "params/<chapter>.full.yml lists only what differs from smoke. Without --write or "
+        "--check, print the generated parameters cells.",
+    )
+    params.add_argument("chapters", nargs="*", help="only these chapters (default: all)")
+    what = params.add_mutually_exclusive_group()
+    what.add_argument(
+        "--write",
+        action="store_true",
+        help="rewrite the parameters cell and smoke.yml, and prune full.yml to what differs",
+    )
+    what.add_argument(
+        "--check", action="store_true", help="exit 1 and list every file that disagrees"
+    )
+    params.set_defaults(func=_cmd_params)
 
     bench = sub.add_parser("bench", help="run benchmarks/bench_<name>.py")
     bench.add_argument("name")
