@@ -123,6 +123,19 @@ def test_force_recomputes(tmp_path, monkeypatch):
     assert calls(log) == [0, 1, 2, 0, 1, 2, 0, 1, 2]
 
 
+def test_one_progress_bar_counts_stored_tasks_as_done(tmp_path, capsys, monkeypatch):
+    monkeypatch.delenv("TQDM_DISABLE", raising=False)
+    run_tasks(grid(n=3), store=tmp_path, progress=False)
+    capsys.readouterr()
+    run_tasks(grid(n=5), store=tmp_path, desc="Table 9.9", progress=True)
+    err = capsys.readouterr().err
+    assert "Table 9.9" in err and "3/5" in err and "5/5" in err
+    assert "1/5" not in err  # starts at the 3 stored tasks
+    monkeypatch.setenv("TQDM_DISABLE", "1")  # what `thesis run` sets in a chapter's kernel
+    run_tasks(grid(n=6), store=tmp_path, desc="Table 9.9")
+    assert "Table 9.9" not in capsys.readouterr().err
+
+
 def test_no_store_keeps_nothing(tmp_path):
     log = tmp_path / "calls.txt"
     a = run_tasks(grid(log, n=2), progress=False)
