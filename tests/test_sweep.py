@@ -113,6 +113,52 @@ def test_resume_after_an_interruption_runs_only_the_rest(tmp_path):
     pd.testing.assert_frame_equal(again, df)
 
 
+def slow_square(config: dict) -> list[dict]:
+    """``square``, but each call waits ``config['wait']`` seconds (for the Ctrl-C test)."""
+    import time
+
+    time.sleep(config["wait"])
+    return square(config)
+
+
+INTERRUPTED_RUN = """
+import sys
+from test_sweep import Task, run_tasks, slow_square
+tasks = [Task(slow_square, {"x": x, "wait": 0.2, "log": sys.argv[2]}) for x in range(8)]
+run_tasks(tasks, store=sys.argv[1], executor=sys.argv[3], n_jobs=2, progress=False)
+"""
+
+
+@pytest.mark.parametrize("executor", ["inprocess", "local"])
+def test_ctrl_c_then_rerun_finishes_only_the_missing_tasks(tmp_path, executor):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    store, log = tmp_path / "tasks", tmp_path / "calls.txt"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), *sys.path])}
+    cmd = [sys.executable, "-c", INTERRUPTED_RUN, str(store), str(log), executor]
+    proc = subprocess.Popen(cmd, env=env, stderr=subprocess.PIPE, text=True)
+    try:
+        while len(TaskStore(store).keys()) < 3:  # wait for three finished tasks, then Ctrl-C
+            assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode != 0 and "KeyboardInterrupt" in err
+    stored = TaskStore(store).keys()
+    assert 3 <= len(stored) < 8
+    assert not list(store.glob("*.tmp"))
+    log.unlink()
+    rerun = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert len(calls(log)) == 8 - len(stored)  # only the missing tasks ran
+    assert len(TaskStore(store).keys()) == 8
+
+
 def test_force_recomputes(tmp_path, monkeypatch):
     log = tmp_path / "calls.txt"
     run_tasks(grid(log, n=3), store=tmp_path / "s", progress=False)

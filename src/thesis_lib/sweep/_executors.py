@@ -11,7 +11,6 @@ from __future__ import annotations
 import os
 import pickle
 import traceback
-import warnings
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -112,28 +111,69 @@ def _guarded(task: Task) -> dict[str, Any]:
         }
 
 
+#: Thread-pool variables limited in each local worker (``cpu_count // n_jobs`` threads), as
+#: joblib does, unless set in the caller's environment.
+THREAD_VARS = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "BLIS_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
+
+
 def _run_joblib(todo: list[Task], finished: Callable[..., None], bar: Any, n_jobs: int) -> None:
-    from joblib import Parallel, delayed
+    """``n_jobs`` local processes (joblib's loky executor, reused across grids).
+
+    Each worker holds one task at a time (the next is sent when one finishes). After a
+    failure no new task starts; the running ones finish and are stored, then
+    :class:`TaskFailed` is raised. Ctrl-C stops the workers at once.
+    """
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    from joblib import cpu_count
+    from joblib.externals.loky import get_reusable_executor
 
     from . import TaskFailed
 
-    by_key = {t.key: t for t in todo}
-    par = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-    results = par(delayed(_guarded)(t) for t in todo)
+    threads = str(max(cpu_count() // n_jobs, 1))
+    env = {var: os.environ.get(var, threads) for var in THREAD_VARS}
+    executor = get_reusable_executor(max_workers=n_jobs, env=env)
+    queue = iter(todo)
+    pending: dict[Any, Task] = {}
+
+    def submit_next() -> None:
+        task = next(queue, None)
+        if task is not None:
+            pending[executor.submit(_guarded, task)] = task
+
+    for _ in range(n_jobs):
+        submit_next()
+    failure: TaskFailed | None = None
     try:
-        for out in results:
-            if "error" in out:
-                raise TaskFailed(by_key[out["key"]], out["message"], out["traceback"]) from out[
-                    "error"
-                ]
-            finished(out["record"])
-            bar.update()
-    finally:
-        close = getattr(results, "close", None)
-        if close is not None:  # cancels the tasks not finished (after a failure or Ctrl-C)
-            with warnings.catch_warnings():  # joblib's "tasks ... have been cancelled" hint
-                warnings.simplefilter("ignore", UserWarning)
-                close()
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                task = pending.pop(fut)
+                try:
+                    out = fut.result()
+                except Exception as e:  # the worker died (killed, out of memory …)
+                    out = {"error": e, "message": f"{type(e).__name__}: {e}", "traceback": ""}
+                if "error" in out:
+                    if failure is None:
+                        failure = TaskFailed(task, out["message"], out["traceback"])
+                        failure.__cause__ = out["error"]
+                    continue
+                finished(out["record"])
+                bar.update()
+                if failure is None:
+                    submit_next()
+    except BaseException:  # Ctrl-C, or an error while storing: stop the workers now
+        executor.shutdown(wait=False, kill_workers=True)
+        raise
+    if failure is not None:
+        raise failure
 
 
 def _ray_options(resources: Mapping[str, float]) -> dict[str, Any]:
