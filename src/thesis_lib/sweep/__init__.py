@@ -12,7 +12,27 @@ Executors: ``"inprocess"`` (one after the other, in this process), ``"local"`` (
 processes, ``n_jobs`` of them) and ``"ray"`` (a Ray cluster at ``address`` or
 ``$RAY_ADDRESS``; ``pip install ".[ray]"``). The defaults come from the environment that
 ``thesis run`` sets for a chapter (``THESIS_EXECUTOR``, ``THESIS_JOBS``, ``RAY_ADDRESS``,
-``THESIS_SWEEP_FORCE``), so a notebook needs no parameter for them.
+``THESIS_SWEEP_FORCE``), so a notebook needs no parameter for them. One progress bar counts
+the grid's tasks (the stored ones as done) and shows an ETA.
+
+Each stored record holds the task's config, rows, timing and host, plus the git commit and
+package versions of the run (:func:`default_provenance`) and when it was stored. A task that
+raises stops the grid with :class:`TaskFailed`, which names its config; what finished before
+stays stored.
+
+Example (``train_and_evaluate`` defined at module level in a library module)::
+
+    def train_and_evaluate(config: dict) -> list[dict]:
+        ...  # train config["method"] on config["dataset"] with config["seed"]
+        return [{"method": config["method"], "seed": config["seed"], "score": score}]
+
+    tasks = [
+        Task(train_and_evaluate, {"method": m, "dataset": d, "seed": s, "iterations": 100})
+        for m in ("DT", "HDT") for d in ("hopper/medium",) for s in (0, 1, 2)
+    ]
+    rows = run_tasks(tasks, store=results_dir("04_hdt") / "tasks", desc="Table 5.3")
+
+Used by every chapter that runs a grid (``thesis_lib.chapters``).
 """
 
 from __future__ import annotations
@@ -84,7 +104,10 @@ class Task:
     Attributes:
         fn: a module-level function ``fn(config) -> rows`` (a DataFrame or a list of dicts).
         config: everything the task depends on, JSON-able (method, setting, seed, sizes …).
-        resources: per-task resources for Ray (``{"num_cpus": 1, "num_gpus": 0}``).
+        resources: what one run of the task needs on a Ray cluster: ``num_cpus``,
+            ``num_gpus`` (fractions allowed), ``memory`` (bytes) and any custom Ray resource
+            (``ray.remote`` options). The in-process and local executors ignore them. Not
+            part of the key.
     """
 
     fn: Callable[[dict[str, Any]], Rows]

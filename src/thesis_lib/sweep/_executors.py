@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import pickle
 import traceback
+import warnings
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -190,6 +191,26 @@ def _ray_options(resources: Mapping[str, float]) -> dict[str, Any]:
     return opts
 
 
+#: ``ray.remote`` option names and the cluster resource each one counts.
+_RAY_RESOURCE_NAMES = {"num_cpus": "CPU", "num_gpus": "GPU", "memory": "memory"}
+
+
+def _infeasible(resources: Mapping[str, float], cluster: Mapping[str, float]) -> list[str]:
+    """What a task asks for beyond the whole cluster's ``cluster`` resources (Ray would wait
+    for it forever unless the cluster grows).
+
+    >>> _infeasible({"num_cpus": 1, "num_gpus": 1}, {"CPU": 2.0})
+    ['num_gpus=1 (the cluster has 0 GPU)']
+    """
+    out = []
+    for key, amount in resources.items():
+        name = _RAY_RESOURCE_NAMES.get(key, key)
+        have = cluster.get(name, 0)
+        if amount > have:
+            out.append(f"{key}={amount} (the cluster has {have:g} {name})")
+    return out
+
+
 def _ray_execute(task: Task) -> dict[str, Any]:
     return _guarded(task)
 
@@ -209,6 +230,16 @@ def _run_ray(
             ray.init(address=address)
         else:  # a local instance, kept for later grids of this process (Ray stops it at exit)
             ray.init(num_cpus=n_jobs if n_jobs > 1 else None, include_dashboard=False)
+    cluster = ray.cluster_resources()
+    asks = {tuple(sorted(t.resources.items())): t for t in todo}
+    for t in asks.values():
+        too_much = _infeasible(t.resources, cluster)
+        if too_much:
+            warnings.warn(
+                f"Task {t.key} asks for {', '.join(too_much)}: it waits until the Ray "
+                "cluster has that much (add nodes, or lower Task.resources).",
+                stacklevel=4,
+            )
     remote = ray.remote(_ray_execute)
     by_ref: dict[Any, Task] = {}
     for t in todo:
