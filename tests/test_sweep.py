@@ -305,6 +305,12 @@ def test_ray_local_instance_gives_the_same_rows_as_local(tmp_path, monkeypatch):
     finally:
         ray.shutdown()
         shutil.rmtree(ray_tmp, ignore_errors=True)  # leave no session folder behind
+    # without a Ray of its own, the executor starts a local instance for the grid and stops it
+    log.unlink()
+    again = run_tasks(tasks, store=tmp_path / "ray2", executor="ray", n_jobs=2, progress=False)
+    pd.testing.assert_frame_equal(again, local)
+    assert sorted(calls(log)) == [0, 1, 2, 3]
+    assert not ray.is_initialized()
 
 
 # --- thesis run / thesis book: the options reach the chapter's kernel -------------------------

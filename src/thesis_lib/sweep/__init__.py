@@ -354,6 +354,26 @@ def run_tasks(
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+def probe(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """A task that reports where it ran: host, process, CPUs and GPUs it sees.
+
+    Check a cluster before a long run: ``run_tasks([Task(probe, {"i": i}) for i in
+    range(8)], executor="ray")`` lists the nodes that took tasks.
+
+    >>> sorted(probe({"i": 3})[0])
+    ['cpus', 'cuda_visible_devices', 'host', 'i', 'pid']
+    """
+    return [
+        {
+            "i": config.get("i"),
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "cpus": os.cpu_count(),
+            "cuda_visible_devices": os.environ.get("CUDA_VISIBLE_DEVICES", ""),
+        }
+    ]
+
+
 __all__ = [
     "EXECUTORS",
     "RAY_MISSING",
@@ -364,6 +384,7 @@ __all__ = [
     "config_hash",
     "default_provenance",
     "execute",
+    "probe",
     "require_ray",
     "resolve_executor",
     "run_tasks",

@@ -8,8 +8,11 @@ has not started and raises :class:`~thesis_lib.sweep.TaskFailed` naming the task
 
 from __future__ import annotations
 
+import logging
 import os
 import pickle
+import shutil
+import tempfile
 import traceback
 import warnings
 from collections.abc import Callable, Mapping
@@ -222,29 +225,44 @@ def _run_ray(
     n_jobs: int,
     address: str | None,
 ) -> None:
+    """Tasks as Ray remote calls with their resources; records gathered with ``ray.wait`` as
+    they finish. Uses the Ray this process is connected to; otherwise connects to ``address``
+    or starts a local instance (``n_jobs`` CPUs when > 1, else all), and disconnects (stops the
+    local instance and removes its session folder) when the grid ends."""
     from . import TaskFailed, require_ray
 
     ray = require_ray()
+    started, session_dir = False, None
     if not ray.is_initialized():
         if address:
-            ray.init(address=address)
-        else:  # a local instance, kept for later grids of this process (Ray stops it at exit)
-            ray.init(num_cpus=n_jobs if n_jobs > 1 else None, include_dashboard=False)
-    cluster = ray.cluster_resources()
-    asks = {tuple(sorted(t.resources.items())): t for t in todo}
-    for t in asks.values():
-        too_much = _infeasible(t.resources, cluster)
-        if too_much:
-            warnings.warn(
-                f"Task {t.key} asks for {', '.join(too_much)}: it waits until the Ray "
-                "cluster has that much (add nodes, or lower Task.resources).",
-                stacklevel=4,
+            ray.init(address=address, logging_level=logging.WARNING)
+        else:
+            # a short folder: Ray's socket paths must stay under 108 characters
+            session_dir = tempfile.mkdtemp(
+                prefix="ray-", dir="/tmp" if os.name == "posix" else None
             )
-    remote = ray.remote(_ray_execute)
+            ray.init(
+                num_cpus=n_jobs if n_jobs > 1 else None,
+                include_dashboard=False,
+                logging_level=logging.WARNING,
+                _temp_dir=session_dir,
+            )
+        started = True
     by_ref: dict[Any, Task] = {}
-    for t in todo:
-        by_ref[remote.options(**_ray_options(t.resources)).remote(t)] = t
     try:
+        cluster = ray.cluster_resources()
+        asks = {tuple(sorted(t.resources.items())): t for t in todo}
+        for t in asks.values():
+            too_much = _infeasible(t.resources, cluster)
+            if too_much:
+                warnings.warn(
+                    f"Task {t.key} asks for {', '.join(too_much)}: it waits until the Ray "
+                    "cluster has that much (add nodes, or lower Task.resources).",
+                    stacklevel=4,
+                )
+        remote = ray.remote(_ray_execute)
+        for t in todo:
+            by_ref[remote.options(**_ray_options(t.resources)).remote(t)] = t
         while by_ref:
             ready, _ = ray.wait(list(by_ref), num_returns=1)
             for ref in ready:
@@ -263,3 +281,7 @@ def _run_ray(
                 ray.cancel(ref, force=True)
             except Exception:
                 pass
+        if started:
+            ray.shutdown()
+        if session_dir is not None:
+            shutil.rmtree(session_dir, ignore_errors=True)
