@@ -96,6 +96,8 @@ def test_resume_after_an_interruption_runs_only_the_rest(tmp_path):
     msg = str(info.value)
     assert '"fail_at":3' in msg and '"x":3' in msg and "cursed" in msg
     assert isinstance(info.value.__cause__, ValueError)
+    assert isinstance(info.value, ValueError)  # `except ValueError` still catches it
+    assert type(info.value).__name__ == "TaskFailed[ValueError]"
     assert calls(log) == [0, 1, 2, 3]
     assert len(TaskStore(store).keys()) == 3  # the three finished tasks stayed stored
 
@@ -203,10 +205,25 @@ def test_local_executor_failure_names_the_config_and_keeps_finished_tasks(tmp_pa
     with pytest.raises(TaskFailed, match=r'"x":0.*cursed') as info:
         run_tasks(tasks, store=tmp_path, executor="local", n_jobs=2, progress=False)
     assert "Traceback of the task" in str(info.value)
+    assert isinstance(info.value, ValueError)  # the worker's error type comes back
     store = TaskStore(tmp_path)
     assert tasks[0].key not in store.keys()
     for key in store.keys():  # whatever finished first is stored and readable
         assert len(store.read(key)["rows"]) == 2
+
+
+def test_task_failed_keeps_the_error_type():
+    task = Task(square, {"x": 1})
+    err = TaskFailed.of(task, KeyError("seed"))
+    assert isinstance(err, KeyError) and isinstance(err, TaskFailed)
+    assert (
+        str(err)
+        == f"Task {task.key} failed: {__name__}:square({{\"x\":1}}) raised KeyError: 'seed'"
+    )
+    assert err.__cause__.args == ("seed",)
+    odd = TaskFailed.of(task, FileNotFoundError(2, "gone"))
+    assert isinstance(odd, FileNotFoundError) and isinstance(odd, TaskFailed)
+    assert "gone" in str(odd)
 
 
 def test_environment_selects_executor_and_jobs(monkeypatch):

@@ -126,7 +126,8 @@ class TaskFailed(RuntimeError):
     The message names the task (key, function, config) and the original error; where the task
     ran in this process the original exception is the ``__cause__``, where it ran in another
     process or on a Ray node the message carries its traceback. Tasks that finished before the
-    failure are already in the store, so a rerun resumes after them.
+    failure are already in the store, so a rerun resumes after them. The exception is also an
+    instance of the original error's type where possible (``TaskFailed[ValueError]``).
     """
 
     def __init__(self, task: Task, error: str, traceback_text: str = "") -> None:
@@ -139,8 +140,35 @@ class TaskFailed(RuntimeError):
             msg += f"\n\nTraceback of the task:\n{traceback_text.rstrip()}"
         super().__init__(msg)
 
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
     def __reduce__(self) -> tuple[Any, ...]:  # picklable as a plain RuntimeError
         return (RuntimeError, (str(self),))
+
+    @classmethod
+    def of(
+        cls, task: Task, error: BaseException, message: str | None = None, traceback_text: str = ""
+    ) -> TaskFailed:
+        """The failure of ``task`` with ``error``, also an instance of ``error``'s type where
+        Python allows it, so ``except ValueError`` still catches a task's ``ValueError``."""
+        kind: type[TaskFailed] = cls
+        etype = type(error)
+        if not issubclass(etype, cls):
+            if etype not in _FAILED_TYPES:
+                try:
+                    _FAILED_TYPES[etype] = type(
+                        f"TaskFailed[{etype.__name__}]", (cls, etype), {"__module__": __name__}
+                    )
+                except TypeError:  # incompatible layouts (e.g. OSError): plain TaskFailed
+                    _FAILED_TYPES[etype] = cls
+            kind = _FAILED_TYPES[etype]
+        exc = kind(task, message or f"{etype.__name__}: {error}", traceback_text)
+        exc.__cause__ = error
+        return exc
+
+
+_FAILED_TYPES: dict[type, type[TaskFailed]] = {}
 
 
 RAY_MISSING = (

@@ -87,7 +87,7 @@ def _run_inprocess(todo: list[Task], finished: Callable[..., None], bar: Any) ->
         try:
             rec = execute(t)
         except Exception as e:
-            raise TaskFailed(t, f"{type(e).__name__}: {e}") from e
+            raise TaskFailed.of(t, e) from e
         finished(rec)
         bar.update()
 
@@ -166,8 +166,8 @@ def _run_joblib(todo: list[Task], finished: Callable[..., None], bar: Any, n_job
                     out = {"error": e, "message": f"{type(e).__name__}: {e}", "traceback": ""}
                 if "error" in out:
                     if failure is None:
-                        failure = TaskFailed(task, out["message"], out["traceback"])
-                        failure.__cause__ = out["error"]
+                        err = out["error"]
+                        failure = TaskFailed.of(task, err, out["message"], out["traceback"])
                     continue
                 finished(out["record"])
                 bar.update()
@@ -270,9 +270,10 @@ def _run_ray(
                 try:
                     out = ray.get(ref)
                 except ray.exceptions.RayError as e:  # the worker died, was cancelled …
-                    raise TaskFailed(t, f"{type(e).__name__}: {e}") from e
+                    raise TaskFailed.of(t, e) from e
                 if "error" in out:
-                    raise TaskFailed(t, out["message"], out["traceback"]) from out["error"]
+                    err = out["error"]
+                    raise TaskFailed.of(t, err, out["message"], out["traceback"]) from err
                 finished(out["record"])
                 bar.update()
     finally:
