@@ -196,9 +196,10 @@ def default_provenance() -> dict[str, Any]:
     The same helpers write ``run.json`` (:mod:`thesis_lib.book.results`), so a task can be
     traced to the code that computed it. Each record also gets ``stored_utc`` when written.
     """
-    from thesis_lib.book.results import git_commit, package_versions
+    from thesis_lib.book.results import RECORDED_PACKAGES, git_commit, package_versions
 
-    return {"git_commit": git_commit(), "versions": package_versions()}
+    versions = package_versions((*RECORDED_PACKAGES, "joblib", "ray"))
+    return {"git_commit": git_commit(), "versions": versions}
 
 
 def _rows_to_records(rows: Rows) -> list[dict[str, Any]]:
