@@ -245,7 +245,10 @@ def test_environment_selects_executor_and_jobs(monkeypatch):
 
 def test_duplicate_tasks_are_rejected(tmp_path):
     tasks = [*grid(n=2), Task(square, {"seed": 0, "x": 1, "log": None})]
-    with pytest.raises(ValueError, match="appear twice"):
+    with pytest.raises(
+        ValueError,
+        match=r"appear twice in the grid, e.g. .*square\(\{\"log\":null,\"seed\":0,\"x\":1\}\)",
+    ):
         run_tasks(tasks, store=tmp_path, progress=False)
     assert TaskStore(tmp_path).keys() == []  # rejected before anything ran
 

@@ -340,8 +340,14 @@ def run_tasks(
     tasks = list(tasks)
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
-        dup = sorted({k for k in keys if keys.count(k) > 1})
-        raise ValueError(f"{len(dup)} task(s) appear twice in the grid (keys {dup[:3]} …)")
+        from collections import Counter
+
+        dup = [k for k, n in Counter(keys).items() if n > 1]
+        first = tasks[keys.index(dup[0])]
+        raise ValueError(
+            f"{len(dup)} task(s) appear twice in the grid, e.g. "
+            f"{_fn_path(first.fn)}({canonical_json(dict(first.config))}) (key {dup[0]})"
+        )
     if force is None:
         force = _env_default("THESIS_SWEEP_FORCE", "0") not in ("0", "false", "False")
     ex, jobs = resolve_executor(executor, n_jobs)
