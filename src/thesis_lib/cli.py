@@ -1,8 +1,13 @@
 """The ``thesis`` command: run chapters, build the book, make data sets, run benchmarks.
 
+The CLI and the notebooks are the only code that imports ``thesis_lib.chapters``.
+
     thesis run 01_background -p rl_timesteps 20000      # one chapter, papermill underneath
     thesis run 01_background -f params/01_background.full.yml
     thesis book -j 2                                    # every chapter, then the HTML book
+    thesis run 04_hdt -j 2                              # the chapter's tasks in 2 processes
+    thesis run 04_hdt --profile full --executor ray     # tasks on the Ray cluster at $RAY_ADDRESS
+    thesis params --check                               # parameters cells/params files vs Config
     thesis data generate --task hopper --tier medium    # see 'thesis data --help'
     thesis bench dtw                                    # benchmarks/bench_dtw.py
 
@@ -19,6 +24,23 @@ import sys
 from pathlib import Path
 
 
+def _sweep_env(args: argparse.Namespace) -> dict[str, str]:
+    """The kernel environment from ``--executor/--address/--jobs|--task-jobs/--force``.
+
+    Raises:
+        ValueError: bad combination (see :func:`thesis_lib.book.runner.sweep_environment`).
+        ImportError: ``--executor ray`` without Ray installed (says ``pip install ".[ray]"``).
+    """
+    from thesis_lib.book.runner import sweep_environment
+
+    env = sweep_environment(args.executor, args.task_jobs, args.address, args.force)
+    if env.get("THESIS_EXECUTOR") == "ray":
+        from thesis_lib.sweep import require_ray
+
+        require_ray()  # fail here, not in the middle of the notebook
+    return env
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from thesis_lib.book import ChapterFailed, run_chapter
     from thesis_lib.book.params import parse_value
@@ -26,10 +48,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
     params = {name: parse_value(value) for name, value in (args.param or [])}
     profile: str | Path | None = args.file or args.profile
     try:
+        env = _sweep_env(args)
         result = run_chapter(
-            args.chapter, params, profile=profile, output=args.output, progress=not args.quiet
+            args.chapter,
+            params,
+            profile=profile,
+            output=args.output,
+            progress=not args.quiet,
+            env=env,
         )
-    except (ValueError, FileNotFoundError, ChapterFailed) as err:
+    except (ValueError, FileNotFoundError, ImportError, ChapterFailed) as err:
         print(f"thesis run: {err}", file=sys.stderr)
         return 1
     print(f"{result.chapter}: executed in {result.wall_time_s:.0f} s -> {result.output}")
@@ -42,9 +70,10 @@ def _cmd_book(args: argparse.Namespace) -> int:
 
     try:
         if not args.no_run:
-            run_chapters(args.chapters or None, jobs=args.jobs, profile=args.profile)
+            env = _sweep_env(args)
+            run_chapters(args.chapters or None, jobs=args.jobs, profile=args.profile, env=env)
         index = build_book(strict=not args.no_strict)
-    except (ValueError, FileNotFoundError, ChapterFailed, RuntimeError) as err:
+    except (ValueError, FileNotFoundError, ImportError, ChapterFailed, RuntimeError) as err:
         print(f"thesis book: {err}", file=sys.stderr)
         return 1
     print(f"The book is at {index}")
@@ -60,6 +89,75 @@ def _cmd_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def chapter_config(chapter: str) -> type:
+    """The ``Config`` dataclass of ``chapter``'s chapters module (the one source of its
+    parameters; see :data:`thesis_lib.book.params.CHAPTER_MODULES`).
+
+    Raises:
+        ValueError: no module for the chapter, the module is missing, or has no dataclass
+            ``Config``.
+    """
+    import dataclasses
+
+    from thesis_lib.book.params import chapter_module
+
+    name = chapter_module(chapter)
+    try:
+        module = importlib.import_module(name)
+    except ModuleNotFoundError as err:
+        if err.name and name.startswith(err.name):
+            raise ValueError(
+                f"{chapter}: no module {name} (its Config defines the parameters)"
+            ) from None
+        raise
+    cls = getattr(module, "Config", None)
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
+        raise ValueError(f"{chapter}: {name} has no dataclass Config")
+    return cls
+
+
+def _cmd_params(args: argparse.Namespace) -> int:
+    from thesis_lib.book import list_chapters, project_root, resolve_chapter
+    from thesis_lib.book.params import (
+        CHAPTER_MODULES,
+        check_chapter,
+        parameters_source,
+        write_chapter,
+    )
+
+    root = project_root()
+    if args.chapters:
+        chapters = [resolve_chapter(c, root) for c in args.chapters]
+    else:
+        chapters = [c for c in list_chapters(root) if c in CHAPTER_MODULES]
+    status = 0
+    for chapter in chapters:
+        try:
+            cls = chapter_config(chapter)
+        except ValueError as err:
+            print(f"thesis params: {err}", file=sys.stderr)
+            status = 1
+            continue
+        if args.write:
+            changed = write_chapter(chapter, cls, root)
+            for path in changed:
+                print(f"{chapter}: wrote {path.relative_to(root)}")
+            if not changed:
+                print(f"{chapter}: up to date")
+        elif args.check:
+            problems = check_chapter(chapter, cls, root)
+            for problem in problems:
+                print(f"{chapter}: {problem}", file=sys.stderr)
+            if problems:
+                status = 1
+            else:
+                print(f"{chapter}: parameters cell and params/ match {cls.__name__}")
+        else:
+            print(f"# {chapter}: the parameters cell generated from {CHAPTER_MODULES[chapter]}")
+            print(parameters_source(cls))
+    return status
+
+
 def _cmd_bench(args: argparse.Namespace) -> int:
     from thesis_lib.book import project_root
 
@@ -73,6 +171,28 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         )
         return 1
     return subprocess.call([sys.executable, str(script), *args.rest])
+
+
+def _add_sweep_options(cmd: argparse.ArgumentParser) -> None:
+    """``--executor``, ``--address``, ``--force``: how a chapter's task grids run."""
+    from thesis_lib.sweep import EXECUTORS
+
+    cmd.add_argument(
+        "--executor",
+        choices=EXECUTORS,
+        help="where the chapter's tasks run: in this kernel, local processes, or a Ray "
+        "cluster (default: inprocess, or local with -j/--task-jobs > 1)",
+    )
+    cmd.add_argument(
+        "--address",
+        help="Ray cluster address (default $RAY_ADDRESS; none starts a local Ray); implies "
+        "--executor ray",
+    )
+    cmd.add_argument(
+        "--force",
+        action="store_true",
+        help="recompute tasks that already have a stored result under results/<chapter>/",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -96,6 +216,16 @@ def build_parser() -> argparse.ArgumentParser:
         "-o", "--output", help="executed notebook path (default book/generated/<chapter>.ipynb)"
     )
     run.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    run.add_argument(
+        "-j",
+        "--jobs",
+        "--task-jobs",
+        dest="task_jobs",
+        type=int,
+        metavar="N",
+        help="tasks of the chapter's grids run in parallel (local processes unless --executor)",
+    )
+    _add_sweep_options(run)
     run.set_defaults(func=_cmd_run)
 
     book = sub.add_parser("book", help="run every chapter, then build the HTML book")
@@ -110,10 +240,38 @@ def build_parser() -> argparse.ArgumentParser:
     book.add_argument(
         "--no-strict", action="store_true", help="do not turn Sphinx warnings into errors"
     )
+    book.add_argument(
+        "--task-jobs",
+        dest="task_jobs",
+        type=int,
+        metavar="N",
+        help="tasks of each chapter's grids run in parallel (-j counts chapters)",
+    )
+    _add_sweep_options(book)
     book.set_defaults(func=_cmd_book)
 
     lst = sub.add_parser("list", help="list the chapters and their parameters")
     lst.set_defaults(func=_cmd_list)
+
+    params = sub.add_parser(
+        "params",
+        help="the parameters cell and params/ files from each chapter's Config",
+        description="Each chapter's Config dataclass (thesis_lib.chapters.<name>.Config) is "
+        "the one source of its notebook's parameters cell and params/<chapter>.smoke.yml; "
+        "params/<chapter>.full.yml lists only what differs from smoke. Without --write or "
+        "--check, print the generated parameters cells.",
+    )
+    params.add_argument("chapters", nargs="*", help="only these chapters (default: all)")
+    what = params.add_mutually_exclusive_group()
+    what.add_argument(
+        "--write",
+        action="store_true",
+        help="rewrite the parameters cell and smoke.yml, and prune full.yml to what differs",
+    )
+    what.add_argument(
+        "--check", action="store_true", help="exit 1 and list every file that disagrees"
+    )
+    params.set_defaults(func=_cmd_params)
 
     bench = sub.add_parser("bench", help="run benchmarks/bench_<name>.py")
     bench.add_argument("name")

@@ -11,6 +11,7 @@ import dataclasses
 import difflib
 import inspect
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any, TypeVar
 
 T = TypeVar("T")
@@ -107,3 +108,429 @@ def parse_value(text: str) -> Any:
         return yaml.safe_load(text)
     except yaml.YAMLError:
         return text
+
+
+# --- One source for parameters: the chapter's Config ---------------------------------------
+#
+# A chapter's ``Config`` dataclass (defaults = the smoke scale) generates the notebook's
+# ``parameters`` cell and ``params/<chapter>.smoke.yml``; ``params/<chapter>.full.yml`` lists
+# only what differs from smoke. ``thesis params --write`` regenerates, ``--check`` compares.
+
+#: The chapters module of each notebook; its ``Config`` dataclass is the one source of the
+#: notebook's parameters (the ``thesis params`` command imports it).
+CHAPTER_MODULES: dict[str, str] = {
+    "01_background": "thesis_lib.chapters.background",
+    "survey": "thesis_lib.chapters.survey",
+    "02_clfd": "thesis_lib.chapters.clfd",
+    "03_defender": "thesis_lib.chapters.defender",
+    "04_hdt": "thesis_lib.chapters.hdt",
+    "05_decision_mamba": "thesis_lib.chapters.decision_mamba",
+    "06_mdlt": "thesis_lib.chapters.mdlt",
+    "07_ur3_deployment": "thesis_lib.chapters.ur3",
+}
+
+#: Line length of the generated cell (the project's ruff ``line-length``).
+LINE_LENGTH = 100
+
+SMOKE_HEADER = (
+    "# Generated from {source} by `thesis params --write`; edit the Config, not this file.\n"
+)
+
+
+def chapter_module(chapter: str) -> str:
+    """The chapters module holding ``chapter``'s ``Config``, e.g. ``thesis_lib.chapters.hdt``.
+
+    >>> chapter_module("04_hdt")
+    'thesis_lib.chapters.hdt'
+
+    Raises:
+        ValueError: ``chapter`` is not in :data:`CHAPTER_MODULES` (the message lists them).
+    """
+    try:
+        return CHAPTER_MODULES[chapter]
+    except KeyError:
+        raise ValueError(
+            f"No chapters module for '{chapter}'. Known: {', '.join(CHAPTER_MODULES)}."
+        ) from None
+
+
+def _plain(value: Any, where: str) -> Any:
+    """``value`` as YAML/literal-able data: tuples become lists, paths strings."""
+    from pathlib import PurePath
+
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    if isinstance(value, PurePath):
+        return str(value)
+    if isinstance(value, list | tuple):
+        return [_plain(v, where) for v in value]
+    if isinstance(value, dict):
+        for k in value:
+            if not isinstance(k, str | int) or isinstance(k, bool):
+                raise TypeError(f"{where}: dict key {k!r} must be a string or an integer")
+        return {k: _plain(v, where) for k, v in value.items()}
+    raise TypeError(
+        f"{where}: default {value!r} ({type(value).__name__}) cannot be a notebook parameter; "
+        "use numbers, strings, booleans, None, lists and dicts of them"
+    )
+
+
+def config_defaults(cls: type) -> dict[str, Any]:
+    """The defaults of a Config dataclass, field by field, as plain data (the smoke profile).
+
+    >>> @dataclasses.dataclass
+    ... class Demo:
+    ...     seed: int = 0
+    ...     sizes: tuple = (8, 16)
+    >>> config_defaults(Demo)
+    {'seed': 0, 'sizes': [8, 16]}
+
+    Raises:
+        TypeError: not a dataclass, a field without a default, or a default that is not plain
+            data.
+    """
+    if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
+        raise TypeError(f"{cls!r} is not a dataclass")
+    fields = [f for f in dataclasses.fields(cls) if f.init]
+    missing = [
+        f.name
+        for f in fields
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    ]
+    if missing:
+        raise TypeError(
+            f"{cls.__name__} must give every field a default (the smoke scale); "
+            f"no default: {', '.join(missing)}"
+        )
+    obj = cls()
+    return {f.name: _plain(getattr(obj, f.name), f"{cls.__name__}.{f.name}") for f in fields}
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """Each field's documentation: the string right after it (an attribute docstring), else a
+    comment at the end of its line; whitespace collapsed. Fields of base classes included."""
+    import ast
+    import io
+    import textwrap
+    import tokenize
+
+    docs: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if klass is object or not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            source = textwrap.dedent(inspect.getsource(klass))
+        except (OSError, TypeError):
+            continue
+        comments = {
+            tok.start[0]: tok.string.lstrip("#").strip()
+            for tok in tokenize.generate_tokens(io.StringIO(source).readline)
+            if tok.type == tokenize.COMMENT
+        }
+        body = ast.parse(source).body[0]
+        if not isinstance(body, ast.ClassDef):
+            continue
+        stmts = body.body
+        for i, node in enumerate(stmts):
+            if not (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)):
+                continue
+            nxt = stmts[i + 1] if i + 1 < len(stmts) else None
+            text = ""
+            if (
+                isinstance(nxt, ast.Expr)
+                and isinstance(nxt.value, ast.Constant)
+                and isinstance(nxt.value.value, str)
+            ):
+                text = nxt.value.value
+            else:
+                end = node.end_lineno or node.lineno
+                text = comments.get(end, "") or comments.get(node.lineno, "")
+            if text.strip():
+                docs[node.target.id] = " ".join(text.split())
+    return docs
+
+
+def _first_sentence(text: str) -> str:
+    """The first sentence of ``text`` (up to a '.', '!' or '?' before a capital or the end)."""
+    import re
+
+    m = re.match(r"(.+?[.!?])(?=\s+[A-Z(`*]|\s*$)", text)
+    return m.group(1) if m else text
+
+
+def _trailing_comment(text: str) -> str:
+    """A field's doc as a trailing comment that papermill still parses: papermill's parameter
+    parser skips a line with two ``=``, so ``=`` becomes ':' (and ``<=``, ``>=``, ``!=``, ``==``
+    their symbols)."""
+    import re
+
+    for a, b in (("<=", "≤"), (">=", "≥"), ("!=", "≠"), ("==", "≡")):
+        text = text.replace(a, b)
+    return re.sub(r"\s*=\s*", ": ", text)
+
+
+def _py_str(s: str) -> str:
+    """A string literal as ruff formats it: double quotes unless that adds escapes."""
+    r = repr(s)
+    if r.startswith("'") and '"' not in s:
+        return '"' + r[1:-1].replace("\\'", "'") + '"'
+    return r
+
+
+def _py_flat(value: Any) -> str:
+    """``value`` as a one-line Python literal, as ruff would write it."""
+    import math
+
+    if value is None or isinstance(value, bool):
+        return repr(value)
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return 'float("nan")'
+        if math.isinf(value):
+            return 'float("inf")' if value > 0 else '-float("inf")'
+        return repr(value)
+    if isinstance(value, str):
+        return _py_str(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_py_flat(v) for v in value) + "]"
+    if isinstance(value, dict):
+        items = (f"{_py_flat(k)}: {_py_flat(v)}" for k, v in value.items())
+        return "{" + ", ".join(items) + "}"
+    raise TypeError(f"cannot write {value!r} as a literal")
+
+
+def _py_literal(value: Any, indent: int, used: int, tail: int = 0) -> str:
+    """``value`` as ruff formats it when it starts at column ``used`` with ``tail`` characters
+    after it on its last line: flat if it fits, else a list or dict one item per line."""
+    flat = _py_flat(value)
+    if used + len(flat) + tail <= LINE_LENGTH or not isinstance(value, list | dict) or not value:
+        return flat
+    pad = " " * (indent + 4)
+    if isinstance(value, list):
+        items = [pad + _py_literal(v, indent + 4, indent + 4, 1) + "," for v in value]
+        return "[\n" + "\n".join(items) + "\n" + " " * indent + "]"
+    lines = []
+    for k, v in value.items():
+        key = f"{_py_flat(k)}: "
+        lines.append(pad + key + _py_literal(v, indent + 4, indent + 4 + len(key), 1) + ",")
+    return "{\n" + "\n".join(lines) + "\n" + " " * indent + "}"
+
+
+def parameters_source(cls: type) -> str:
+    """The notebook's ``parameters`` cell for a Config dataclass: one ``name = value`` line per
+    field, in field order, with the first sentence of the field's docstring as a trailing
+    comment (as comment lines above it when the line would pass 100 characters). The text is
+    stable and ruff-format clean.
+
+    The comments come from the class's source file (:func:`field_docs`): a field followed by
+    the attribute docstring "Seed of every random draw. Set it to repeat a run." gives
+    ``seed = 0  # Seed of every random draw.``; ``envs: tuple = ("Hopper-v5",)  # gymnasium
+    ids`` gives ``envs = ["Hopper-v5"]  # gymnasium ids``. A class without a source file (as
+    here) gives the lines without comments:
+
+    >>> @dataclasses.dataclass
+    ... class Demo:
+    ...     seed: int = 0
+    ...     lr: float = 1e-3
+    ...     envs: tuple = ("Hopper-v5",)
+    >>> print(parameters_source(Demo))
+    seed = 0
+    lr = 0.001
+    envs = ["Hopper-v5"]
+    """
+    import textwrap
+
+    defaults = config_defaults(cls)
+    docs = field_docs(cls)
+    lines: list[str] = []
+    for name, value in defaults.items():
+        head = f"{name} = "
+        doc = _first_sentence(docs.get(name, ""))
+        comment = f"  # {_trailing_comment(doc)}" if doc else ""
+        code = head + _py_literal(value, 0, len(head))
+        last = code.rsplit("\n", 1)[-1]
+        if comment and len(last) + len(comment) > LINE_LENGTH:
+            lines.extend(
+                textwrap.wrap(
+                    doc,
+                    LINE_LENGTH,
+                    initial_indent="# ",
+                    subsequent_indent="# ",
+                    break_long_words=False,
+                    break_on_hyphens=False,
+                )
+            )
+            comment = ""
+        lines.append(code + comment)
+    return "\n".join(lines)
+
+
+def smoke_yaml(cls: type, source: str | None = None) -> str:
+    """``params/<chapter>.smoke.yml`` for a Config: a header naming ``source`` (default the
+    class's import path), then every field's default in field order."""
+    import yaml
+
+    source = source or f"{cls.__module__}.{cls.__qualname__}"
+    body = yaml.safe_dump(
+        config_defaults(cls), sort_keys=False, default_flow_style=False, allow_unicode=True
+    )
+    return SMOKE_HEADER.format(source=source) + body
+
+
+def full_overrides(defaults: Mapping[str, Any], full: Mapping[str, Any]) -> dict[str, Any]:
+    """The entries of a full profile that differ from the smoke defaults.
+
+    >>> full_overrides({"seed": 0, "steps": 10}, {"seed": 0, "steps": 1000})
+    {'steps': 1000}
+    """
+    return {k: v for k, v in full.items() if k not in defaults or _plain(v, k) != defaults[k]}
+
+
+def check_full_profile(
+    cls: type, full: Mapping[str, Any], where: str = "the full profile"
+) -> list[str]:
+    """Problems of a full profile against its Config: unknown names, values equal to the smoke
+    default (a full profile lists only what differs), values the Config rejects.
+
+    >>> @dataclasses.dataclass
+    ... class Demo:
+    ...     seed: int = 0
+    ...     steps: int = 10
+    >>> check_full_profile(Demo, {"seed": 0, "step": 1000}, "demo.full.yml")  # doctest: +NORMALIZE_WHITESPACE
+    ["demo.full.yml: 'step' is not a parameter of Demo (did you mean 'steps'?)",
+     "demo.full.yml: 'seed' has the smoke value 0; list only what differs from smoke"]
+    """
+    defaults = config_defaults(cls)
+    problems = []
+    for name in full:
+        if name not in defaults:
+            close = difflib.get_close_matches(name, list(defaults), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            problems.append(f"{where}: '{name}' is not a parameter of {cls.__name__}{hint}")
+    for name, value in full.items():
+        if name in defaults and _plain(value, name) == defaults[name]:
+            problems.append(
+                f"{where}: '{name}' has the smoke value {value!r}; list only what differs from smoke"
+            )
+    known = {k: v for k, v in full.items() if k in defaults}
+    try:
+        cls(**known)
+    except (TypeError, ValueError) as err:
+        problems.append(f"{where}: {cls.__name__} rejects these values: {err}")
+    return problems
+
+
+def prune_full_yaml(text: str, defaults: Mapping[str, Any]) -> str:
+    """A full profile's text with only what differs from ``defaults``; its leading comment
+    block (why these values) is kept.
+
+    >>> print(prune_full_yaml("# thesis scale\\nseed: 0\\nsteps: 1000\\n", {"seed": 0, "steps": 10}), end="")
+    # thesis scale
+    steps: 1000
+    """
+    import yaml
+
+    lines = text.splitlines()
+    n = 0
+    while n < len(lines) and (lines[n].startswith("#") or not lines[n].strip()):
+        n += 1
+    header = "\n".join(lines[:n]).rstrip()
+    data = yaml.safe_load(text) or {}
+    if not isinstance(data, dict):
+        raise ValueError(f"a profile must be a mapping, got {type(data).__name__}")
+    over = full_overrides(defaults, data)
+    body = yaml.safe_dump(over, sort_keys=False, allow_unicode=True) if over else ""
+    return (header + "\n" if header else "") + body
+
+
+def notebook_parameters_cell(path: str | Path) -> str:
+    """The source of the notebook's cell tagged ``parameters``.
+
+    Raises:
+        ValueError: no such cell, or more than one.
+    """
+    import nbformat
+
+    nb = nbformat.read(str(path), as_version=4)
+    return _parameters_cell(nb, path).source
+
+
+def _parameters_cell(nb: Any, path: Any) -> Any:
+    cells = [c for c in nb.cells if "parameters" in c.get("metadata", {}).get("tags", [])]
+    if len(cells) != 1:
+        raise ValueError(f"{path} must have exactly one cell tagged 'parameters', has {len(cells)}")
+    return cells[0]
+
+
+def write_parameters_cell(path: str | Path, source: str) -> bool:
+    """Replace the source of the notebook's ``parameters`` cell; return whether it changed.
+
+    The rest of the notebook is written back as nbformat writes it (outputs untouched).
+    """
+    import nbformat
+
+    nb = nbformat.read(str(path), as_version=4)
+    cell = _parameters_cell(nb, path)
+    if cell.source == source:
+        return False
+    cell.source = source
+    nbformat.write(nb, str(path))
+    return True
+
+
+def check_chapter(chapter: str, cls: type, root: str | Path) -> list[str]:
+    """Where ``chapter``'s files disagree with its Config (empty when they agree): the
+    notebook's ``parameters`` cell and ``params/<chapter>.smoke.yml`` against the generated
+    text, ``params/<chapter>.full.yml`` against :func:`check_full_profile`."""
+    import yaml
+
+    root = Path(root)
+    problems = []
+    nb = root / "notebooks" / f"{chapter}.ipynb"
+    want = parameters_source(cls)
+    try:
+        if notebook_parameters_cell(nb) != want:
+            problems.append(
+                f"{nb.relative_to(root)}: the parameters cell differs from "
+                f"{cls.__name__} (run 'thesis params --write {chapter}')"
+            )
+    except (OSError, ValueError) as err:
+        problems.append(str(err))
+    smoke = root / "params" / f"{chapter}.smoke.yml"
+    if not smoke.is_file() or smoke.read_text() != smoke_yaml(cls):
+        problems.append(
+            f"params/{chapter}.smoke.yml differs from {cls.__name__} "
+            f"(run 'thesis params --write {chapter}')"
+        )
+    full = root / "params" / f"{chapter}.full.yml"
+    if full.is_file():
+        data = yaml.safe_load(full.read_text()) or {}
+        if not isinstance(data, dict):
+            problems.append(f"params/{chapter}.full.yml must hold a mapping")
+        else:
+            problems += check_full_profile(cls, data, f"params/{chapter}.full.yml")
+    return problems
+
+
+def write_chapter(chapter: str, cls: type, root: str | Path) -> list[Path]:
+    """Regenerate ``chapter``'s parameters cell and smoke profile from its Config, and prune its
+    full profile to what differs from smoke; return the files that changed."""
+    root = Path(root)
+    changed = []
+    nb = root / "notebooks" / f"{chapter}.ipynb"
+    if write_parameters_cell(nb, parameters_source(cls)):
+        changed.append(nb)
+    smoke = root / "params" / f"{chapter}.smoke.yml"
+    text = smoke_yaml(cls)
+    if not smoke.is_file() or smoke.read_text() != text:
+        smoke.write_text(text)
+        changed.append(smoke)
+    full = root / "params" / f"{chapter}.full.yml"
+    if full.is_file():
+        pruned = prune_full_yaml(full.read_text(), config_defaults(cls))
+        if pruned != full.read_text():
+            full.write_text(pruned)
+            changed.append(full)
+    return changed

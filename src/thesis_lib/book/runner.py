@@ -145,6 +145,7 @@ def run_chapter(
     kernel: str = "python3",
     progress: bool = True,
     root: Path | None = None,
+    env: Mapping[str, str] | None = None,
 ) -> ChapterRun:
     """Execute one chapter notebook with papermill.
 
@@ -155,6 +156,8 @@ def run_chapter(
         output: where the executed notebook goes (default ``book/generated/<chapter>.ipynb``).
         kernel: Jupyter kernel name.
         progress: show papermill's cell progress bar.
+        env: environment variables for the notebook's kernel, over the caller's (e.g.
+            :func:`sweep_environment`: how the chapter's task grids run).
 
     Raises:
         ValueError: an unknown parameter name (listing the valid ones).
@@ -171,7 +174,7 @@ def run_chapter(
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
-        with _kernel_environment():
+        with _kernel_environment(env):
             pm.execute_notebook(
                 str(notebook_path(chapter, root)),
                 str(out),
@@ -212,22 +215,73 @@ own bar over the cells still shows progress). ``MUJOCO_GL=egl``: MuJoCo renders 
 (the UR3 and CLfD frames); where EGL is missing the UR3 renderer falls back to matplotlib."""
 
 
+#: Kernel environment variables that say how a chapter's task grids run (read by
+#: :func:`thesis_lib.sweep.run_tasks`): executor, parallel tasks, Ray address, recompute.
+SWEEP_ENV = ("THESIS_EXECUTOR", "THESIS_JOBS", "RAY_ADDRESS", "THESIS_SWEEP_FORCE")
+
+
+def sweep_environment(
+    executor: str | None = None,
+    jobs: int | None = None,
+    address: str | None = None,
+    force: bool = False,
+) -> dict[str, str]:
+    """The kernel environment for ``thesis run --executor/--jobs/--address/--force``.
+
+    Only what is given is set, so a variable the caller exported stays in effect otherwise.
+    An ``address`` without an executor means ``ray``.
+
+    >>> sweep_environment("local", 4)
+    {'THESIS_EXECUTOR': 'local', 'THESIS_JOBS': '4'}
+    >>> sweep_environment(address="ray://head:10001", force=True)
+    {'THESIS_EXECUTOR': 'ray', 'RAY_ADDRESS': 'ray://head:10001', 'THESIS_SWEEP_FORCE': '1'}
+
+    Raises:
+        ValueError: an unknown executor, ``jobs < 1``, or an address with a non-Ray executor.
+    """
+    from thesis_lib.sweep import EXECUTORS
+
+    if address and executor is None:
+        executor = "ray"
+    env: dict[str, str] = {}
+    if executor is not None:
+        if executor not in EXECUTORS:
+            raise ValueError(f"Unknown executor '{executor}'. Use one of {', '.join(EXECUTORS)}.")
+        env["THESIS_EXECUTOR"] = executor
+    if jobs is not None:
+        if jobs < 1:
+            raise ValueError(f"The number of parallel tasks must be at least 1, got {jobs}.")
+        env["THESIS_JOBS"] = str(jobs)
+    if address:
+        if executor != "ray":
+            raise ValueError(f"A Ray address needs the Ray executor, not '{executor}'.")
+        env["RAY_ADDRESS"] = address
+    if force:
+        env["THESIS_SWEEP_FORCE"] = "1"
+    return env
+
+
 @contextlib.contextmanager
-def _kernel_environment() -> Iterator[None]:
-    """Set :data:`KERNEL_ENV_DEFAULTS` that the caller did not set, for the duration."""
-    added = [k for k in KERNEL_ENV_DEFAULTS if k not in os.environ]
-    for k in added:
-        os.environ[k] = KERNEL_ENV_DEFAULTS[k]
+def _kernel_environment(env: Mapping[str, str] | None = None) -> Iterator[None]:
+    """For the duration: set ``env`` (over the caller's values) and the
+    :data:`KERNEL_ENV_DEFAULTS` that neither sets; then restore the environment."""
+    wanted = {k: v for k, v in KERNEL_ENV_DEFAULTS.items() if k not in os.environ}
+    wanted.update(env or {})
+    saved = {k: os.environ.get(k) for k in wanted}
+    os.environ.update(wanted)
     try:
         yield
     finally:
-        for k in added:
-            os.environ.pop(k, None)
+        for k, old in saved.items():
+            if old is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = old
 
 
 def _run_one(args: tuple) -> ChapterRun:
-    chapter, parameters, profile, root = args
-    return run_chapter(chapter, parameters, profile=profile, root=root, progress=False)
+    chapter, parameters, profile, root, env = args
+    return run_chapter(chapter, parameters, profile=profile, root=root, progress=False, env=env)
 
 
 def run_chapters(
@@ -237,15 +291,21 @@ def run_chapters(
     profile: str | Path | None = "smoke",
     parameters: Mapping[str, Mapping[str, Any]] | None = None,
     root: Path | None = None,
+    env: Mapping[str, str] | None = None,
 ) -> list[ChapterRun]:
     """Run several chapters, ``jobs`` at a time in separate processes; every chapter is tried.
+
+    ``jobs`` counts chapters; how each chapter's own task grids run (executor, parallel
+    tasks) is set by ``env`` (see :func:`sweep_environment`), given to every chapter's kernel.
 
     Raises:
         ChapterFailed: after all chapters ran, if any failed (every failure in the message).
     """
     root = root or project_root()
     chapters = [resolve_chapter(c, root) for c in (chapters or list_chapters(root))]
-    tasks = [(c, dict((parameters or {}).get(c, {})), profile, root) for c in chapters]
+    tasks = [
+        (c, dict((parameters or {}).get(c, {})), profile, root, dict(env or {})) for c in chapters
+    ]
     done: list[ChapterRun] = []
     failures: list[str] = []
 

@@ -12,7 +12,27 @@ Executors: ``"inprocess"`` (one after the other, in this process), ``"local"`` (
 processes, ``n_jobs`` of them) and ``"ray"`` (a Ray cluster at ``address`` or
 ``$RAY_ADDRESS``; ``pip install ".[ray]"``). The defaults come from the environment that
 ``thesis run`` sets for a chapter (``THESIS_EXECUTOR``, ``THESIS_JOBS``, ``RAY_ADDRESS``,
-``THESIS_SWEEP_FORCE``), so a notebook needs no parameter for them.
+``THESIS_SWEEP_FORCE``), so a notebook needs no parameter for them. One progress bar counts
+the grid's tasks (the stored ones as done) and shows an ETA.
+
+Each stored record holds the task's config, rows, timing and host, plus the git commit and
+package versions of the run (:func:`default_provenance`) and when it was stored. A task that
+raises stops the grid with :class:`TaskFailed`, which names its config; what finished before
+stays stored.
+
+Example (``train_and_evaluate`` defined at module level in a library module)::
+
+    def train_and_evaluate(config: dict) -> list[dict]:
+        ...  # train config["method"] on config["dataset"] with config["seed"]
+        return [{"method": config["method"], "seed": config["seed"], "score": score}]
+
+    tasks = [
+        Task(train_and_evaluate, {"method": m, "dataset": d, "seed": s, "iterations": 100})
+        for m in ("DT", "HDT") for d in ("hopper/medium",) for s in (0, 1, 2)
+    ]
+    rows = run_tasks(tasks, store=results_dir("04_hdt") / "tasks", desc="Table 5.3")
+
+Used by every chapter that runs a grid (``thesis_lib.chapters``).
 """
 
 from __future__ import annotations
@@ -20,16 +40,18 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import socket
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import pandas as pd
 
 #: result rows a task function returns: a DataFrame or a list of flat dicts.
-Rows = pd.DataFrame | list[dict[str, Any]]
+Rows: TypeAlias = pd.DataFrame | list[dict[str, Any]]
 
 EXECUTORS = ("inprocess", "local", "ray")
 
@@ -60,8 +82,10 @@ def _json_default(o: Any) -> Any:
 def config_hash(obj: Any, n: int = 16) -> str:
     """First ``n`` hex digits of the SHA-256 of :func:`canonical_json` of ``obj``.
 
-    >>> config_hash({"a": 1}) == config_hash({"a": 1.0 * 1})
+    >>> config_hash({"a": 1, "b": [2]}) == config_hash({"b": (2,), "a": 1})
     True
+    >>> config_hash({"a": 1}) == config_hash({"a": 1.0})  # 1 and 1.0 are different configs
+    False
     """
     return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:n]
 
@@ -80,7 +104,10 @@ class Task:
     Attributes:
         fn: a module-level function ``fn(config) -> rows`` (a DataFrame or a list of dicts).
         config: everything the task depends on, JSON-able (method, setting, seed, sizes …).
-        resources: per-task resources for Ray (``{"num_cpus": 1, "num_gpus": 0}``).
+        resources: what one run of the task needs on a Ray cluster: ``num_cpus``,
+            ``num_gpus`` (fractions allowed), ``memory`` (bytes) and any custom Ray resource
+            (``ray.remote`` options). The in-process and local executors ignore them. Not
+            part of the key.
     """
 
     fn: Callable[[dict[str, Any]], Rows]
@@ -91,6 +118,88 @@ class Task:
     def key(self) -> str:
         """Hash of the function's import path and the config."""
         return config_hash({"fn": _fn_path(self.fn), "config": dict(self.config)})
+
+
+class TaskFailed(RuntimeError):
+    """A task of a grid raised.
+
+    The message names the task (key, function, config) and the original error; where the task
+    ran in this process the original exception is the ``__cause__``, where it ran in another
+    process or on a Ray node the message carries its traceback. Tasks that finished before the
+    failure are already in the store, so a rerun resumes after them. The exception is also an
+    instance of the original error's type where possible (``TaskFailed[ValueError]``).
+    """
+
+    def __init__(self, task: Task, error: str, traceback_text: str = "") -> None:
+        self.key = task.key
+        self.fn = _fn_path(task.fn)
+        self.config = dict(task.config)
+        self.error = error
+        msg = f"Task {self.key} failed: {self.fn}({canonical_json(self.config)}) raised {error}"
+        if traceback_text:
+            msg += f"\n\nTraceback of the task:\n{traceback_text.rstrip()}"
+        super().__init__(msg)
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+    def __reduce__(self) -> tuple[Any, ...]:  # picklable as a plain RuntimeError
+        return (RuntimeError, (str(self),))
+
+    @classmethod
+    def of(
+        cls, task: Task, error: BaseException, message: str | None = None, traceback_text: str = ""
+    ) -> TaskFailed:
+        """The failure of ``task`` with ``error``, also an instance of ``error``'s type where
+        Python allows it, so ``except ValueError`` still catches a task's ``ValueError``."""
+        kind: type[TaskFailed] = cls
+        etype = type(error)
+        if not issubclass(etype, cls):
+            if etype not in _FAILED_TYPES:
+                try:
+                    _FAILED_TYPES[etype] = type(
+                        f"TaskFailed[{etype.__name__}]", (cls, etype), {"__module__": __name__}
+                    )
+                except TypeError:  # incompatible layouts (e.g. OSError): plain TaskFailed
+                    _FAILED_TYPES[etype] = cls
+            kind = _FAILED_TYPES[etype]
+        exc = kind(task, message or f"{etype.__name__}: {error}", traceback_text)
+        exc.__cause__ = error
+        return exc
+
+
+_FAILED_TYPES: dict[type, type[TaskFailed]] = {}
+
+
+RAY_MISSING = (
+    'The Ray executor needs Ray, an optional extra of thesis_lib: pip install ".[ray]" '
+    '(from the checkout) or pip install "ray>=2.9".'
+)
+
+
+def require_ray() -> Any:
+    """Import and return :mod:`ray`.
+
+    Raises:
+        ImportError: Ray is not installed; the message says ``pip install ".[ray]"``.
+    """
+    try:
+        import ray
+    except ImportError as e:
+        raise ImportError(RAY_MISSING) from e
+    return ray
+
+
+def default_provenance() -> dict[str, Any]:
+    """What every stored task record carries: the git commit and the package versions.
+
+    The same helpers write ``run.json`` (:mod:`thesis_lib.book.results`), so a task can be
+    traced to the code that computed it. Each record also gets ``stored_utc`` when written.
+    """
+    from thesis_lib.book.results import RECORDED_PACKAGES, git_commit, package_versions
+
+    versions = package_versions((*RECORDED_PACKAGES, "joblib", "ray"))
+    return {"git_commit": git_commit(), "versions": versions}
 
 
 def _rows_to_records(rows: Rows) -> list[dict[str, Any]]:
@@ -110,6 +219,7 @@ def execute(task: Task) -> dict[str, Any]:
         "wall_s": round(time.time() - t0, 3),
         "cpu_s": round(time.process_time() - c0, 3),
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        "host": socket.gethostname(),
     }
 
 
@@ -126,13 +236,37 @@ class TaskStore:
         return self.path(key).is_file()
 
     def read(self, key: str) -> dict[str, Any]:
+        """The stored record of task ``key``.
+
+        Raises:
+            RuntimeError: the file cannot be read, is not JSON, or is not a task record of
+                ``key`` (a ``rows`` list, the same ``key``); the message names the file and says
+                to delete it.
+        """
         p = self.path(key)
         try:
-            return json.loads(p.read_text())
-        except (OSError, json.JSONDecodeError) as e:
+            rec = json.loads(p.read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
             raise RuntimeError(
                 f"Damaged task result {p}: {e}. Delete it and run again to recompute it."
             ) from e
+        if not isinstance(rec, dict) or not isinstance(rec.get("rows"), list):
+            raise RuntimeError(
+                f"Damaged task result {p}: not a task record (no 'rows' list). "
+                "Delete it and run again to recompute it."
+            )
+        if rec.get("key") != key:
+            raise RuntimeError(
+                f"Damaged task result {p}: it holds task {rec.get('key')!r}, not {key!r}. "
+                "Delete it and run again to recompute it."
+            )
+        return rec
+
+    def keys(self) -> list[str]:
+        """Keys of every stored task (sorted)."""
+        if not self.root.is_dir():
+            return []
+        return sorted(p.stem for p in self.root.glob("*.json"))
 
     def write(self, record: dict[str, Any], extra: Mapping[str, Any] | None = None) -> Path:
         self.root.mkdir(parents=True, exist_ok=True)
@@ -151,7 +285,13 @@ def _env_default(name: str, default: str | None) -> str | None:
 
 def resolve_executor(executor: str | None, n_jobs: int | None) -> tuple[str, int]:
     """The executor and job count, from the arguments or ``THESIS_EXECUTOR`` / ``THESIS_JOBS``."""
-    jobs = n_jobs if n_jobs is not None else int(_env_default("THESIS_JOBS", "1") or 1)
+    if n_jobs is None:
+        text = _env_default("THESIS_JOBS", "1") or "1"
+        try:
+            n_jobs = int(text)
+        except ValueError:
+            raise ValueError(f"THESIS_JOBS must be a whole number, got {text!r}") from None
+    jobs = n_jobs
     ex = executor or _env_default("THESIS_EXECUTOR", None)
     if ex is None:
         ex = "local" if jobs > 1 else "inprocess"
@@ -184,19 +324,30 @@ def run_tasks(
         force: recompute finished tasks too (default ``$THESIS_SWEEP_FORCE``).
         desc: the progress bar's label.
         progress: show a progress bar with an ETA (default: unless ``TQDM_DISABLE`` is set).
-        provenance: extra fields written into each task's record (commit, versions …).
+        provenance: extra fields written into each stored record, on top of the git commit,
+            the package versions (:func:`default_provenance`) and ``stored_utc``.
 
     Returns:
         The rows of all tasks, concatenated, with a ``task_key`` column.
 
     Raises:
         ValueError: two tasks with the same key, or an unknown executor.
+        TaskFailed: a task raised (its config is in the message); the tasks that finished
+            before it are stored.
+        RuntimeError: a stored result is damaged (the message names the file).
+        ImportError: ``executor="ray"`` without Ray installed.
     """
     tasks = list(tasks)
     keys = [t.key for t in tasks]
     if len(set(keys)) != len(keys):
-        dup = sorted({k for k in keys if keys.count(k) > 1})
-        raise ValueError(f"{len(dup)} task(s) appear twice in the grid (keys {dup[:3]} …)")
+        from collections import Counter
+
+        dup = [k for k, n in Counter(keys).items() if n > 1]
+        first = tasks[keys.index(dup[0])]
+        raise ValueError(
+            f"{len(dup)} task(s) appear twice in the grid, e.g. "
+            f"{_fn_path(first.fn)}({canonical_json(dict(first.config))}) (key {dup[0]})"
+        )
     if force is None:
         force = _env_default("THESIS_SWEEP_FORCE", "0") not in ("0", "false", "False")
     ex, jobs = resolve_executor(executor, n_jobs)
@@ -205,11 +356,16 @@ def run_tasks(
     if st is not None and not force:
         done = {k: st.read(k) for k in keys if st.has(k)}
     todo = [t for t in tasks if t.key not in done]
-    extra = dict(provenance or {})
+    extra: dict[str, Any] = {}
+    if st is not None and todo:
+        extra = {**default_provenance(), **(provenance or {})}
+    elif provenance:
+        extra = dict(provenance)
 
     def finished(rec: dict[str, Any]) -> None:
         if st is not None:
-            st.write(rec, extra)
+            stamp = datetime.now(UTC).isoformat(timespec="seconds")
+            st.write(rec, {**extra, "stored_utc": stamp})
         done[rec["key"]] = rec
 
     from ._executors import run_pending
@@ -233,13 +389,38 @@ def run_tasks(
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+def probe(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """A task that reports where it ran: host, process, CPUs and GPUs it sees.
+
+    Check a cluster before a long run: ``run_tasks([Task(probe, {"i": i}) for i in
+    range(8)], executor="ray")`` lists the nodes that took tasks.
+
+    >>> sorted(probe({"i": 3})[0])
+    ['cpus', 'cuda_visible_devices', 'host', 'i', 'pid']
+    """
+    return [
+        {
+            "i": config.get("i"),
+            "host": socket.gethostname(),
+            "pid": os.getpid(),
+            "cpus": os.cpu_count(),
+            "cuda_visible_devices": os.environ.get("CUDA_VISIBLE_DEVICES", ""),
+        }
+    ]
+
+
 __all__ = [
     "EXECUTORS",
+    "RAY_MISSING",
     "Task",
+    "TaskFailed",
     "TaskStore",
     "canonical_json",
     "config_hash",
+    "default_provenance",
     "execute",
+    "probe",
+    "require_ray",
     "resolve_executor",
     "run_tasks",
 ]
