@@ -127,6 +127,7 @@ CHAPTER_MODULES: dict[str, str] = {
     "05_decision_mamba": "thesis_lib.chapters.decision_mamba",
     "06_mdlt": "thesis_lib.chapters.mdlt",
     "07_ur3_deployment": "thesis_lib.chapters.ur3",
+    "claims": "thesis_lib.chapters.claims",
 }
 
 #: Line length of the generated cell (the project's ruff ``line-length``).

@@ -43,19 +43,6 @@ STUDY_KEYS = {
 REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
 DEFAULT_COLUMNS = {"method": "method", "setting": "setting", "seed": "seed"}
 
-#: chapter notebook -> module of ``thesis_lib.chapters`` holding its ``Config`` and tasks.
-CHAPTER_MODULES: dict[str, str] = {
-    "01_background": "background",
-    "survey": "survey",
-    "02_clfd": "clfd",
-    "03_defender": "defender",
-    "04_hdt": "hdt",
-    "05_decision_mamba": "decision_mamba",
-    "06_mdlt": "mdlt",
-    "07_ur3_deployment": "ur3",
-}
-
-
 @dataclass
 class Study:
     """One pre-registered study, as read from its parameter file."""
@@ -143,9 +130,9 @@ def load_study(chapter_or_path: str | Path) -> Study:
 
 def chapter_module(chapter: str) -> Any:
     """The ``thesis_lib.chapters`` module of a chapter notebook name (imported lazily)."""
-    if chapter not in CHAPTER_MODULES:
-        raise ValueError(f"unknown chapter {chapter!r}; valid: {', '.join(CHAPTER_MODULES)}")
-    return importlib.import_module(f"thesis_lib.chapters.{CHAPTER_MODULES[chapter]}")
+    from thesis_lib.book.params import chapter_module as module_name
+
+    return importlib.import_module(module_name(chapter))
 
 
 def study_config(study: Study) -> Any:
@@ -161,7 +148,7 @@ def study_tasks(study: Study) -> list[Any]:
     mod = chapter_module(study.chapter)
     if not hasattr(mod, "study_tasks"):
         raise NotImplementedError(
-            f"thesis_lib.chapters.{CHAPTER_MODULES[study.chapter]} has no study_tasks(cfg) yet"
+            f"{mod.__name__} of {study.chapter} has no study_tasks(cfg) yet"
         )
     return list(mod.study_tasks(study_config(study)))
 
@@ -334,7 +321,6 @@ def write_claims(reps: int = 10_000) -> pd.DataFrame:
 
 
 __all__ = [
-    "CHAPTER_MODULES",
     "Study",
     "chapter_module",
     "evaluate_study",
