@@ -56,11 +56,9 @@ def test_chapter_smoke_run_writes_results(executed, chapter):
     for name in meta["artifacts"]:
         assert (results / chapter / name).stat().st_size > 0
     assert meta["git_commit"] and meta["versions"]["numpy"]
-    # Target: under 5 minutes each on an idle 2-core machine; CI runs two chapters at once, so allow
-    # some headroom before calling a smoke profile too big.
-    assert run.wall_time_s < 400, (
-        f"{chapter} smoke run took {run.wall_time_s:.0f} s (target < 5 min)"
-    )
+    # No wall-clock assert: how long a smoke profile takes is reported by pytest's --durations
+    # (pyproject addopts) and recorded in run.json, not judged by a test on a shared machine.
+    assert run.wall_time_s >= 0 and meta["wall_time_s"] >= 0
 
 
 @pytest.mark.slow
