@@ -7,11 +7,12 @@ PY     := $(VENV)/bin/python
 JOBS   ?= 2
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv book chapter test test-fast lint format bench clean help
+.PHONY: venv book api chapter test test-fast lint format bench clean help
 
 help:
 	@echo "make book      run every chapter (smoke profile) and build the HTML book"
 	@echo "make test      run the whole test suite (what CI runs)"
+	@echo "make api       build only the API reference page (no notebooks; _build/api/)"
 	@echo "make chapter CHAPTER=01_background [PROFILE=full]   run one chapter"
 	@echo "make test-fast unit tests only (no notebook runs, no book build)"
 	@echo "make lint      ruff (lint + format check) and the type checker"
@@ -29,6 +30,12 @@ venv: $(STAMP)
 
 book: $(STAMP)
 	$(VENV)/bin/thesis book -j $(JOBS)
+
+# The API reference alone, with the book's settings and -W -n like `make book`: a one-page toc.
+api: $(STAMP)
+	mkdir -p _build
+	printf 'format: jb-book\nroot: book/api\n' > _build/api_toc.yml
+	$(VENV)/bin/jupyter-book build . --toc $(CURDIR)/_build/api_toc.yml --path-output $(CURDIR)/_build/api -W -n --keep-going
 
 chapter: $(STAMP)
 	$(VENV)/bin/thesis run $(CHAPTER) --profile $(or $(PROFILE),smoke)

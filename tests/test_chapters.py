@@ -7,6 +7,7 @@ These are the slow tests (marked ``slow``): they execute notebooks through paper
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -71,6 +72,12 @@ def test_book_builds_strict(executed):
         assert page.is_file(), f"{chapter} missing from the built book"
         assert "<img" in page.read_text(), f"{chapter} shows no figure in the book"
     assert "book/intro.html" in html  # index.html redirects to the root page
+    api = (ROOT / "_build" / "html" / "book" / "api.html").read_text()
+    listed = re.findall(r"^\s+(thesis_lib\.\w+)\s*$", (ROOT / "book" / "api.md").read_text(), re.M)
+    assert "thesis_lib.dtw" in listed and "thesis_lib.book" in listed
+    for package in listed:  # the API reference documents each package's names by its path
+        assert f'id="module-{package}"' in api, f"{package} missing from the API reference"
+    assert 'id="thesis_lib.dtw.dtw"' in api and 'id="thesis_lib.seq.HDT"' in api
     intro = (ROOT / "_build" / "html" / "book" / "intro.html").read_text()
     assert "Improving the Robustness" in intro and "01_background.html" in intro
 
