@@ -46,7 +46,7 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(PY) -m pytest -m "not slow"
 
-LINT_PATHS := src tests benchmarks notebooks
+LINT_PATHS := src tests benchmarks notebooks book/_ext
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check $(LINT_PATHS)

@@ -4,8 +4,10 @@
 with the package's name holding ``.. automodule:: <name>`` with the page's autodoc options, so the
 package's public names are documented under the package (where users import them from), however
 its modules are named inside. Public names are the package's ``__all__``, or, where it has none,
-the public names it imports into its namespace. Constants among them (autodoc documents only
-those with a comment in the package's own source) are listed with their value.
+the public names it imports into its namespace. A package that only holds modules (one module
+per notebook: ``thesis_lib.chapters``) gets a section per module. Constants among the public
+names (autodoc documents only those with a comment in the package's own source) are listed
+with the doc comment of the module that defines them and their value.
 
 Adding a package to the reference is adding one line to the directive's content.
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import pkgutil
 import re
 import sys
 
@@ -64,6 +67,17 @@ def _constant_doc(package: str, const: str, value) -> list[str]:
     return []
 
 
+def _modules_of(name: str, package) -> list[str]:
+    """A package that only holds modules: its docstring, then a section per public module."""
+    lines = [name, "-" * len(name), "", f".. automodule:: {name}", ""]
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        full = f"{name}.{info.name}"
+        lines += [full, "~" * len(full), "", f".. automodule:: {full}", "   :members:", ""]
+    return lines
+
+
 class APIPackages(Directive):
     has_content = True
 
@@ -74,6 +88,9 @@ class APIPackages(Directive):
                 continue
             module = importlib.import_module(name)
             public, has_all = _public_names(module)
+            if not has_all and all(inspect.ismodule(getattr(module, n)) for n in public):
+                lines += _modules_of(name, module)  # e.g. thesis_lib.chapters: one per notebook
+                continue
             options = ["   :members:"]
             if not has_all:  # no __all__: document what the package imports into its namespace
                 options += ["   :imported-members:", "   :exclude-members: annotations"]
