@@ -122,11 +122,14 @@ def _no_inline_attribute_type(app, what, name, obj, options, lines) -> None:
         lines[:0] = ["..", ""]
 
 
+_MISSING = object()
+
+
 def _lookup(dotted: str):
-    """The object a dotted ``thesis_lib`` name points to, or ``None`` (imports only thesis_lib)."""
+    """The object a dotted ``thesis_lib`` name points to, or ``_MISSING`` (imports only thesis_lib)."""
     parts = dotted.split(".")
     if parts[0] != "thesis_lib":
-        return None
+        return _MISSING
     for i in range(len(parts), 0, -1):
         try:
             obj = importlib.import_module(".".join(parts[:i]))
@@ -136,9 +139,9 @@ def _lookup(dotted: str):
             for attr in parts[i:]:
                 obj = getattr(obj, attr)
         except AttributeError:
-            return None
+            return _MISSING
         return obj
-    return None
+    return _MISSING
 
 
 def _undocumented_but_real(app, env, node, contnode):
@@ -185,7 +188,7 @@ def _undocumented_but_real(app, env, node, contnode):
                     scopes.append(defining)
         candidates = [f"{scope}.{target}" for scope in dict.fromkeys(scopes)]
     for candidate in candidates:
-        if _lookup(candidate) is not None:
+        if _lookup(candidate) is not _MISSING:
             return contnode
     return None
 
