@@ -7,11 +7,12 @@ PY     := $(VENV)/bin/python
 JOBS   ?= 2
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv book chapter study claims test test-fast lint format bench clean help
+.PHONY: venv book api chapter study claims test test-fast lint format bench clean help
 
 help:
 	@echo "make book      run every chapter (smoke profile) and build the HTML book"
 	@echo "make test      run the whole test suite (what CI runs)"
+	@echo "make api       build only the API reference page (no notebooks; _build/api/)"
 	@echo "make chapter CHAPTER=01_background [PROFILE=full]   run one chapter"
 	@echo "make study CHAPTER=04_hdt [JOBS=2]   run or resume a pre-registered study"
 	@echo "make claims    studies/claims.csv from the committed studies"
@@ -32,6 +33,12 @@ venv: $(STAMP)
 book: $(STAMP)
 	$(VENV)/bin/thesis book -j $(JOBS)
 
+# The API reference alone, with the book's settings and -W -n like `make book`: a one-page toc.
+api: $(STAMP)
+	mkdir -p _build
+	printf 'format: jb-book\nroot: book/api\n' > _build/api_toc.yml
+	$(VENV)/bin/jupyter-book build . --toc $(CURDIR)/_build/api_toc.yml --path-output $(CURDIR)/_build/api -W -n --keep-going
+
 chapter: $(STAMP)
 	$(VENV)/bin/thesis run $(CHAPTER) --profile $(or $(PROFILE),smoke)
 
@@ -47,7 +54,7 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	$(PY) -m pytest -m "not slow"
 
-LINT_PATHS := src tests benchmarks notebooks
+LINT_PATHS := src tests benchmarks notebooks book/_ext
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check $(LINT_PATHS)

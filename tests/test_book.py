@@ -191,3 +191,17 @@ def test_survey_counts_split_multi_valued_cells():
     assert sorted(duplicate_citations(df)["ref"].unique().tolist()) == [141, 142, 194, 208]
     with pytest.raises(ValueError, match="no column 'tech'"):
         count_values(df, "tech")
+
+
+def test_api_reference_lists_every_package():
+    """book/api.md documents each sub-package of thesis_lib (one line each in `api-packages`)."""
+    import re
+
+    root = project_root()
+    listed = re.findall(r"^\s+(thesis_lib\.\w+)\s*$", (root / "book" / "api.md").read_text(), re.M)
+    packages = sorted(
+        f"thesis_lib.{p.parent.name}" for p in (root / "src" / "thesis_lib").glob("*/__init__.py")
+    )
+    missing = sorted(set(packages) - set(listed))
+    assert not missing, f"add to the api-packages list in book/api.md: {', '.join(missing)}"
+    assert len(listed) == len(set(listed))

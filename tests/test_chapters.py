@@ -7,6 +7,7 @@ These are the slow tests (marked ``slow``): they execute notebooks through paper
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -56,11 +57,9 @@ def test_chapter_smoke_run_writes_results(executed, chapter):
     for name in meta["artifacts"]:
         assert (results / chapter / name).stat().st_size > 0
     assert meta["git_commit"] and meta["versions"]["numpy"]
-    # Target: under 5 minutes each on an idle 2-core machine; CI runs two chapters at once, so allow
-    # some headroom before calling a smoke profile too big.
-    assert run.wall_time_s < 400, (
-        f"{chapter} smoke run took {run.wall_time_s:.0f} s (target < 5 min)"
-    )
+    # No wall-clock assert: how long a smoke profile takes is reported by pytest's --durations
+    # (pyproject addopts) and recorded in run.json, not judged by a test on a shared machine.
+    assert run.wall_time_s >= 0 and meta["wall_time_s"] >= 0
 
 
 @pytest.mark.slow
@@ -73,6 +72,12 @@ def test_book_builds_strict(executed):
         assert page.is_file(), f"{chapter} missing from the built book"
         assert "<img" in page.read_text(), f"{chapter} shows no figure in the book"
     assert "book/intro.html" in html  # index.html redirects to the root page
+    api = (ROOT / "_build" / "html" / "book" / "api.html").read_text()
+    listed = re.findall(r"^\s+(thesis_lib\.\w+)\s*$", (ROOT / "book" / "api.md").read_text(), re.M)
+    assert "thesis_lib.dtw" in listed and "thesis_lib.book" in listed
+    for package in listed:  # the API reference documents each package's names by its path
+        assert f'id="module-{package}"' in api, f"{package} missing from the API reference"
+    assert 'id="thesis_lib.dtw.dtw"' in api and 'id="thesis_lib.seq.HDT"' in api
     intro = (ROOT / "_build" / "html" / "book" / "intro.html").read_text()
     assert "Improving the Robustness" in intro and "01_background.html" in intro
 

@@ -1,10 +1,13 @@
-"""The robot driver: dry-run, refusal of unsafe motion, emergency stop, a fake UR endpoint on localhost."""
+"""The robot driver: dry-run, refusal of unsafe motion, emergency stop, a fake UR endpoint on localhost.
+
+Threads here synchronise on events (what was received, which frame was reached); the timeouts are
+only a safety net so that a broken driver fails the test instead of hanging it.
+"""
 
 from __future__ import annotations
 
 import socket
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -24,6 +27,7 @@ class FakeUR:
         self.port = self.server.getsockname()[1]
         self.received = b""
         self.connections = 0
+        self._changed = threading.Condition()
         self._thread = threading.Thread(target=self._serve, daemon=True)
         self._thread.start()
 
@@ -33,7 +37,9 @@ class FakeUR:
             conn, _ = self.server.accept()
         except OSError:
             return
-        self.connections += 1
+        with self._changed:
+            self.connections += 1
+            self._changed.notify_all()
         with conn:
             conn.settimeout(10)
             while True:
@@ -43,14 +49,19 @@ class FakeUR:
                     return
                 if not chunk:
                     return
-                self.received += chunk
+                with self._changed:
+                    self.received += chunk
+                    self._changed.notify_all()
 
-    def text(self, wait: float = 2.0) -> str:
-        deadline = time.time() + wait
-        while time.time() < deadline and not self.received:
-            time.sleep(0.01)
-        time.sleep(0.05)
-        return self.received.decode()
+    def text(self, until: str, timeout: float = 10.0) -> str:
+        """Everything received once it ends with ``until`` (the client's last command)."""
+        with self._changed:
+            done = self._changed.wait_for(
+                lambda: self.received.decode().endswith(until), timeout=timeout
+            )
+        text = self.received.decode()
+        assert done, f"the fake robot never received {until!r}; it got {text!r}"
+        return text
 
     def close(self) -> None:
         self.server.close()
@@ -103,15 +114,57 @@ def test_unsafe_trajectories_are_refused_and_nothing_moves():
         slow.play(_wave(amp=0.2, fps=50), fps=50)  # 1.26 rad/s > 0.785
 
 
+class PausingSim(SimBackend):
+    """The simulated UR3, which at its ``pause_at``-th streamed frame says so (``reached``) and
+    holds that frame until the test lets it go on (``resume``): a robot still moving when the
+    operator presses the emergency stop, with no clock in the test."""
+
+    def __init__(self, pause_at: int) -> None:
+        super().__init__()
+        self.pause_at = pause_at
+        self.reached = threading.Event()
+        self.resume = threading.Event()
+        self._streaming = False
+        self._streamed = 0
+        forward = self.kin.forward
+
+        def forward_and_count(q):
+            out = forward(q)
+            if self._streaming:
+                self._streamed += 1
+                if self._streamed == self.pause_at:
+                    self.reached.set()
+                    self.resume.wait(timeout=10)
+            return out
+
+        self.kin.forward = forward_and_count
+
+    def stream(self, q, dt, stop):
+        self._streaming = True
+        try:
+            return super().stream(q, dt, stop)
+        finally:
+            self._streaming = False
+
+
 def test_emergency_stop_halts_streaming_and_blocks_motion():
-    backend = SimBackend(realtime=True)
+    backend = PausingSim(pause_at=10)
     drv = UR3Driver(backend, dry_run=False)
-    q = _wave(n=200, amp=0.1, fps=50)  # 4 s in real time
-    timer = threading.Timer(0.3, drv.emergency_stop)
-    timer.start()
+    q = _wave(n=200, amp=0.1, fps=50)
+
+    def operator():  # another thread presses the stop while frame 10 is being played
+        if backend.reached.wait(timeout=10):
+            drv.emergency_stop()
+        backend.resume.set()
+
+    stopper = threading.Thread(target=operator)
+    stopper.start()
     res = drv.play(q, fps=50)
-    timer.join()
-    assert res.stopped and 0 < res.frames_sent < 200 and backend.stopped
+    stopper.join(timeout=10)
+    assert backend.reached.is_set() and not stopper.is_alive()
+    # the stream halts at the next frame after the stop: exactly the 10 frames played so far
+    assert res.stopped and res.frames_sent == 10 and backend.stopped
+    assert len(backend.history) >= 10 and np.allclose(backend.q, q[9])
     with pytest.raises(RobotStopped):
         drv.play(q, fps=50)
     drv.clear_stop()
@@ -130,7 +183,7 @@ def test_urscript_backend_against_fake_robot(fake_ur):
         drv.play(q, fps=50)
     res = drv.play(q, fps=50, current=HOME)
     drv.emergency_stop()
-    text = fake_ur.text()
+    text = fake_ur.text(until="stopj(4.0)\n")
     lines = text.splitlines()
     assert lines[0].startswith("movej([") and "v=0.5000" in lines[0]
     assert (

@@ -55,7 +55,7 @@ def nt_xent(z_a: torch.Tensor, z_p: torch.Tensor, temperature: float = 0.5) -> t
 def triplet_loss(
     anchor: torch.Tensor, positive: torch.Tensor, negative: torch.Tensor, margin: float = 0.2
 ) -> torch.Tensor:
-    """TCN's triplet loss on L2-normalised embeddings: mean of max(0, |a-p|² - |a-n|² + margin).
+    """TCN's triplet loss on L2-normalised embeddings: mean of ``max(0, |a-p|² - |a-n|² + margin)``.
 
     >>> a = torch.tensor([[1.0, 0.0]]); n = torch.tensor([[0.0, 1.0]])
     >>> float(triplet_loss(a, a, n))  # positive = anchor, negative far: no loss

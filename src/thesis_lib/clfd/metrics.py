@@ -16,7 +16,7 @@ def alignment_error(emb1: np.ndarray, emb2: np.ndarray) -> float:
     """Alignment error of two synchronised videos' embeddings, in % of the video length.
 
     For every frame i of video 1 the nearest frame j* of video 2 in embedding space (Euclidean)
-    is found; the error is the mean of |i - j*| / N over i, × 100 (TCN's metric, as the authors'
+    is found; the error is the mean of ``|i - j*| / N`` over i, × 100 (TCN's metric, as the authors'
     code computes it). The thesis's Eq 4.3 prints the sum of the nearest *distances* instead; the
     table reports frame-index errors in %, so this is the metric behind Table 4.1.
 

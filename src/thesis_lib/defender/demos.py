@@ -166,7 +166,7 @@ def trajectory_features(demo: Demonstration, trajectory: Trajectory = "state") -
 class EpisodeRecorder(gym.Wrapper):
     """Records every finished episode (observations, actions, rewards, flags) as a Demonstration.
 
-    Put it under the agent's env to log a training run for :func:`strategy_ablation`.
+    Put it under the agent's env to log a training run for :func:`~thesis_lib.defender.ablation.strategy_ablation`.
 
     Used in: DEFENDER (thesis 4.3.2).
     """

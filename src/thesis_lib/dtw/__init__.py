@@ -9,7 +9,7 @@ Exact DTW with the thesis's recursion, compiled with numba:
 - :class:`IncrementalDTW` a growing query (the agent's trajectory) against fixed references.
 - :func:`fastdtw_cost` the authors' approximate FastDTW, for ``paper_compat`` runs.
 
-Local costs (``metric``): ``"l1"`` sum |x_i - y_j| (the DEFENDER code's choice), ``"l2"``
+Local costs (``metric``): ``"l1"`` sum ``|x_i - y_j|`` (the DEFENDER code's choice), ``"l2"``
 Euclidean norm (default), ``"sqeuclidean"`` squared Euclidean (dtaidistance accumulates this and
 returns the square root of the total).
 
