@@ -1,0 +1,1 @@
+"""The chapters of the book, one module per notebook: each holds its ``Config`` (defaults = the smoke scale), ``run_*(cfg) -> DataFrame`` per table or experiment, ``compare_*`` beside the thesis's numbers (through :func:`thesis_lib.book.compare_with_paper`) and ``plot_*``; the notebooks and the CLI import them, nothing else does."""
