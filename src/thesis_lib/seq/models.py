@@ -183,7 +183,9 @@ class _TransformerConfig(_ModelConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         if not isinstance(self.n_layers, int) or self.n_layers <= 0:
-            raise ValueError(f"Expect `n_layers` to be a positive int, actually: {self.n_layers!r}.")
+            raise ValueError(
+                f"Expect `n_layers` to be a positive int, actually: {self.n_layers!r}."
+            )
         if not isinstance(self.max_timestep, int) or self.max_timestep <= 0:
             raise ValueError(
                 f"Expect `max_timestep` to be a positive int, actually: {self.max_timestep!r}."
