@@ -87,7 +87,7 @@ class Stack(nn.Module):
 
     def __init__(self, n_layers: int, d_model: int, n_head: int) -> None:
         super().__init__()
-        cfg = GPTBlockConfig(d_model=d_model, n_head=n_head, dropout=0.1, causal=True)
+        cfg = GPTBlockConfig(d_model=d_model, n_heads=n_head, dropout=0.1, causal=True)
         self.blocks = nn.ModuleList(Block(cfg) for _ in range(n_layers))
         self.ln_f = nn.LayerNorm(d_model)
 
@@ -171,7 +171,7 @@ def main() -> None:
 
     # Whole models, as thesis_lib.seq.evaluate calls them (Hopper sizes: state 11, action 3).
     sd, ad = 11, 3
-    size = dict(state_dim=sd, act_dim=ad, K=args.K, d_model=d, n_layer=n_layers)
+    size = dict(state_dim=sd, act_dim=ad, K=args.K, d_model=d, n_layers=n_layers)
     dt = DecisionTransformer(DTConfig(**size)).eval()
     dm = DecisionMamba(DMConfig(use_rtg=True, **size)).eval()
     history = {

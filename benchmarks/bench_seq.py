@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from thesis_lib.data import Episode, SequenceDataset
-from thesis_lib.seq.evaluate import evaluate
+from thesis_lib.seq.evaluation import evaluate
 from thesis_lib.seq.models import BC, HDT, BCConfig, DecisionTransformer, DTConfig, HDTConfig
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
@@ -89,7 +89,7 @@ def parse_args() -> argparse.Namespace:
 def task_sizes(task: str) -> tuple[int, int]:
     """(state size, action size) of ``task``'s environment."""
     from thesis_lib.data import make_env
-    from thesis_lib.seq.evaluate import _observation
+    from thesis_lib.seq.evaluation import _observation
 
     env = make_env(task)
     obs, _ = env.reset(seed=0)
@@ -120,7 +120,7 @@ def make_data(K: int, sd: int = 17, ad: int = 6, seed: int = 0) -> SequenceDatas
 
 def make_models(args: argparse.Namespace, sd: int = 17, ad: int = 6) -> dict[str, torch.nn.Module]:
     torch.manual_seed(0)
-    tf = dict(K=args.K, d_model=args.d_model, n_layer=args.n_layer, n_head=1)
+    tf = dict(K=args.K, d_model=args.d_model, n_layers=args.n_layer, n_heads=1)
     return {
         "BC": BC(BCConfig(sd, ad, K=args.K)),
         "DT": DecisionTransformer(DTConfig(sd, ad, **tf)),

@@ -1,4 +1,4 @@
-"""Tests for thesis_lib.seq.attention: Eq. 2.1-2.3, masks, and the GPT block."""
+"""Tests for thesis_lib.seq.attention_ops: Eq. 2.1-2.3, masks, and the GPT block."""
 
 from __future__ import annotations
 
@@ -204,25 +204,25 @@ def test_attention_errors():
 
 
 def test_config_validation():
-    cfg = GPTBlockConfig(d_model=64, n_head=4)
+    cfg = GPTBlockConfig(d_model=64, n_heads=4)
     assert cfg.head_dim == 16
-    with pytest.raises(ValueError, match=r"d_model=10 and n_head=4.*1, 2, 5, 10"):
-        GPTBlockConfig(d_model=10, n_head=4)
+    with pytest.raises(ValueError, match=r"d_model=10 and n_heads=4.*1, 2, 5, 10"):
+        GPTBlockConfig(d_model=10, n_heads=4)
     with pytest.raises(
         ValueError, match=r"Unknown activation 'tanh'. Valid: gelu, gelu_tanh, relu, silu"
     ):
         GPTBlockConfig(activation="tanh")
     with pytest.raises(ValueError, match=r"dropout.*\[0, 1\).*1.5"):
         GPTBlockConfig(dropout=1.5)
-    with pytest.raises(ValueError, match=r"n_head.*positive int.*0"):
-        GPTBlockConfig(n_head=0)
+    with pytest.raises(ValueError, match=r"n_heads.*positive int.*0"):
+        GPTBlockConfig(n_heads=0)
     with pytest.raises(TypeError):
         GPTBlockConfig(head_dim=3)  # derived, not an argument
 
 
 def _block(**kw):
     torch.manual_seed(0)
-    cfg = GPTBlockConfig(**{"d_model": 16, "n_head": 4, "dropout": 0.0, **kw})
+    cfg = GPTBlockConfig(**{"d_model": 16, "n_heads": 4, "dropout": 0.0, **kw})
     return Block(cfg).double().eval()
 
 
@@ -287,7 +287,7 @@ def test_attention_weights_match_sdpa_module():
 
 def test_block_dropout_trains_and_input_errors():
     torch.manual_seed(0)
-    block = Block(GPTBlockConfig(d_model=8, n_head=2, dropout=0.5)).train()
+    block = Block(GPTBlockConfig(d_model=8, n_heads=2, dropout=0.5)).train()
     x = torch.randn(2, 4, 8)
     kpm = padding_mask([4, 2], 4)
     assert not torch.equal(block(x, kpm), block(x, kpm))  # dropout active in training
@@ -303,7 +303,7 @@ def test_block_dropout_trains_and_input_errors():
 
 def test_block_backward_is_finite_with_left_padding():
     torch.manual_seed(0)
-    block = Block(GPTBlockConfig(d_model=8, n_head=2, dropout=0.0))
+    block = Block(GPTBlockConfig(d_model=8, n_heads=2, dropout=0.0))
     x = torch.randn(2, 5, 8, requires_grad=True)
     kpm = padding_mask(
         [5, 2], 5, side="left"

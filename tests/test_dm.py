@@ -10,13 +10,13 @@ import torch
 
 from thesis_lib.data import Episode, SequenceDataset
 from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig, RecurrentPolicy
-from thesis_lib.seq.evaluate import evaluate
+from thesis_lib.seq.evaluation import evaluate
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 torch.set_num_threads(1)
 SD, AD, K = 3, 2, 6
-SMALL = dict(K=K, d_model=16, n_layer=2)
+SMALL = dict(K=K, d_model=16, n_layers=2)
 
 
 def _episodes(n=6, T=30, seed=0):
@@ -207,17 +207,24 @@ def test_eval_mode_auto_and_errors():
 
 
 def test_parse_arch_and_config_errors():
-    from thesis_lib.seq.dm_experiments import DMChapterConfig, parse_arch
+    from thesis_lib.chapters.decision_mamba import Config, parse_arch
 
     assert parse_arch("2/32/10").label == "L2 D32 K10"
+    assert Config().arch_spec("2/32/10").label == "L2 D32 K10"
     with pytest.raises(ValueError, match="Did you mean: 'HDM'"):
-        DMChapterConfig(methods=["HDMM"])
+        Config(methods=["HDMM"])
+    with pytest.raises(ValueError, match="Unknown method 'DM'. Did you mean: 'HDM'"):
+        Config(methods=["DM"])  # one spelling: DM-noRTG
     with pytest.raises(ValueError, match="layers/d_model/K"):
-        DMChapterConfig(sweep_archs=["2/32"])
+        Config(sweep_archs=["2/32"])
 
 
 def test_summary_and_win_counts_on_synthetic_curves():
-    from thesis_lib.seq.dm_experiments import summarize_dm, thesis_table_5_5, win_counts_5_5
+    from thesis_lib.chapters.decision_mamba import (
+        compare_table_5_5,
+        compare_win_counts_5_5,
+        summarize_dm,
+    )
 
     rows = []
     for seed, (dm, dt) in enumerate([(10.0, 5.0), (20.0, 7.0)]):
@@ -225,7 +232,11 @@ def test_summary_and_win_counts_on_synthetic_curves():
             base = dict(task="hopper", tier="medium", seed=seed, arch="L1 D8 K4", iteration=it)
             rows.append(
                 dict(
-                    base, method="DM", target="none", eval_mode="recurrent", return_mean=dm * scale
+                    base,
+                    method="DM-noRTG",
+                    target="none",
+                    eval_mode="recurrent",
+                    return_mean=dm * scale,
                 )
             )
             rows.append(
@@ -239,13 +250,13 @@ def test_summary_and_win_counts_on_synthetic_curves():
                     dict(base, method="DT", target=tgt, eval_mode="window", return_mean=dt * scale)
                 )
     s = summarize_dm(pd.DataFrame(rows))
-    dm = s[s.method == "DM"].iloc[0]
+    dm = s[s.method == "DM-noRTG"].iloc[0]
     assert (
         dm.best_mean == pytest.approx(15.0)
         and dm.best_std == pytest.approx(5.0)
         and dm.n_seeds == 2
     )
-    t = thesis_table_5_5(s)
+    t = compare_table_5_5(s)
     row = t[
         (t.metric == "best during training (thesis)")
         & (t.method == "DM_without_R")
@@ -253,7 +264,7 @@ def test_summary_and_win_counts_on_synthetic_curves():
         & (t.dataset == "medium")
     ].iloc[0]
     assert row.paper == pytest.approx(1383.51) and row.ours == pytest.approx(15.0)
-    wins = win_counts_5_5(t).set_index(["comparison", "metric"])
+    wins = compare_win_counts_5_5(t).set_index(["comparison", "metric"])
     w = wins.loc[("DM wo/ R beats DT (all three targets)", "best during training (thesis)")]
     assert (
         w["ours"] == "1/1" and w["thesis table (our settings)"] == "1/1"
@@ -262,30 +273,17 @@ def test_summary_and_win_counts_on_synthetic_curves():
     assert h["ours"] == "0/1" and h["thesis table (all settings)"] == "21/27"
 
 
-def test_chapter_functions_run_end_to_end_at_tiny_scale():
+def test_chapter_functions_run_end_to_end_at_tiny_scale(tmp_path, monkeypatch):
     """Table 5.5 runs, the sweeps (reusing a run), Table 5.6 timing, figures: shapes and invariants."""
     import matplotlib
 
     matplotlib.use("Agg")
-    from thesis_lib.seq import dm_experiments as ch
+    from thesis_lib.chapters import decision_mamba as ch
 
-    rng = np.random.default_rng(0)
-    eps = []
-    for i in range(3):  # Hopper-sized episodes (state 11, action 3)
-        T = 12
-        eps.append(
-            Episode(
-                i,
-                rng.normal(size=(T + 1, 11)),
-                rng.uniform(-1, 1, size=(T, 3)).astype(np.float32),
-                rng.uniform(0, 2, size=T),
-                np.zeros(T, bool),
-                np.zeros(T, bool),
-            )
-        )
-    data = {("hopper", "medium"): eps}
-    cfg = ch.DMChapterConfig(
-        datasets=["hopper/medium"],
+    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path / "data"))  # a tiny data set
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
+    cfg = ch.Config(
+        datasets=["maze2d-open/expert"],
         iterations=4,
         batch_size=4,
         arch="1/8/4",
@@ -293,22 +291,23 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale():
         eval_episodes=1,
         max_eval_steps=5,
         warmup_steps=2,
-        sweep_datasets=["hopper/medium"],
+        sweep_datasets=["maze2d-open/expert"],
         sweep_archs=["1/8/4", "1/8/2"],
-        timing_datasets=["hopper/medium"],
+        timing_datasets=["maze2d-open/expert"],
         timing_arch="1/8/4",
         timing_train_iters=1,
         timing_infer_steps=3,
         timing_infer_episodes=1,
+        n_transitions=300,
     )
-    curves = ch.run_table_5_5(cfg, data)
+    curves = ch.run_table_5_5(cfg)
     # evaluations at iterations 2 and 4; RTG methods at 3 targets; DM/HDM once more in the other mode
-    n = {"DT": 6, "HDT": 2, "DM-RTG": 6 + 3, "DM": 2 + 1, "HDM": 2 + 1}
+    n = {"DT": 6, "HDT": 2, "DM-RTG": 6 + 3, "DM-noRTG": 2 + 1, "HDM": 2 + 1}
     assert curves.groupby("method").size().to_dict() == n
-    assert set(curves[curves.method == "DM"].eval_mode) == {"recurrent", "window"}
-    assert (curves.length_mean <= 5).all()
+    assert set(curves[curves.method == "DM-noRTG"].eval_mode) == {"recurrent", "window"}
+    assert len(list((tmp_path / "results" / ch.CHAPTER / "tasks").glob("*.json"))) == 5
     summary = ch.summarize_dm(curves)
-    t55 = ch.thesis_table_5_5(summary, "recurrent")
+    t55 = ch.compare_table_5_5(summary, "recurrent")
     assert set(t55.dropna(subset=["ours"]).method) == {
         "DT",
         "HDT",
@@ -317,25 +316,34 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale():
         "HDM",
     }
     assert len(ch.format_table_5_5(t55)) == 1
-    sweep = ch.run_sweeps(cfg, data, reuse=curves)
+    sweep = ch.run_sweeps(cfg, reuse=curves)
     reused = sweep[sweep.arch == "L1 D8 K4"]
     assert len(reused) == len(
         curves[curves.method.isin(cfg.sweep_methods)]
     )  # taken from Table 5.5, not re-run
     assert set(sweep[(sweep.arch == "L1 D8 K2") & (sweep.method == "DM-RTG")].target) == {"max"}
-    timing = ch.time_methods(cfg, data)
+    data = ch.load_datasets(cfg.datasets, cfg)
+    timing = ch.run_table_5_6(cfg, data)
     assert len(timing) == 5 + 5 + 3  # train x5, window inference x5, recurrent inference x3
     assert (timing.time_ms_mean > 0).all()
-    t56 = ch.thesis_table_5_6(timing)
+    t56 = ch.compare_table_5_6(timing)
     assert "DM_without_R (recurrent step)" in set(t56.dropna(subset=["ours"]).method)
+    ratios = ch.run_timing_ratios(timing).set_index("method")
+    assert ratios.loc["DT", "train / DT"] == pytest.approx(1.0)
+    assert ratios.loc["HDM", "window / recurrent"] == pytest.approx(
+        ratios.loc["HDM", "inference (window)"] / ratios.loc["HDM", "inference (recurrent)"]
+    )
+    counts = ch.run_parameter_counts(d_model=16, n_layers=1).set_index("model").parameters
+    assert counts["DM, plain Mamba blocks"] < counts["DM, gated MLP (authors' later code)"]
     ch.plot_methods(summary, data)
-    ch.plot_sweep(ch.summarize_dm(sweep), "DM", data)
+    ch.plot_sweep(ch.summarize_dm(sweep), "DM-noRTG", data)
 
 
 @pytest.mark.parametrize("method", ["DM-RTG", "HDM"])
 def test_paper_compat_run_acts_on_the_window(method):
     """The authors' behaviour end to end: a_{t-1} tokens, windowed acting (and the other mode compared)."""
-    from thesis_lib.seq import dm_experiments as ch
+    from thesis_lib.seq.registry import ArchSpec
+    from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 
     rng = np.random.default_rng(1)
     eps = [
@@ -349,19 +357,12 @@ def test_paper_compat_run_acts_on_the_window(method):
         )
         for i in range(3)
     ]
-    cfg = ch.DMChapterConfig(
-        iterations=2,
-        batch_size=4,
-        arch="1/8/4",
-        eval_every=2,
-        eval_episodes=1,
-        max_eval_steps=6,
-        warmup_steps=1,
-        eval_mode="window",
-        paper_compat=True,
-    )
-    rows = ch.run_dm_method(method, "hopper", "medium", 0, cfg, data=eps, compare_eval_modes=True)
+    arch = ArchSpec(d_model=8, n_layers=1, K=4, eval_mode="window", paper_compat=True)
+    train = TrainSpec(iterations=2, batch_size=4, eval_every=2, warmup_steps=1)
+    ev = EvalSpec(episodes=1, max_steps=6, compare_eval_modes=True)
+    rows = pd.DataFrame(run_offline(method, eps, arch, train, ev, task="hopper"))
     assert set(rows.eval_mode) == {"window", "recurrent"}
     assert set(rows.iteration) == {2}
+    assert rows.paper_compat.all()
     with pytest.raises(ValueError, match="Unknown target 'best'"):
-        ch.run_dm_method(method, "hopper", "medium", 0, cfg, data=eps, targets=("best",))
+        EvalSpec(targets=("best",))

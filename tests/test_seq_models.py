@@ -17,7 +17,7 @@ from thesis_lib.seq.models import (
 
 torch.set_num_threads(1)
 SD, AD, K = 3, 2, 5
-SMALL = dict(K=K, d_model=16, n_layer=2, n_head=2, dropout=0.0)
+SMALL = dict(K=K, d_model=16, n_layers=2, n_heads=2, dropout=0.0)
 
 
 def _batch(B=2, T=K, seed=0):
@@ -182,8 +182,8 @@ def test_state_dimension_mismatch_names_both_shapes():
 
 
 def test_configs_are_validated():
-    with pytest.raises(ValueError, match="d_model must be divisible by n_head"):
-        DTConfig(SD, AD, d_model=10, n_head=3)
+    with pytest.raises(ValueError, match="d_model must be divisible by n_heads"):
+        DTConfig(SD, AD, d_model=10, n_heads=3)
     with pytest.raises(ValueError, match="`state_dim` to be a positive int"):
         HDTConfig(0, AD)
     with pytest.raises(ValueError, match="Unknown activation 'tanh'. Valid:"):

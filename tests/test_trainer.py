@@ -1,4 +1,4 @@
-"""Tests for thesis_lib.seq.trainer and thesis_lib.seq.evaluate (thesis 5.2.5)."""
+"""Tests for thesis_lib.seq.trainer and thesis_lib.seq.evaluation (thesis 5.2.5)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import torch
 import torch.nn as nn
 
 from thesis_lib.data import Episode, SequenceDataset
-from thesis_lib.seq.evaluate import evaluate
+from thesis_lib.seq.evaluation import evaluate
 from thesis_lib.seq.models import (
     BC,
     HDT,
@@ -25,7 +25,7 @@ from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 torch.set_num_threads(1)
 SD, AD, K = 3, 2, 4
-SMALL = dict(K=K, d_model=16, n_layer=1, n_head=1, dropout=0.1)
+SMALL = dict(K=K, d_model=16, n_layers=1, n_heads=1, dropout=0.1)
 
 
 def _expert(obs):
@@ -358,7 +358,7 @@ def test_evaluate_errors():
 
 
 def test_evaluate_on_a_real_task_gives_d4rl_scores():
-    model = HDT(HDTConfig(11, 3, K=5, d_model=16, n_layer=1))
+    model = HDT(HDTConfig(11, 3, K=5, d_model=16, n_layers=1))
     res = evaluate(
         model, "hopper", n_episodes=2, max_steps=5, state_mean=np.zeros(11), state_std=np.ones(11)
     )
@@ -413,8 +413,9 @@ def test_trained_models_beat_a_random_policy(kind):
     assert trained.mean_return > np.mean(random_returns) + 10.0  # measured: about 19 vs -15
 
 
-def test_experiment_rows_and_both_metrics():
-    from thesis_lib.seq.experiments import HDTExperimentConfig, run_method, summarize
+def test_offline_runner_rows_and_both_metrics():
+    from thesis_lib.chapters.hdt import Config, summarize
+    from thesis_lib.seq.runner import run_offline
 
     rng = np.random.default_rng(0)
     data = []
@@ -430,26 +431,31 @@ def test_experiment_rows_and_both_metrics():
                 np.zeros(15, bool),
             )
         )
-    cfg = HDTExperimentConfig(
+    cfg = Config(
+        datasets=["hopper/medium"],
         iterations=4,
         eval_every=2,
         eval_episodes=2,
         max_eval_steps=3,
         K=4,
         d_model=16,
-        n_layer=1,
+        n_layers=1,
         batch_size=4,
         warmup_steps=2,
         seeds=(0, 1),
+        extra_seeds=[],
+        extra_seed_datasets=[],
         progress=False,
     )
-    curves = pd.concat(
+    curves = pd.DataFrame(
         [
-            run_method(m, "hopper", "medium", s, cfg, data=data)
+            r | {"task": "hopper", "tier": "medium"}
             for m in ("DT", "HDT")
             for s in cfg.seeds
-        ],
-        ignore_index=True,
+            for r in run_offline(
+                m, data, cfg.arch(), cfg.train_spec(s), cfg.eval_spec(), task="hopper"
+            )
+        ]
     )
     dt = curves[curves.method == "DT"]
     assert sorted(dt.target.unique()) == ["10k", "half", "max"]
@@ -467,39 +473,38 @@ def test_experiment_rows_and_both_metrics():
     assert curves.paper_compat.eq(False).all()
     assert row.best_return_std == pytest.approx(hdt.groupby("seed").return_mean.max().std(ddof=0))
     with pytest.raises(ValueError, match="Unknown method 'HTD'. Did you mean: 'HDT'"):
-        HDTExperimentConfig(methods=("HTD",))
+        Config(methods=("HTD",))
+    with pytest.raises(ValueError, match="Unknown method 'DM'"):
+        run_offline("DM", data, cfg.arch(), cfg.train_spec(0), cfg.eval_spec(), task="hopper")
+    with pytest.raises(ValueError, match="task's name"):
+        run_offline("DT", data, cfg.arch(), cfg.train_spec(0), cfg.eval_spec())
 
 
 def test_experiment_config_errors_and_seeds():
-    from thesis_lib.seq.experiments import HDTExperimentConfig
-    from thesis_lib.seq.hdt_chapter import HDTChapterConfig
+    from thesis_lib.chapters.hdt import Config
 
-    assert HDTChapterConfig is HDTExperimentConfig  # one config for the chapter and its experiments
-    cfg = HDTExperimentConfig(
+    cfg = Config(
         datasets=["hopper/medium", "maze2d-umaze/expert"],
         seeds=[0],
         extra_seeds=[1, 0],
         extra_seed_datasets=["maze2d-umaze/expert"],
     )
-    assert cfg.pairs == [("hopper", "medium"), ("maze2d-umaze", "expert")]
     assert cfg.seeds_for("hopper/medium") == [0] and cfg.seeds_for("maze2d-umaze/expert") == [0, 1]
-    per_set = cfg.experiment_configs()
-    assert [(c.datasets, c.seeds_for(c.datasets[0])) for c in per_set] == [
-        (["hopper/medium"], [0]),
-        (["maze2d-umaze/expert"], [0, 1]),
-    ]
+    assert cfg.arch().n_layers == cfg.n_layers and cfg.train_spec(3).seed == 3
     with pytest.raises(ValueError, match="'task/tier'"):
-        HDTExperimentConfig(datasets=["hopper-medium"])
+        Config(datasets=["hopper-medium"])
     with pytest.raises(ValueError, match="not in datasets"):
-        HDTExperimentConfig(datasets=["hopper/medium"], extra_seed_datasets=["hopper/expert"])
+        Config(datasets=["hopper/medium"], extra_seed_datasets=["hopper/expert"])
     with pytest.raises(ValueError, match="to be a list"):
-        HDTExperimentConfig(datasets="hopper/medium")
+        Config(datasets="hopper/medium")
     with pytest.raises(ValueError, match="Unknown method 'DTT'"):
-        HDTExperimentConfig(compat_methods=["DTT"])
+        Config(compat_methods=["DTT"])
+    with pytest.raises(ValueError, match="Unknown dataset_size 'tiny'"):
+        Config(dataset_size="tiny")
 
 
 def test_paper_compat_is_measured_beside_the_default():
-    from thesis_lib.seq.experiments import compare_paper_compat
+    from thesis_lib.chapters.hdt import compare_paper_compat
 
     def rows(compat, offset):
         return pd.DataFrame([
@@ -517,17 +522,13 @@ def test_paper_compat_is_measured_beside_the_default():
 
 
 def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
-    from thesis_lib.seq.experiments import (
-        HDTExperimentConfig,
-        compare_paper_compat,
-        run_hdt_experiments,
-        run_paper_compat,
-    )
+    from thesis_lib.chapters.hdt import Config, compare_paper_compat, run_curves, run_paper_compat
 
     monkeypatch.setenv(
-        "THESIS_DATA_DIR", str(tmp_path)
+        "THESIS_DATA_DIR", str(tmp_path / "data")
     )  # a tiny data set, not the cached smoke one
-    cfg = HDTExperimentConfig(
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
+    cfg = Config(
         datasets=["maze2d-open/expert"],
         methods=["DT", "HDT"],
         seeds=[0],
@@ -541,13 +542,13 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
         max_eval_steps=3,
         K=4,
         d_model=8,
-        n_layer=1,
+        n_layers=1,
         batch_size=4,
         warmup_steps=1,
         n_transitions=300,
         progress=False,
     )
-    curves = run_hdt_experiments(cfg)
+    curves = run_curves(cfg)
     # 2 seeds x (DT: 3 targets, HDT: 1) x 2 evaluations
     assert (
         len(curves) == 2 * (3 + 1) * 2
@@ -556,8 +557,14 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     )
     # max_eval_steps caps locomotion only: Maze2D's sparse-reward scores need whole episodes
     assert (curves.length_mean > 3).all() and curves.length_mean.nunique() == 1
-    again = run_hdt_experiments(cfg)
-    pd.testing.assert_frame_equal(curves, again)  # same seeds, same numbers
+    store = tmp_path / "results" / "04_hdt" / "tasks"
+    assert len(list(store.glob("*.json"))) == 4  # one finished task per seed x method
+    again = run_curves(cfg)  # read back from the store
+    pd.testing.assert_frame_equal(curves, again)
+    monkeypatch.setenv("THESIS_SWEEP_FORCE", "1")
+    recomputed = run_curves(cfg)  # trained again: same seeds, same numbers
+    pd.testing.assert_frame_equal(curves, recomputed)
+    monkeypatch.delenv("THESIS_SWEEP_FORCE")
     compat = run_paper_compat(cfg)
     assert compat.paper_compat.all() and set(compat.method) == {"HDT"}
     table = compare_paper_compat(curves, compat)

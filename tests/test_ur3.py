@@ -155,35 +155,50 @@ def test_safety_checks_positions_speed_workspace():
 
 # -- Table 5.4 at tiny scale ------------------------------------------------------------------
 def test_table_5_4_tiny():
-    from thesis_lib.ur3.experiments import ReachConfig, run_reach_method, success_curves, table_5_4
+    import pandas as pd
+
+    from thesis_lib.chapters.ur3 import (
+        Config,
+        run_reach,
+        run_success_curves,
+        summarize_table_5_4,
+    )
 
     eps = reach.make_demonstrations(24, seed=0)
     demos = reach.split_demonstrations(eps, n_train=4, n_val=0, n_test=3)
-    cfg = ReachConfig(
-        train_demos=(4,),
-        seeds=(0,),
+    cfg = Config(
+        train_demos=[4],
+        seeds=[0],
         iterations=3,
         batch_size=4,
         d_model=16,
-        n_layer=1,
+        n_layers=1,
         warmup_steps=1,
         max_eval_steps=12,
     )
-    rows = [run_reach_method(m, 4, 0, cfg, demos) for m in ("HDT", "DT")]
-    import pandas as pd
-
-    rows = pd.concat(rows, ignore_index=True)
+    rows = pd.DataFrame(
+        [
+            r | {"train_demos": 4}
+            for m in ("HDT", "DT")
+            for r in run_reach(m, demos.train, demos.test_starts, cfg.arch(), cfg.train_spec(0), 12)
+        ]
+    )
     assert len(rows) == 6 and set(rows.method) == {"HDT", "DT"}
+    assert rows.start.tolist() == [0, 1, 2, 0, 1, 2]
     assert rows.goals_reached.between(0, 5).all() and (rows.steps <= 12).all()
-    t = table_5_4(rows)
+    dt = rows[rows.method == "DT"]
+    assert (dt.target_return == max(e.episode_return for e in demos.train)).all()
+    t = summarize_table_5_4(rows)
     assert list(t.columns[:4]) == ["method", "train_demos", "goals_mean", "goals_std"]
-    curves = success_curves(rows, horizon=12)
+    curves = run_success_curves(rows, horizon=12)
     last = curves[curves.step == 12].set_index("method")["goals_mean"]
     np.testing.assert_allclose(
         last.loc[["HDT", "DT"]].to_numpy(), t.set_index("method").loc[["HDT", "DT"], "goals_mean"]
     )
     with pytest.raises(ValueError, match="Did you mean: 'HDT'"):
-        ReachConfig(methods=("HTD",))
+        Config(methods=("HTD",))
+    with pytest.raises(ValueError, match="train_demos must lie in 1..80"):
+        Config(train_demos=[90])
 
 
 # -- viewer and command line --------------------------------------------------------------------

@@ -1,3 +1,7 @@
-"""One module per book page: its ``Config`` (smoke-scale defaults), ``run_*(cfg)`` per table
-or experiment, ``compare_*`` against the thesis and ``plot_*``. Notebooks and the CLI import
-these; nothing in the method packages does."""
+"""The book's pages, one module per notebook.
+
+Each holds its ``Config`` (defaults = the smoke scale), ``run_*(cfg) -> DataFrame`` per table or
+experiment, ``compare_*`` beside the thesis's numbers (through
+:func:`thesis_lib.book.compare_with_paper`) and ``plot_*``. The notebooks and the CLI import them;
+nothing in the method packages does.
+"""

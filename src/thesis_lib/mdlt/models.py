@@ -5,7 +5,7 @@ angles (a zero start pose first), and predict the next four joint angles as ``ta
 trained with an L2 loss on real (non-padded) frames.
 
 * :class:`MDLTTransformer` (MDLT-T, 6.4.1): ``torch.nn.Transformer`` (an encoder-decoder with
-  cross-attention; the project's GPT :class:`~thesis_lib.seq.attention.Block` is decoder-only,
+  cross-attention; the project's GPT :class:`~thesis_lib.seq.attention_ops.Block` is decoder-only,
   so it does not fit). Encoder = the last K audio frames with a padding mask; decoder =
   ``[zero start pose, a_s .. a_{t-1}]`` with a causal and a padding mask. Inputs are
   ``Linear * sqrt(d)`` plus a learned embedding of each frame's index in the song (the

@@ -1,6 +1,6 @@
 """Sequence-model foundations (thesis Ch. 2): attention and GPT blocks, SSMs, DT tokens.
 
-* :mod:`thesis_lib.seq.attention` - positional encoding (Eq. 2.1-2.2), masks, attention
+* :mod:`thesis_lib.seq.attention_ops` - positional encoding (Eq. 2.1-2.2), masks, attention
   (Eq. 2.3), and the pre-LN GPT :class:`Block` reused by DT, HDT and MDLT.
 * :mod:`thesis_lib.seq.ssm` - S4's LTI state space model (Eq. 2.4-2.7) and Mamba's selective
   scan reference.
@@ -11,9 +11,13 @@
 * :mod:`thesis_lib.seq.mamba` - a Mamba-1 block with a fast CPU selective scan (numba, hand-written
   backward) and an O(1)-per-token recurrent step (Sec. 2.3, 5.3); ``mamba_ssm`` on CUDA.
 * :mod:`thesis_lib.seq.dm` - the Decision Mamba and the Hierarchical Decision Mamba (Sec. 5.3),
-  acting recurrently; :mod:`thesis_lib.seq.dm_experiments` - Tables 5.5-5.6, Figs 5.3-5.6.
-* :mod:`thesis_lib.seq.trainer` and :mod:`thesis_lib.seq.evaluate` - the one trainer and the
-  one evaluator of every sequence model; :mod:`thesis_lib.seq.experiments` - Tables 5.1-5.3.
+  acting recurrently.
+* :mod:`thesis_lib.seq.trainer` and :mod:`thesis_lib.seq.evaluation` - the one trainer and the
+  one evaluator of every sequence model.
+* :mod:`thesis_lib.seq.registry` - one registry of BC, DT, DT-noRTG, HDT, HDT-RTG, DM-RTG,
+  DM-noRTG and HDM built from one :class:`ArchSpec`; :mod:`thesis_lib.seq.runner` - the one
+  offline run (:func:`run_offline`: train, evaluate along the way, rows) of the HDT, Decision
+  Mamba and UR3 chapters (their tables live in :mod:`thesis_lib.chapters`).
 
 Mask convention throughout: a boolean mask is ``True`` where a query may attend (torch SDPA's).
 
@@ -22,7 +26,7 @@ Used in: Background chapter (thesis 2.2, 2.3, 2.8); DT, HDT, MDLT, Decision Mamb
 
 from __future__ import annotations
 
-from thesis_lib.seq.attention import (
+from thesis_lib.seq.attention_ops import (
     ACTIVATIONS,
     MLP,
     AttentionOutput,
@@ -37,13 +41,7 @@ from thesis_lib.seq.attention import (
     sinusoidal_positional_encoding,
 )
 from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig, RecurrentPolicy, TokenMamba
-from thesis_lib.seq.evaluate import EvalResult, evaluate, target_returns
-from thesis_lib.seq.experiments import (
-    HDTExperimentConfig,
-    run_hdt_experiments,
-    run_method,
-    summarize,
-)
+from thesis_lib.seq.evaluation import EvalResult, evaluate, target_returns
 from thesis_lib.seq.mamba import (
     SCAN_BACKENDS,
     GatedMLP,
@@ -69,6 +67,8 @@ from thesis_lib.seq.models import (
     TokenTransformer,
     masked_mse,
 )
+from thesis_lib.seq.registry import METHODS, ArchSpec, build_model
+from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.ssm import (
     Discretization,
     ScanStep,
@@ -91,6 +91,12 @@ from thesis_lib.seq.tokens import (
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 __all__ = [
+    "METHODS",
+    "ArchSpec",
+    "EvalSpec",
+    "TrainSpec",
+    "build_model",
+    "run_offline",
     "DMConfig",
     "DecisionMamba",
     "HDM",
@@ -114,7 +120,6 @@ __all__ = [
     "GPTBlockConfig",
     "GatedMLP",
     "HDTConfig",
-    "HDTExperimentConfig",
     "LayerState",
     "Mamba",
     "MambaBlock",
@@ -142,8 +147,6 @@ __all__ = [
     "padding_mask",
     "resolve_scan_backend",
     "returns_to_go",
-    "run_hdt_experiments",
-    "run_method",
     "select_subgoal_indices",
     "select_subgoals",
     "selective_scan",
@@ -154,7 +157,6 @@ __all__ = [
     "ssm_kernel",
     "ssm_recurrence",
     "subgoal_fn",
-    "summarize",
     "target_returns",
     "zoh_discretize",
 ]

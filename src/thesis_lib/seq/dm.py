@@ -3,7 +3,7 @@
 Both replace the transformers of the DT and the HDT (:mod:`thesis_lib.seq.models`) by stacks
 of Mamba blocks (:class:`thesis_lib.seq.mamba.Mamba`). They take the same batches, train with
 the same :class:`~thesis_lib.seq.trainer.Trainer` and act through the same
-:func:`~thesis_lib.seq.evaluate.evaluate` as the transformers. Tokens, per time step ``t``:
+:func:`~thesis_lib.seq.evaluation.evaluate` as the transformers. Tokens, per time step ``t``:
 
 * DM: ``(s_t, a_t)``, with ``use_rtg=True`` ``(rtg_t, s_t, a_t)``; ``a_t`` is read at ``s_t``
   (thesis 5.3.1, "DM without / with RTG");
@@ -77,7 +77,7 @@ EVAL_MODES: tuple[str, ...] = ("auto", "recurrent", "window")
 class _MambaModelConfig(_ModelConfig):
     d_model: int = 128
     """Token embedding size (128 in the thesis)."""
-    n_layer: int = 6
+    n_layers: int = 6
     """Mamba blocks (per level for HDM; 6 in the thesis)."""
     d_state: int = 16
     """SSM state size per channel (Mamba-1's 16)."""
@@ -90,7 +90,7 @@ class _MambaModelConfig(_ModelConfig):
     dropout: float = 0.0
     """Dropout on the token embeddings (the authors' code has none)."""
     eval_mode: Literal["auto", "recurrent", "window"] = "auto"
-    """How :func:`~thesis_lib.seq.evaluate.evaluate` acts: ``"recurrent"`` (one step per
+    """How :func:`~thesis_lib.seq.evaluation.evaluate` acts: ``"recurrent"`` (one step per
     action, conditions on the whole episode), ``"window"`` (re-run the last K steps, the
     authors' way), ``"auto"`` = window with ``paper_compat``, else recurrent."""
     paper_compat: bool = False
@@ -105,13 +105,13 @@ class _MambaModelConfig(_ModelConfig):
             )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expect `dropout` in [0, 1), actually: {self.dropout!r}.")
-        self.mamba_config()  # validates n_layer, d_model, d_state ...
+        self.mamba_config()  # validates n_layers, d_model, d_state ...
 
     def mamba_config(self) -> MambaConfig:
         """The :class:`MambaConfig` of each trunk."""
         return MambaConfig(
             d_model=self.d_model,
-            n_layers=self.n_layer,
+            n_layers=self.n_layers,
             d_state=self.d_state,
             d_conv=self.d_conv,
             expand=self.expand,
@@ -205,7 +205,7 @@ class DecisionMamba(nn.Module):
 
     Example:
         >>> _ = torch.manual_seed(0)
-        >>> dm = DecisionMamba(DMConfig(state_dim=3, act_dim=2, K=4, d_model=16, n_layer=1))
+        >>> dm = DecisionMamba(DMConfig(state_dim=3, act_dim=2, K=4, d_model=16, n_layers=1))
         >>> b = {"states": torch.randn(2, 4, 3), "actions": torch.zeros(2, 4, 2)}
         >>> tuple(dm(b).actions.shape)
         (2, 4, 2)
@@ -344,7 +344,7 @@ class HDM(nn.Module):
 class RecurrentPolicy:
     """Acts with a DM or HDM one environment step at a time, carrying each episode's Mamba state.
 
-    :func:`~thesis_lib.seq.evaluate.evaluate` makes one per round of ``n_envs`` episodes
+    :func:`~thesis_lib.seq.evaluation.evaluate` makes one per round of ``n_envs`` episodes
     (``model.recurrent_policy(n_envs)``) and calls ``act(history, live)`` each step with the
     same history it would give ``model.act`` and the indices of the running episodes. Only the
     history's last entries are read: at step ``t`` the policy feeds the previous step's action

@@ -40,7 +40,7 @@ from typing import Literal, NamedTuple
 import torch
 import torch.nn as nn
 
-from thesis_lib.seq.attention import ACTIVATIONS, Block, GPTBlockConfig
+from thesis_lib.seq.attention_ops import ACTIVATIONS, Block, GPTBlockConfig
 from thesis_lib.seq.tokens import deinterleave_embeddings, interleave_embeddings
 
 __all__ = [
@@ -122,8 +122,8 @@ class _ModelConfig:
         Example:
             >>> from types import SimpleNamespace
             >>> seq = SimpleNamespace(states=torch.zeros(10, 11), actions=torch.zeros(10, 3), K=20)
-            >>> DTConfig.for_data(seq, n_layer=2)
-            DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layer=2, n_head=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, use_rtg=True)
+            >>> DTConfig.for_data(seq, n_layers=2)
+            DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layers=2, n_heads=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, use_rtg=True)
         """
         sizes = dict(
             state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=int(seq.K)
@@ -167,9 +167,9 @@ class BCConfig(_ModelConfig):
 class _TransformerConfig(_ModelConfig):
     d_model: int = 128
     """Token embedding size (128 in the authors' code)."""
-    n_layer: int = 3
+    n_layers: int = 3
     """Number of GPT blocks (per level for HDT)."""
-    n_head: int = 1
+    n_heads: int = 1
     """Attention heads; must divide ``d_model``."""
     dropout: float = 0.1
     """Dropout on embeddings, attention and residual branches."""
@@ -182,8 +182,10 @@ class _TransformerConfig(_ModelConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not isinstance(self.n_layer, int) or self.n_layer <= 0:
-            raise ValueError(f"Expect `n_layer` to be a positive int, actually: {self.n_layer!r}.")
+        if not isinstance(self.n_layers, int) or self.n_layers <= 0:
+            raise ValueError(
+                f"Expect `n_layers` to be a positive int, actually: {self.n_layers!r}."
+            )
         if not isinstance(self.max_timestep, int) or self.max_timestep <= 0:
             raise ValueError(
                 f"Expect `max_timestep` to be a positive int, actually: {self.max_timestep!r}."
@@ -192,13 +194,13 @@ class _TransformerConfig(_ModelConfig):
             raise ValueError(
                 f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}."
             )
-        self.block_config()  # validates d_model, n_head, dropout
+        self.block_config()  # validates d_model, n_heads, dropout
 
     def block_config(self) -> GPTBlockConfig:
         """The :class:`GPTBlockConfig` of each block."""
         return GPTBlockConfig(
             d_model=self.d_model,
-            n_head=self.n_head,
+            n_heads=self.n_heads,
             dropout=self.dropout,
             activation=self.activation,
         )
@@ -217,7 +219,7 @@ class DTConfig(_TransformerConfig):
 
 @dataclass
 class HDTConfig(_TransformerConfig):
-    """Configuration of :class:`HDT`; ``d_model``, ``n_layer``, ``n_head`` serve both levels.
+    """Configuration of :class:`HDT`; ``d_model``, ``n_layers``, ``n_heads`` serve both levels.
 
     Used in: HDT chapter (Tables 5.2, 5.3).
     """
@@ -327,7 +329,7 @@ class TokenTransformer(nn.Module):
         self.embed_timestep = nn.Embedding(config.max_timestep, config.d_model)
         self.embed_ln = nn.LayerNorm(config.d_model)
         self.drop = nn.Dropout(config.dropout)
-        self.blocks = nn.ModuleList([Block(config.block_config()) for _ in range(config.n_layer)])
+        self.blocks = nn.ModuleList([Block(config.block_config()) for _ in range(config.n_layers)])
         self.ln_f = nn.LayerNorm(config.d_model)
 
     def forward(

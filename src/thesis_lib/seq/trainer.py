@@ -134,7 +134,7 @@ class Trainer:
         config: :class:`TrainConfig`.
         eval_fn: Called as ``eval_fn(model)`` (model in eval mode) every
             ``config.eval_every`` iterations; returns a float or an object with ``returns``
-            (e.g. :class:`~thesis_lib.seq.evaluate.EvalResult`); its mean is logged.
+            (e.g. :class:`~thesis_lib.seq.evaluation.EvalResult`); its mean is logged.
 
     Raises:
         ValueError: If the data set and the model disagree on dimensions, or an HDT gets a

@@ -1,10 +1,11 @@
-"""The UR3 deployment chapter (thesis 5.2.5.4 and chapter 6's application), on a simulated UR3.
+"""The UR3 methods (thesis 5.2.5.4 and chapter 6's application), on a simulated UR3.
+
+Table 5.4 and the chapter's figures live in :mod:`thesis_lib.chapters.ur3`.
 
 * :mod:`thesis_lib.ur3.model` - DH parameters, limits, forward kinematics, the MJCF model
   (``assets/ur3.xml``);
 * :mod:`thesis_lib.ur3.reach` - the reaching task (a gymnasium env, ``thesis/UR3Reach-v0``),
   scripted teleoperation-like demonstrations, their Minari data set;
-* :mod:`thesis_lib.ur3.experiments` - Table 5.4 (HDT and DT with 10..80 demonstrations);
 * :mod:`thesis_lib.ur3.safety` - joint, speed and workspace limits: check or clip;
 * :mod:`thesis_lib.ur3.dance` - MDLT's four angles on the arm, with the limit checks;
 * :mod:`thesis_lib.ur3.render`, :mod:`thesis_lib.ur3.viewer` - frames, GIF, meshcat 3-D viewer;
@@ -18,7 +19,6 @@ from __future__ import annotations
 
 from .dance import DanceMapping, DancePlayback, demo_angles, map_dance, prepare_dance
 from .driver import PlayResult, RobotStopped, RTDEBackend, SimBackend, UR3Driver, URScriptBackend
-from .experiments import ReachConfig, run_reach_method, run_table_5_4, success_curves, table_5_4
 from .model import (
     DH,
     JOINT_NAMES,
@@ -71,7 +71,6 @@ __all__ = [
     "DancePlayback",
     "PlayResult",
     "RTDEBackend",
-    "ReachConfig",
     "RobotStopped",
     "SafetyLimits",
     "SafetyReport",
@@ -93,11 +92,7 @@ __all__ = [
     "make_demonstrations",
     "map_dance",
     "prepare_dance",
-    "run_reach_method",
-    "run_table_5_4",
     "split_demonstrations",
-    "success_curves",
-    "table_5_4",
     "tcp_position",
     "trajectory_html",
 ]

@@ -422,7 +422,7 @@ class CausalSelfAttention(nn.Module):
                 f"Expect input of shape (B, T, d_model={self.config.d_model}), got {tuple(x.shape)}."
             )
         B, T, C = x.shape
-        nh, hs = self.config.n_head, self.config.head_dim
+        nh, hs = self.config.n_heads, self.config.head_dim
         q, k, v = self.c_attn(x).split(C, dim=2)  # 3 x (B, T, C)
         q = q.view(B, T, nh, hs).transpose(1, 2)  # (B, nh, T, hs)
         k = k.view(B, T, nh, hs).transpose(1, 2)  # (B, nh, T, hs)
@@ -475,7 +475,7 @@ class CausalSelfAttention(nn.Module):
             key_padding_mask: Optional bool ``(B, T)``, ``True`` at real tokens.
 
         Returns:
-            Weights ``(B, n_head, T, T)`` without dropout; ``[b, h]`` is heatmap-ready.
+            Weights ``(B, n_heads, T, T)`` without dropout; ``[b, h]`` is heatmap-ready.
         """
         q, k, v = self._qkv(x)
         return attention(q, k, v, self._mask(x, key_padding_mask)).weights
@@ -510,7 +510,7 @@ class Block(nn.Module):
 
     Example:
         >>> _ = torch.manual_seed(0)
-        >>> block = Block(GPTBlockConfig(d_model=8, n_head=2, dropout=0.0))
+        >>> block = Block(GPTBlockConfig(d_model=8, n_heads=2, dropout=0.0))
         >>> tuple(block(torch.randn(3, 5, 8)).shape)
         (3, 5, 8)
     """
@@ -554,7 +554,7 @@ class Block(nn.Module):
             key_padding_mask: Optional bool ``(B, T)``, ``True`` at real tokens.
 
         Returns:
-            ``(B, n_head, T, T)``, rows = queries, columns = keys; ``[b, h]`` is heatmap-ready.
+            ``(B, n_heads, T, T)``, rows = queries, columns = keys; ``[b, h]`` is heatmap-ready.
         """
         return self.attn.attention_weights(self.ln_1(x), key_padding_mask)
 
@@ -569,17 +569,17 @@ class GPTBlockConfig:
     Used in: Background chapter (thesis 2.2); DT, HDT, MDLT chapters.
 
     Example:
-        >>> GPTBlockConfig(d_model=128, n_head=4).head_dim
+        >>> GPTBlockConfig(d_model=128, n_heads=4).head_dim
         32
-        >>> GPTBlockConfig(d_model=100, n_head=3)
+        >>> GPTBlockConfig(d_model=100, n_heads=3)
         Traceback (most recent call last):
         ...
-        ValueError: d_model must be divisible by n_head, got d_model=100 and n_head=3 (100 % 3 = 1). Choose n_head among the divisors of 100: 1, 2, 4, 5, 10, 20, 25, 50, 100.
+        ValueError: d_model must be divisible by n_heads, got d_model=100 and n_heads=3 (100 % 3 = 1). Choose n_heads among the divisors of 100: 1, 2, 4, 5, 10, 20, 25, 50, 100.
     """
 
     d_model: int = 128
     """Embedding size ``C`` of every token; split evenly across heads."""
-    n_head: int = 1
+    n_heads: int = 1
     """Number of attention heads; must divide ``d_model``."""
     dropout: float = 0.1
     """Dropout on attention weights and on both residual branches, in ``[0, 1)``."""
@@ -592,21 +592,21 @@ class GPTBlockConfig:
     causal: bool = True
     """Causal self-attention (decoder, as in GPT-2/DT); ``False`` gives full attention (encoder)."""
     head_dim: int = field(init=False)
-    """Derived: channels per head, ``d_model // n_head`` (the ``D`` of Eq. 2.3)."""
+    """Derived: channels per head, ``d_model // n_heads`` (the ``D`` of Eq. 2.3)."""
 
     def __post_init__(self) -> None:
-        for name in ("d_model", "n_head", "mlp_ratio"):
+        for name in ("d_model", "n_heads", "mlp_ratio"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
                 raise ValueError(f"Expect `{name}` to be a positive int, actually: {value!r}.")
-        if self.d_model % self.n_head != 0:
+        if self.d_model % self.n_heads != 0:
             divisors = ", ".join(
                 str(n) for n in range(1, self.d_model + 1) if self.d_model % n == 0
             )
             raise ValueError(
-                f"d_model must be divisible by n_head, got d_model={self.d_model} and n_head={self.n_head} "
-                f"({self.d_model} % {self.n_head} = {self.d_model % self.n_head}). "
-                f"Choose n_head among the divisors of {self.d_model}: {divisors}."
+                f"d_model must be divisible by n_heads, got d_model={self.d_model} and n_heads={self.n_heads} "
+                f"({self.d_model} % {self.n_heads} = {self.d_model % self.n_heads}). "
+                f"Choose n_heads among the divisors of {self.d_model}: {divisors}."
             )
         if not 0.0 <= self.dropout < 1.0:
             raise ValueError(f"Expect `dropout` in [0, 1), actually: {self.dropout!r}.")
@@ -614,4 +614,4 @@ class GPTBlockConfig:
             raise ValueError(
                 f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}."
             )
-        self.head_dim = self.d_model // self.n_head
+        self.head_dim = self.d_model // self.n_heads

@@ -1,18 +1,20 @@
-"""The Decision Mamba chapter's experiments (thesis 5.3) as functions returning tidy DataFrames.
+"""The Decision Mamba chapter (thesis 5.3; notebook ``05_decision_mamba``): Tables 5.5, 5.6, Figs 5.3-5.6.
 
-* :func:`run_dm_method` trains one method (``DT``, ``HDT``, ``DM-RTG``, ``DM``, ``HDM``) of one
-  architecture on one data set with one seed, evaluating every ``eval_every`` iterations
-  (RTG methods at the data set's max return, half of it and 10,000); one row per evaluation.
-* :func:`run_table_5_5` loops over data sets x seeds x methods at the chapter's architecture;
-  :func:`run_sweeps` over the architectures of Figs 5.3, 5.5, 5.6 (reusing the Table 5.5 runs
-  where the architecture is the same).
-* :func:`summarize_dm` gives, per method x data set x target x architecture x evaluation mode,
-  the thesis's metric (best evaluation average during training, mean +- std over seeds) and
-  the final checkpoint's.
-* :func:`thesis_table_5_5`, :func:`win_counts_5_5`: Table 5.5 beside the thesis's, and the
-  "wins out of N settings" the thesis quotes (5.3.3).
-* :func:`time_methods`, :func:`thesis_table_5_6`: Table 5.6 (train ms/iteration, inference
-  ms/step) plus the recurrent-step inference the thesis did not have.
+* :class:`Config`: the notebook's parameters; defaults are the smoke scale.
+* :func:`run_parameter_counts`: the five models' sizes at the thesis's architecture.
+* :func:`run_table_5_5`: every data set x seed x method at the chapter's architecture, trained
+  and evaluated by the one offline runner (:func:`thesis_lib.seq.runner.run_offline`) as a
+  resumable sweep (``results/05_decision_mamba/tasks``); RTG methods at the data set's max
+  return, half of it and 10,000; :func:`run_sweeps`: the architectures of Figs 5.3, 5.5, 5.6
+  (reusing the Table 5.5 runs where the architecture is the same).
+* :func:`summarize_dm`: per method x data set x target x architecture x evaluation mode, the
+  thesis's metric (best evaluation during training, mean +- std over seeds) and the final
+  checkpoint's.
+* :func:`compare_table_5_5`, :func:`compare_win_counts_5_5`: Table 5.5 beside the thesis's,
+  and the "wins out of N settings" the thesis quotes (5.3.3).
+* :func:`run_table_5_6`, :func:`compare_table_5_6`, :func:`run_timing_ratios`: Table 5.6
+  (train ms/iteration, inference ms/step) plus the recurrent-step inference the thesis did not
+  have, and the ratios to DT.
 * :func:`plot_sweep` (Figs 5.3, 5.5, 5.6) and :func:`plot_methods` (Fig 5.4).
 
 Used in: Decision Mamba chapter (thesis 5.3; Tables 5.5, 5.6; Figs 5.3-5.6).
@@ -20,10 +22,9 @@ Used in: Decision Mamba chapter (thesis 5.3; Tables 5.5, 5.6; Figs 5.3-5.6).
 
 from __future__ import annotations
 
-import difflib
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -31,45 +32,53 @@ import pandas as pd
 import torch
 from tqdm.auto import tqdm
 
-from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig
-from thesis_lib.seq.evaluate import EvalResult, eval_step_cap, evaluate, target_returns
-from thesis_lib.seq.models import HDT, DecisionTransformer, DTConfig, HDTConfig
+from thesis_lib.seq.evaluation import evaluate, target_returns
+from thesis_lib.seq.registry import ArchSpec, build_model, check_methods
+from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
 
+CHAPTER = "05_decision_mamba"
+
 __all__ = [
-    "Arch",
-    "DMChapterConfig",
     "DM_METHODS",
+    "METRICS",
     "THESIS_METHOD",
-    "build_dm_model",
+    "WIN_COMPARISONS",
+    "Arch",
+    "Config",
+    "compare_table_5_5",
+    "compare_table_5_6",
+    "compare_win_counts_5_5",
+    "eval_mode_effect",
+    "format_table_5_5",
+    "load_datasets",
+    "offline_task",
     "parse_arch",
     "plot_methods",
     "plot_sweep",
-    "run_dm_method",
+    "run_parameter_counts",
     "run_sweeps",
     "run_table_5_5",
+    "run_table_5_6",
+    "run_timing_ratios",
     "summarize_dm",
     "thesis_labels_5_5",
-    "thesis_table_5_5",
-    "thesis_table_5_6",
-    "time_methods",
-    "win_counts_5_5",
 ]
 
-DM_METHODS: tuple[str, ...] = ("DT", "HDT", "DM-RTG", "DM", "HDM")
-"""Our method names: DT (with RTG), HDT, DM with RTG, DM without RTG, HDM."""
+DM_METHODS: tuple[str, ...] = ("DT", "HDT", "DM-RTG", "DM-noRTG", "HDM")
+"""Our method names: DT (with RTG), HDT, DM with RTG, DM without RTG (DM-noRTG), HDM."""
 THESIS_METHOD: dict[str, str] = {
     "DT": "DT",
     "HDT": "HDT",
     "DM-RTG": "DM_with_R",
-    "DM": "DM_without_R",
+    "DM-noRTG": "DM_without_R",
     "HDM": "HDM",
 }
 """Our names -> the reference tables' (``table_5_5.csv``, ``table_5_6.csv``)."""
 RTG_METHODS = ("DT", "DM-RTG")
 HIERARCHICAL = ("HDT", "HDM")
-MAMBA_METHODS = ("DM-RTG", "DM", "HDM")
+MAMBA_METHODS = ("DM-RTG", "DM-noRTG", "HDM")
 TARGETS = ("half", "max", "10k")
 #: The two metrics: the thesis's (best evaluation during training) and the final checkpoint's.
 METRICS: dict[str, str] = {"best during training (thesis)": "best", "final checkpoint": "final"}
@@ -78,14 +87,14 @@ METRICS: dict[str, str] = {"best during training (thesis)": "best", "final check
 class Arch(NamedTuple):
     """An architecture of the sweeps: layers (per level), embedding size, context length."""
 
-    n_layer: int
+    n_layers: int
     d_model: int
     K: int
 
     @property
     def label(self) -> str:
         """``"L6 D128 K20"`` as the thesis's figure legends."""
-        return f"L{self.n_layer} D{self.d_model} K{self.K}"
+        return f"L{self.n_layers} D{self.d_model} K{self.K}"
 
 
 def parse_arch(text: str | Arch) -> Arch:
@@ -93,7 +102,7 @@ def parse_arch(text: str | Arch) -> Arch:
 
     Example:
         >>> parse_arch("6/128/20")
-        Arch(n_layer=6, d_model=128, K=20)
+        Arch(n_layers=6, d_model=128, K=20)
         >>> parse_arch("6-128")
         Traceback (most recent call last):
         ...
@@ -114,7 +123,7 @@ def parse_arch(text: str | Arch) -> Arch:
 
 
 @dataclass
-class DMChapterConfig:
+class Config:
     """Parameters of the Decision Mamba chapter; defaults are the smoke scale.
 
     ``params/05_decision_mamba.smoke.yml`` equals these defaults; ``.full.yml`` holds the
@@ -138,7 +147,7 @@ class DMChapterConfig:
     """Windows per batch (16 in the thesis)."""
     arch: str = "2/32/20"
     """Architecture of Table 5.5 and Fig 5.4, ``layers/d_model/K`` (the thesis: ``6/128/20``)."""
-    n_head: int = 1
+    n_heads: int = 1
     """Attention heads of DT/HDT."""
     dropout: float = 0.1
     """Dropout of DT/HDT (the DM/HDM have none, as the authors' code)."""
@@ -154,7 +163,7 @@ class DMChapterConfig:
     """Episodes per evaluation (100 in the thesis)."""
     max_eval_steps: int | None = 100
     """Cap on evaluation episode length (``None``: the task's time limit). Maze2D always runs
-    whole episodes (:func:`~thesis_lib.seq.evaluate.eval_step_cap`)."""
+    whole episodes (:func:`~thesis_lib.seq.evaluation.eval_step_cap`)."""
     eval_mode: str = "recurrent"
     """How the DM/HDM act: ``recurrent`` (one O(1) step per action) or ``window`` (re-run the
     last K steps, as the authors' code: ``paper_compat``)."""
@@ -162,7 +171,7 @@ class DMChapterConfig:
     """Also evaluate each final DM/HDM in the other mode (the difference is a table)."""
     sweep_datasets: list[str] = field(default_factory=lambda: ["hopper/medium"])
     """Data sets of the architecture sweeps (Figs 5.3, 5.5, 5.6)."""
-    sweep_methods: list[str] = field(default_factory=lambda: ["HDM", "DM", "DM-RTG"])
+    sweep_methods: list[str] = field(default_factory=lambda: ["HDM", "DM-noRTG", "DM-RTG"])
     """Methods swept (Fig 5.3: HDM, 5.5: DM, 5.6: DM with RTG)."""
     sweep_archs: list[str] = field(default_factory=lambda: ["1/32/10", "2/32/20", "2/64/20"])
     """Architectures swept, ``layers/d_model/K`` (the thesis: layers 2-12, d 128/256, K 10/20/60)."""
@@ -178,8 +187,10 @@ class DMChapterConfig:
     """Environment steps per timed inference episode."""
     timing_infer_episodes: int = 2
     """Timed inference episodes per method and mode (after one untimed)."""
-    profile: str = "smoke"
-    """Data-set size profile of ``thesis_lib.data.get_dataset``."""
+    dataset_size: str = "smoke"
+    """Size of the generated data sets: a key of ``thesis_lib.data.PROFILE_SIZES`` (``smoke``
+    20k transitions, ``full`` D4RL's 1M). Not the chapter's profile (``thesis run --profile``),
+    which picks the parameter file."""
     n_transitions: int | None = None
     """Data-set size override."""
     paper_compat: bool = False
@@ -192,13 +203,7 @@ class DMChapterConfig:
 
     def __post_init__(self) -> None:
         for name in ("methods", "sweep_methods"):
-            for m in getattr(self, name):
-                if m not in DM_METHODS:
-                    close = difflib.get_close_matches(m, DM_METHODS, n=1)
-                    hint = f" Did you mean: '{close[0]}'?" if close else ""
-                    raise ValueError(
-                        f"Unknown method '{m}' in {name}.{hint} Valid: {', '.join(DM_METHODS)}."
-                    )
+            check_methods(getattr(self, name), DM_METHODS)
         for name in ("datasets", "sweep_datasets", "timing_datasets"):
             for d in getattr(self, name):
                 if str(d).count("/") != 1:
@@ -228,222 +233,145 @@ class DMChapterConfig:
         """:attr:`arch` parsed."""
         return parse_arch(self.arch)
 
+    def arch_spec(self, arch: str | Arch | None = None) -> ArchSpec:
+        """The :class:`~thesis_lib.seq.registry.ArchSpec` of ``arch`` (default :attr:`arch`)."""
+        a = parse_arch(arch or self.arch)
+        return ArchSpec(
+            d_model=a.d_model,
+            n_layers=a.n_layers,
+            n_heads=self.n_heads,
+            K=a.K,
+            dropout=self.dropout,
+            gated_mlp=self.gated_mlp,
+            eval_mode=self.eval_mode,
+            paper_compat=self.paper_compat,
+        )
+
+    def train_spec(self, seed: int) -> TrainSpec:
+        """The :class:`~thesis_lib.seq.runner.TrainSpec` of the run with ``seed``."""
+        return TrainSpec(
+            seed=seed,
+            iterations=self.iterations,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            warmup_steps=self.warmup_steps,
+            eval_every=self.eval_every,
+            device=self.device,
+            progress=self.progress,
+        )
+
 
 # ----------------------------------------------------------------------------------------------
-# One run
+# The runs
 
 
-def build_dm_model(
-    method: str, seq: Any, arch: Arch, cfg: DMChapterConfig, max_action: float = 1.0
-) -> torch.nn.Module:
-    """The model of ``method`` with architecture ``arch`` sized for the data set ``seq``.
-
-    Used in: Decision Mamba chapter.
-    """
-    sizes = dict(
-        state_dim=int(seq.states.shape[-1]),
-        act_dim=int(seq.actions.shape[-1]),
-        K=arch.K,
-        max_action=max_action,
-        d_model=arch.d_model,
-        n_layer=arch.n_layer,
-        paper_compat=cfg.paper_compat,
-    )
-    if method in ("DT", "HDT"):
-        tf = dict(n_head=cfg.n_head, dropout=cfg.dropout, max_timestep=4096, **sizes)
-        return (
-            DecisionTransformer(DTConfig(use_rtg=True, **tf))
-            if method == "DT"
-            else HDT(HDTConfig(**tf))
-        )
-    mb = dict(gated_mlp=cfg.gated_mlp, eval_mode=cfg.eval_mode, **sizes)
-    if method in ("DM", "DM-RTG"):
-        return DecisionMamba(DMConfig(use_rtg=method == "DM-RTG", **mb))
-    if method == "HDM":
-        return HDM(HDMConfig(**mb))
-    raise ValueError(f"Unknown method '{method}'. Valid: {', '.join(DM_METHODS)}.")
-
-
-def _sequence_dataset(data: Any, method: str, K: int, seed: int, paper_compat: bool) -> Any:
-    from thesis_lib.data import SequenceDataset
-
-    sg = subgoal_fn(paper_compat) if method in HIERARCHICAL else None
-    return SequenceDataset(data, K=K, subgoal_fn=sg, paper_compat=paper_compat, seed=seed)
-
-
-def _max_action(task: str) -> float:
-    from thesis_lib.data import make_env
-
-    env = make_env(task)
-    try:
-        return float(np.max(env.action_space.high))
-    finally:
-        env.close()
-
-
-def run_dm_method(
-    method: str,
-    task: str,
-    tier: str,
-    seed: int,
-    cfg: DMChapterConfig,
-    data: Any = None,
-    arch: Arch | str | None = None,
-    compare_eval_modes: bool = False,
-    targets: tuple[str, ...] = TARGETS,
-) -> pd.DataFrame:
-    """Train ``method`` on ``thesis/<task>/<tier>`` with ``seed``; evaluate along the way.
-
-    Used in: Decision Mamba chapter (Table 5.5, Figs 5.3-5.6).
-
-    Args:
-        method: One of :data:`DM_METHODS`.
-        task: Task name; evaluation runs in its environment.
-        tier: Data-set tier.
-        seed: Seed of the run (model init, batches, evaluation episodes).
-        cfg: :class:`DMChapterConfig` (training and evaluation settings).
-        data: The episodes (default ``get_dataset(task, tier, cfg.profile)``).
-        arch: Architecture (default ``cfg.arch``).
-        compare_eval_modes: For DM/HDM, also evaluate the final model in the other mode.
-        targets: The desired returns RTG methods are evaluated at (of ``half``, ``max``, ``10k``).
-
-    Returns:
-        One row per evaluation and target: ``method, task, tier, seed, arch, n_layer, d_model,
-        K, eval_mode, target, target_return, iteration, return_mean, return_std, score_mean,
-        length_mean, loss``.
-    """
-    from thesis_lib.data import get_dataset
-
-    arch = parse_arch(arch or cfg.arch)
-    if method not in DM_METHODS:
-        raise ValueError(f"Unknown method '{method}'. Valid: {', '.join(DM_METHODS)}.")
-    unknown = [t for t in targets if t not in TARGETS]
-    if unknown:
-        raise ValueError(f"Unknown target {unknown[0]!r}. Valid: {', '.join(TARGETS)}.")
-    if data is None:
-        data = get_dataset(task, tier, cfg.profile, n_transitions=cfg.n_transitions)
-    seq = _sequence_dataset(data, method, arch.K, seed, cfg.paper_compat)
-    torch.manual_seed(seed)
-    model = build_dm_model(method, seq, arch, cfg, _max_action(task))
-    if method in RTG_METHODS:
-        targets = {k: v for k, v in target_returns(data).items() if k in targets}
-    else:
-        targets = {"none": None}
-    base_mode = model.config.resolved_eval_mode if method in MAMBA_METHODS else "window"
-    rows: list[dict[str, Any]] = []
-
-    def run_eval(m: torch.nn.Module, mode: str) -> None:
-        # Every target in one batch of environments (one model call per step for all targets);
-        # episode k of the batch resets with seed ep_seed + k, so each target has its own starts.
-        E, values = cfg.eval_episodes, list(targets.values())
-        per_episode = (
-            None if values[0] is None else np.repeat(np.asarray(values, dtype=np.float64), E)
-        )
-        ep_seed = 10_000 * (seed + 1) + trainer.iteration
-        res_all = evaluate(
-            m,
-            task,
-            E * len(values),
-            target_return=per_episode,
-            dataset=seq,
-            seed=ep_seed,
-            max_steps=eval_step_cap(task, cfg.max_eval_steps),
-            n_envs=E * len(values),
-        )
-        for i, (name, target) in enumerate(targets.items()):
-            part = slice(i * E, (i + 1) * E)
-            res = EvalResult(
-                res_all.returns[part],
-                res_all.lengths[part],
-                None if res_all.scores is None else res_all.scores[part],
-            )
-            rows.append({
-                "method": method, "task": task, "tier": tier, "seed": seed, "arch": arch.label,
-                "n_layer": arch.n_layer, "d_model": arch.d_model, "K": arch.K, "eval_mode": mode,
-                "target": name, "target_return": np.nan if target is None else target,
-                "iteration": trainer.iteration, "return_mean": res.mean_return,
-                "return_std": float(np.std(res.returns)),
-                "score_mean": np.nan if res.scores is None else res.mean_score,
-                "length_mean": float(np.mean(res.lengths)),
-                "loss": trainer.history[-1]["loss"] if trainer.history else np.nan,
-            })  # fmt: skip
-
-    def eval_fn(m: torch.nn.Module) -> float:
-        run_eval(m, base_mode)
-        return rows[-1]["return_mean"]
-
-    train_cfg = TrainConfig(
-        iterations=cfg.iterations,
-        batch_size=cfg.batch_size,
-        lr=cfg.lr,
-        warmup_steps=cfg.warmup_steps,
-        eval_every=cfg.eval_every,
-        seed=seed,
-        device=cfg.device,
-        progress=cfg.progress,
-    )
-    trainer = Trainer(model, seq, train_cfg, eval_fn=eval_fn)
-    trainer.train()
-    if cfg.iterations % cfg.eval_every:  # always evaluate the final model
-        trainer.evaluate()
-    if compare_eval_modes and method in MAMBA_METHODS:
-        other = "window" if base_mode == "recurrent" else "recurrent"
-        model.config.eval_mode = other
-        model.eval()
-        try:
-            run_eval(model, other)
-        finally:
-            model.config.eval_mode = cfg.eval_mode
-    return pd.DataFrame(rows)
-
-
-def _split(name: str) -> tuple[str, str]:
+def split_dataset(name: str) -> tuple[str, str]:
+    """``"hopper/medium"`` -> ``("hopper", "medium")``."""
     task, tier = name.split("/")
     return task, tier
 
 
-def _load(
-    names: list[str], cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None
-) -> dict:
+def load_datasets(
+    names: list[str], cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
+) -> dict[tuple[str, str], Any]:
+    """``{(task, tier): OfflineDataset}`` of ``names`` (those not already in ``data``).
+
+    Used in: Decision Mamba chapter.
+    """
     from thesis_lib.data import get_dataset
 
     out = dict(data or {})
     for name in names:
-        key = _split(name)
+        key = split_dataset(name)
         if key not in out:
-            out[key] = get_dataset(*key, cfg.profile, n_transitions=cfg.n_transitions)
+            out[key] = get_dataset(*key, cfg.dataset_size, n_transitions=cfg.n_transitions)
     return out
 
 
-def run_table_5_5(
-    cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None
-) -> pd.DataFrame:
-    """Every data set x seed x method of ``cfg`` at ``cfg.arch``: the :func:`run_dm_method` rows.
+#: The columns of the curves (one row per evaluation and target).
+CURVE_COLUMNS = [
+    "method", "task", "tier", "seed", "arch", "n_layers", "d_model", "K", "eval_mode", "target",
+    "target_return", "iteration", "return_mean", "return_std", "score_mean", "length_mean",
+    "loss",
+]  # fmt: skip
+
+
+def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One sweep task: train and evaluate ``config["method"]`` on ``config["dataset"]``.
+
+    ``config`` holds ``method, dataset ("task/tier"), dataset_size, n_transitions`` and the
+    ``arch``, ``train``, ``eval`` specs as dicts. Returns :data:`CURVE_COLUMNS` rows.
+
+    Used in: Decision Mamba chapter (through :func:`run_table_5_5`, :func:`run_sweeps`).
+    """
+    from thesis_lib.data import get_dataset
+
+    task, tier = split_dataset(config["dataset"])
+    data = get_dataset(task, tier, config["dataset_size"], n_transitions=config["n_transitions"])
+    ev = dict(config["eval"])
+    ev["targets"] = tuple(ev["targets"])
+    rows = run_offline(
+        config["method"],
+        data,
+        ArchSpec(**config["arch"]),
+        TrainSpec(**config["train"]),
+        EvalSpec(**ev),
+        task=task,
+    )
+    where = {"task": task, "tier": tier}
+    return [{k: where[k] if k in where else r[k] for k in CURVE_COLUMNS} for r in rows]
+
+
+def _task(cfg: Config, method: str, dataset: str, seed: int, arch: Any, ev: EvalSpec) -> Any:
+    from thesis_lib.sweep import Task
+
+    return Task(
+        offline_task,
+        {
+            "method": method,
+            "dataset": dataset,
+            "dataset_size": cfg.dataset_size,
+            "n_transitions": cfg.n_transitions,
+            "arch": asdict(cfg.arch_spec(arch)),
+            "train": asdict(cfg.train_spec(seed)),
+            "eval": asdict(ev),
+        },
+    )
+
+
+def _run(cfg: Config, tasks: list[Any], desc: str) -> pd.DataFrame:
+    from thesis_lib.book.paths import results_dir
+    from thesis_lib.sweep import run_tasks
+
+    if not tasks:
+        return pd.DataFrame(columns=CURVE_COLUMNS)
+    rows = run_tasks(tasks, store=results_dir(CHAPTER) / "tasks", desc=desc, progress=cfg.progress)
+    return rows.drop(columns="task_key").reset_index(drop=True)
+
+
+def run_table_5_5(cfg: Config) -> pd.DataFrame:
+    """Every data set x seed x method of ``cfg`` at ``cfg.arch``: one row per evaluation and target.
+
+    A resumable sweep (store ``results/05_decision_mamba/tasks``).
 
     Used in: Decision Mamba chapter (Table 5.5, Fig 5.4).
     """
-    data = _load(cfg.datasets, cfg, data)
-    jobs = [(m, *_split(d), s) for d in cfg.datasets for s in cfg.seeds for m in cfg.methods]
-    frames = [
-        run_dm_method(
-            m,
-            task,
-            tier,
-            s,
-            cfg,
-            data=data[(task, tier)],
-            compare_eval_modes=cfg.compare_eval_modes,
-        )
-        for m, task, tier, s in tqdm(jobs, desc="Table 5.5 runs", disable=not cfg.progress)
+    ev = EvalSpec(
+        episodes=cfg.eval_episodes,
+        max_steps=cfg.max_eval_steps,
+        targets=("max", "half", "10k"),
+        compare_eval_modes=cfg.compare_eval_modes,
+    )
+    tasks = [
+        _task(cfg, m, d, s, cfg.arch, ev)
+        for d in cfg.datasets
+        for s in cfg.seeds
+        for m in cfg.methods
     ]
-    return pd.concat(frames, ignore_index=True)
+    return _run(cfg, tasks, "Table 5.5")
 
 
-def run_sweeps(
-    cfg: DMChapterConfig,
-    data: Mapping[tuple[str, str], Any] | None = None,
-    reuse: pd.DataFrame | None = None,
-) -> pd.DataFrame:
+def run_sweeps(cfg: Config, reuse: pd.DataFrame | None = None) -> pd.DataFrame:
     """The architecture sweeps of Figs 5.3 (HDM), 5.5 (DM) and 5.6 (DM with RTG, at the max target only).
 
     Runs already in ``reuse`` (e.g. :func:`run_table_5_5`'s, same method, data set, seed and
@@ -451,10 +379,10 @@ def run_sweeps(
 
     Used in: Decision Mamba chapter (Figs 5.3, 5.5, 5.6).
     """
-    data = _load(cfg.sweep_datasets, cfg, data)
-    frames, jobs = [], []
+    ev = EvalSpec(episodes=cfg.eval_episodes, max_steps=cfg.max_eval_steps, targets=("max",))
+    frames, tasks = [], []
     for d in cfg.sweep_datasets:
-        task, tier = _split(d)
+        task, tier = split_dataset(d)
         for a in map(parse_arch, cfg.sweep_archs):
             for s in cfg.seeds:
                 for m in cfg.sweep_methods:
@@ -469,12 +397,42 @@ def run_sweeps(
                         if len(hit):
                             frames.append(hit)
                             continue
-                    jobs.append((m, task, tier, s, a))
-    for m, task, tier, s, a in tqdm(jobs, desc="sweep runs", disable=not cfg.progress):
-        frames.append(
-            run_dm_method(m, task, tier, s, cfg, data=data[(task, tier)], arch=a, targets=("max",))
-        )
-    return pd.concat(frames, ignore_index=True)
+                    tasks.append(_task(cfg, m, d, s, a, ev))
+    frames.append(_run(cfg, tasks, "Figs 5.3, 5.5, 5.6"))
+    return pd.concat([f for f in frames if len(f)], ignore_index=True)
+
+
+def run_parameter_counts(
+    state_dim: int = 11, act_dim: int = 3, K: int = 20, d_model: int = 128, n_layers: int = 6
+) -> pd.DataFrame:
+    """Trainable parameters of DT, HDT, DM (with and without the gated MLP) and HDM at one size.
+
+    Used in: Decision Mamba chapter (the models' sizes at the thesis's 6/128/20).
+    """
+    from thesis_lib.seq import (
+        HDM,
+        HDT,
+        DecisionMamba,
+        DecisionTransformer,
+        DMConfig,
+        DTConfig,
+        HDMConfig,
+        HDTConfig,
+    )
+
+    size = dict(state_dim=state_dim, act_dim=act_dim, K=K, d_model=d_model, n_layers=n_layers)
+
+    def n_params(model: torch.nn.Module) -> int:
+        return sum(p.numel() for p in model.parameters())
+
+    models = {
+        f"DT ({n_layers} GPT blocks)": lambda: DecisionTransformer(DTConfig(**size)),
+        f"HDT (2 x {n_layers} GPT blocks)": lambda: HDT(HDTConfig(**size)),
+        "DM, gated MLP (authors' later code)": lambda: DecisionMamba(DMConfig(**size)),
+        "DM, plain Mamba blocks": lambda: DecisionMamba(DMConfig(**size, gated_mlp=False)),
+        "HDM, gated MLP": lambda: HDM(HDMConfig(**size)),
+    }
+    return pd.DataFrame([{"model": k, "parameters": n_params(f())} for k, f in models.items()])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -482,7 +440,7 @@ def run_sweeps(
 
 
 def summarize_dm(curves: pd.DataFrame) -> pd.DataFrame:
-    """Both metrics per ``method, task, tier, target, arch, eval_mode`` from :func:`run_dm_method` rows.
+    """Both metrics per ``method, task, tier, target, arch, eval_mode`` from :func:`run_table_5_5` rows.
 
     * ``best_mean``, ``best_std``: the thesis's metric, each run's highest evaluation average
       during training, mean and std over seeds;
@@ -549,7 +507,7 @@ def thesis_labels_5_5(task: str, tier: str) -> tuple[str, str]:
     return _TASKS_5_5.get(task, task), tier
 
 
-def thesis_table_5_5(
+def compare_table_5_5(
     summary: pd.DataFrame, eval_mode: str = "recurrent", differs: Any = None
 ) -> pd.DataFrame:
     """Table 5.5 beside the thesis's, for both metrics.
@@ -641,11 +599,11 @@ def _wins(wide: pd.DataFrame, a: tuple[str, str], b: tuple[str, str]) -> tuple[i
     return int((sub[a] > sub[b]).sum()), len(sub)
 
 
-def win_counts_5_5(table: pd.DataFrame) -> pd.DataFrame:
+def compare_win_counts_5_5(table: pd.DataFrame) -> pd.DataFrame:
     """The thesis's "wins out of N settings" (5.3.3): quoted, recounted from its Table 5.5, and ours.
 
     Args:
-        table: :func:`thesis_table_5_5` output.
+        table: :func:`compare_table_5_5` output.
 
     Returns:
         One row per comparison and metric: ``comparison, metric, thesis text, thesis table
@@ -695,16 +653,14 @@ def _timing_env(task: str) -> Any:
     return gym.vector.SyncVectorEnv([lambda: make_env(task)])
 
 
-def time_methods(
-    cfg: DMChapterConfig, data: Mapping[tuple[str, str], Any] | None = None
-) -> pd.DataFrame:
+def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
     """Table 5.6: ms per training iteration and per inference step of each method, at ``cfg.timing_arch``.
 
     * train: one gradient step of the :class:`~thesis_lib.seq.trainer.Trainer` (sampling the
       batch of ``timing_batch_size`` windows included; HDT/HDM: both levels), timed
       ``timing_train_iters`` times after one untimed step;
     * inference: an episode of at most ``timing_infer_steps`` steps in one environment through
-      :func:`~thesis_lib.seq.evaluate.evaluate` (building the history, the action, the
+      :func:`~thesis_lib.seq.evaluation.evaluate` (building the history, the action, the
       environment's transition), as ms per step, ``timing_infer_episodes`` episodes after one
       untimed. DT/HDT re-run the window (``window``); DM/HDM are timed re-running the window, as
       the authors' code, and with the recurrent step (``recurrent``, not in the thesis).
@@ -717,16 +673,25 @@ def time_methods(
         One row per data set x method x phase x mode: ``task, tier, method, phase, mode,
         time_ms_mean, time_ms_std, n``.
     """
-    arch = parse_arch(cfg.timing_arch)
-    data = _load(cfg.timing_datasets, cfg, data)
+    from thesis_lib.data import SequenceDataset
+
+    arch = cfg.arch_spec(cfg.timing_arch)
+    data = load_datasets(cfg.timing_datasets, cfg, data)
     rows = []
     for name in cfg.timing_datasets:
-        task, tier = _split(name)
-        max_action = _max_action(task)
+        task, tier = split_dataset(name)
         for method in tqdm(cfg.methods, desc=f"timing {name}", disable=not cfg.progress):
-            seq = _sequence_dataset(data[(task, tier)], method, arch.K, cfg.seed, cfg.paper_compat)
+            sg = subgoal_fn(cfg.paper_compat) if method in HIERARCHICAL else None
+            seq = SequenceDataset(
+                data[(task, tier)],
+                K=arch.K,
+                subgoal_fn=sg,
+                paper_compat=cfg.paper_compat,
+                seed=cfg.seed,
+            )
+            venv = _timing_env(task)
             torch.manual_seed(cfg.seed)
-            model = build_dm_model(method, seq, arch, cfg, max_action)
+            model = build_model(method, seq, arch, float(np.max(venv.single_action_space.high)))
             trainer = Trainer(
                 model,
                 seq,
@@ -759,7 +724,6 @@ def time_methods(
             )
             target = target_returns(data[(task, tier)])["max"] if method in RTG_METHODS else None
             modes = ("window", "recurrent") if method in MAMBA_METHODS else ("window",)
-            venv = _timing_env(task)
             try:
                 for mode in modes:
                     if method in MAMBA_METHODS:
@@ -797,7 +761,7 @@ def time_methods(
     return pd.DataFrame(rows)
 
 
-def thesis_table_5_6(timing: pd.DataFrame, differs: Any = None) -> pd.DataFrame:
+def compare_table_5_6(timing: pd.DataFrame, differs: Any = None) -> pd.DataFrame:
     """Table 5.6 beside the thesis's GPU numbers.
 
     The thesis's inference times re-ran the window, so they sit beside our ``window`` rows;
@@ -818,6 +782,36 @@ def thesis_table_5_6(timing: pd.DataFrame, differs: Any = None) -> pd.DataFrame:
     )
     std = t[["env", "phase", "method", "time_ms_std"]].rename(columns={"time_ms_std": "ours_std"})
     return out.merge(std, on=["env", "phase", "method"], how="left")
+
+
+def run_timing_ratios(timing: pd.DataFrame) -> pd.DataFrame:
+    """Table 5.6 as ratios: each method's times over DT's, and windowed over recurrent acting.
+
+    Args:
+        timing: :func:`run_table_5_6` output.
+
+    Returns:
+        One row per ``task, method``: the times (ms) per phase (and mode) and the ratios
+        ``train / DT``, ``inference (window) / DT``, ``inference (recurrent) / DT`` (DT windowed)
+        and ``window / recurrent``.
+
+    Used in: Decision Mamba chapter (Table 5.6).
+    """
+    t = timing.assign(
+        key=[p if not m else f"{p} ({m})" for p, m in zip(timing["phase"], timing["mode"])]
+    )
+    wide = t.pivot_table(index=["task", "method"], columns="key", values="time_ms_mean")
+    dt = wide.xs("DT", level="method")
+    ratios = wide.copy()
+    tasks = wide.index.get_level_values("task")
+    for col in ("train", "inference (window)"):
+        ratios[f"{col} / DT"] = wide[col] / dt[col].reindex(tasks).values
+    if "inference (recurrent)" in wide:
+        ratios["inference (recurrent) / DT"] = (
+            wide["inference (recurrent)"] / dt["inference (window)"].reindex(tasks).values
+        )
+        ratios["window / recurrent"] = wide["inference (window)"] / wide["inference (recurrent)"]
+    return ratios.reset_index()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -947,9 +941,6 @@ def eval_mode_effect(summary: pd.DataFrame) -> pd.DataFrame:
     return wide
 
 
-__all__ += ["METRICS", "WIN_COMPARISONS", "eval_mode_effect"]
-
-
 def format_table_5_5(
     table: pd.DataFrame, metric: str = "best during training (thesis)"
 ) -> pd.DataFrame:
@@ -982,6 +973,3 @@ def format_table_5_5(
     )
     cols = [f"{m} {d}" if d != "none" else m for m, d in order]
     return wide[[c for c in cols if c in wide.columns]]
-
-
-__all__ += ["format_table_5_5"]
