@@ -43,6 +43,7 @@ STUDY_KEYS = {
 REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
 DEFAULT_COLUMNS = {"method": "method", "setting": "setting", "seed": "seed"}
 
+
 @dataclass
 class Study:
     """One pre-registered study, as read from its parameter file."""
@@ -147,9 +148,7 @@ def study_tasks(study: Study) -> list[Any]:
     """The study's tasks, from the chapter module's ``study_tasks(cfg)``."""
     mod = chapter_module(study.chapter)
     if not hasattr(mod, "study_tasks"):
-        raise NotImplementedError(
-            f"{mod.__name__} of {study.chapter} has no study_tasks(cfg) yet"
-        )
+        raise NotImplementedError(f"{mod.__name__} of {study.chapter} has no study_tasks(cfg) yet")
     return list(mod.study_tasks(study_config(study)))
 
 

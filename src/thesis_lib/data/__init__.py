@@ -41,7 +41,7 @@ from .recipe import (
     rollout,
 )
 from .scores import normalized_score
-from .sequence import SequenceBatch, SequenceDataset, discounted_cumsum
+from .sequence import SequenceBatch, SequenceDataset, returns_to_go
 from .storage import (
     DamagedDatasetError,
     Episode,
@@ -80,7 +80,6 @@ __all__ = [
     "check_environments",
     "data_card",
     "data_dir",
-    "discounted_cumsum",
     "expert_quality",
     "format_card",
     "gen_dataset_id",
@@ -97,6 +96,7 @@ __all__ = [
     "minari_root",
     "normalized_score",
     "parse_dataset_id",
+    "returns_to_go",
     "rollout",
     "train_experts",
     "write_dataset",

@@ -21,57 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-import scipy.signal
 import torch
+
+from thesis_lib.data.sequence import returns_to_go as returns_to_go  # one implementation, in data
 
 MODALITIES: tuple[str, ...] = ("rtg", "state", "action")
 """Token order within one DT time step."""
-
-
-def returns_to_go(rewards: np.ndarray, gamma: float = 1.0) -> np.ndarray:
-    """Returns-to-go of one episode: ``rtg_t = Σ_{t'=t}^{T} γ^{t'-t} r_{t'}`` (thesis Sec. 2.8).
-
-    With the DT's ``γ = 1`` this is the reversed cumulative sum of the rewards; for ``γ < 1``
-    it is the linear recurrence ``rtg_t = r_t + γ rtg_{t+1}``, run backwards by
-    ``scipy.signal.lfilter`` (no Python loop). Call it once per episode: the sum stops at the
-    episode's last reward, also when the episode was truncated rather than terminated. Any
-    scaling of the RTG (the DT divides by a task constant) is left to the dataset code.
-
-    Used in: Background chapter (thesis 2.8); DT, HDT, MDLT chapters.
-
-    Args:
-        rewards: Per-step rewards of one episode, shape ``(T,)``; finite.
-        gamma: Discount in ``[0, 1]``; the DT uses ``1``.
-
-    Returns:
-        Float64 array of shape ``(T,)``; ``rtg[0]`` is the episode return.
-
-    Raises:
-        ValueError: If ``rewards`` is not 1-D or has NaN/inf, or ``gamma`` is outside ``[0, 1]``.
-
-    Example:
-        >>> returns_to_go([1.0, 2.0, 3.0])
-        array([6., 5., 3.])
-        >>> returns_to_go([1.0, 2.0, 3.0], gamma=0.5)  # 1 + 0.5 * (2 + 0.5 * 3)
-        array([2.75, 3.5 , 3.  ])
-    """
-    r = np.asarray(rewards, dtype=np.float64)
-    if r.ndim != 1:
-        raise ValueError(
-            f"returns_to_go expects the 1-D rewards (T,) of one episode, got shape {r.shape}. "
-            f"Call it once per episode."
-        )
-    if not np.all(np.isfinite(r)):
-        bad = np.flatnonzero(~np.isfinite(r))
-        raise ValueError(
-            f"Expect finite rewards, got {bad.size} NaN/inf values (first at step {int(bad[0])})."
-        )
-    if not 0.0 <= gamma <= 1.0:
-        raise ValueError(f"Expect the discount `gamma` in [0, 1], actually: {gamma!r}.")
-    if gamma == 1.0:
-        return np.cumsum(r[::-1])[::-1].copy()
-    # y[n] = x[n] + γ y[n-1] on the reversed sequence is rtg_t = r_t + γ rtg_{t+1}.
-    return scipy.signal.lfilter([1.0], [1.0, -gamma], r[::-1])[::-1].copy()
 
 
 def _per_step(name: str, x: object, T: int) -> list[float | tuple[float, ...]]:
