@@ -174,7 +174,7 @@ def run_chapter(
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     try:
-        with _kernel_environment(env):
+        with _kernel_environment(env), _interrupt_forwarded_to_kernel():
             pm.execute_notebook(
                 str(notebook_path(chapter, root)),
                 str(out),
@@ -185,12 +185,50 @@ def run_chapter(
                 log_output=False,
             )
     except pm.PapermillExecutionError as err:
+        if err.ename == "KeyboardInterrupt":
+            raise ChapterFailed(
+                f"Chapter '{chapter}' interrupted in cell {err.cell_index}; the tasks it had "
+                f"finished are stored, so running it again resumes there ({out})."
+            ) from None
         raise ChapterFailed(
             f"Chapter '{chapter}' failed in cell {err.cell_index} (execution count {err.exec_count}): "
             f"{err.ename}: {err.evalue}\nOpen {out} — papermill marked the failing cell at its top."
         ) from None
     _show_parameters_once(out)
     return ChapterRun(chapter, out, params, round(time.perf_counter() - t0, 2))
+
+
+@contextlib.contextmanager
+def _interrupt_forwarded_to_kernel() -> Iterator[None]:
+    """Ctrl-C interrupts the running cell, as in Jupyter.
+
+    Jupyter starts the kernel in its own session, so the terminal's SIGINT reaches only this
+    process, and papermill keeps waiting for the kernel. While a chapter runs, the first SIGINT
+    is passed on to the kernel and its children (a task grid's workers): the cell raises
+    ``KeyboardInterrupt``, the tasks finished so far are already stored, and the chapter stops.
+    A second Ctrl-C stops this process at once.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set in the main thread (e.g. a worker process pool)
+        return
+    import psutil
+
+    previous = signal.getsignal(signal.SIGINT)
+
+    def forward(signum: int, frame: Any) -> None:
+        for child in psutil.Process().children(recursive=True):
+            with contextlib.suppress(psutil.Error):
+                child.send_signal(signal.SIGINT)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    signal.signal(signal.SIGINT, forward)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _show_parameters_once(path: Path) -> None:
