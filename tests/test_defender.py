@@ -424,10 +424,12 @@ def test_expert_demonstrations_make_both_groups(tmp_path):
         expert_demonstrations("Pendulum-v1", n_safe=1, n_unsafe=1)
 
 
-def test_make_demonstrations_tops_up_a_missing_group():
+def test_make_demonstrations_tops_up_a_missing_group(tmp_path, monkeypatch):
     """200 SAC steps on InvertedDoublePendulum: no roll-out balances 20 steps, so "auto" takes the safe
     group from the expert and the thesis's recipe alone ("sac") fails with a clear message."""
     from thesis_lib.chapters import defender as ex
+
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
 
     kw = dict(
         tasks=["InvertedDoublePendulum-v5"],
@@ -606,7 +608,7 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     assert set(t45.episodes.algo) == {"SAC"} and len(t45.episodes) == t45.runs.n_episodes.sum()
     assert (tables.episodes.crashed & tables.episodes.filtered).sum() == 0
     store = tmp_path / "03_defender" / "tasks"
-    assert len(list(store.glob("*.json"))) == 2 + 6 + 1  # Table 4.5's 3-demo run is Table 4.3's
+    assert len(list(store.glob("*.json"))) == 1 + 2 + 6 + 1  # Table 4.5's 3-demo run is 4.3's
     shared = tables.runs[(tables.runs.algo == "SAC") & (tables.runs.trajectory == "state")]
     pd.testing.assert_frame_equal(
         t45.runs[t45.runs.n_demos == 3].reset_index(drop=True), shared.reset_index(drop=True)
@@ -617,6 +619,15 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
 
     monkeypatch.setattr(ex, "train_run", no_training)
     monkeypatch.setattr(ex, "strategy_ablation", no_training)
+    monkeypatch.setattr(ex, "collect_demonstrations", no_training)
+    back = ex.make_demonstrations(cfg)["Hopper-v5"]
+    run = runs["Hopper-v5"]
+    assert back.n_sac == run.n_sac and back.sources() == run.sources()
+    assert [d.length for d in back.demos.safe] == [d.length for d in run.demos.safe]
+    assert all(
+        np.array_equal(a.observations, b.observations)
+        for a, b in zip(back.pool.unsafe, run.pool.unsafe)
+    )
     pd.testing.assert_frame_equal(ex.run_ablation(cfg, runs, progress=False), scores)
     again = ex.run_tables_4_3_4_4(cfg, runs, progress=False)
     pd.testing.assert_frame_equal(again.runs, tables.runs)

@@ -225,7 +225,83 @@ def _make_env(task: str, horizon: int | None) -> gym.Env:
     return gym.make(task, max_episode_steps=horizon) if horizon else gym.make(task)
 
 
-def make_demonstrations(cfg: Config, progress: bool = False) -> dict[str, DemoRun]:
+#: Config fields the demonstrations depend on (each :func:`demonstrations_task` config holds them).
+DEMO_FIELDS = (
+    "seed", "max_episode_steps", "demo_timesteps", "demo_every", "demo_deterministic",
+    "demo_source", "n_demos", "n_demos_list", "net_arch", "learning_rate", "batch_size",
+)  # fmt: skip
+
+
+def collect_task_demonstrations(task: str, cfg: Config, progress: bool = False) -> DemoRun:
+    """One SAC run on ``task``, rolled out every ``demo_every`` episodes, topped up from the
+    shipped expert as ``cfg.demo_source`` says (see :func:`make_demonstrations`)."""
+    n = max(cfg.n_demos, *cfg.n_demos_list)
+    run = collect_demonstrations(
+        task,
+        n_safe=n,
+        n_unsafe=n,
+        total_timesteps=cfg.demo_timesteps,
+        every=cfg.demo_every,
+        seed=cfg.seed,
+        max_episode_steps=cfg.max_episode_steps,
+        deterministic=cfg.demo_deterministic,
+        rl_overrides=_rl_overrides(cfg),
+        progress=progress,
+        allow_missing=cfg.demo_source != "sac",
+    )
+    if cfg.demo_source == "sac":
+        return run
+    sac = (
+        {"safe": run.pool.safe, "unsafe": run.pool.unsafe}
+        if cfg.demo_source == "auto"
+        else {"safe": [], "unsafe": []}
+    )
+    need = {g: max(0, n - len(sac[g])) for g in sac}
+    extra = expert_demonstrations(
+        task,
+        n_safe=need["safe"],
+        n_unsafe=need["unsafe"],
+        seed=cfg.seed,
+        max_episode_steps=cfg.max_episode_steps,
+    )
+    pool = DemoSet([*sac["safe"], *extra.safe], [*sac["unsafe"], *extra.unsafe], task)
+    demos = DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), task)
+    return DemoRun(
+        demos,
+        pool,
+        run.episodes,
+        run.result,
+        {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])},
+    )
+
+
+def demonstrations_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """Sweep task: :func:`collect_task_demonstrations` for ``config["task"]``.
+
+    Writes the pool and the SAC run's training episodes (:func:`demos_file`) and returns one row:
+    ``task``, ``pool``, ``episodes`` (file names), ``n_sac_safe`` / ``n_sac_unsafe`` (-1: all
+    SAC) and ``safe`` / ``unsafe`` (the kept demonstrations, comma-separated pool indices).
+
+    Used in: DEFENDER chapter (thesis 4.3.3), through :func:`make_demonstrations`.
+    """
+    task = config["task"]
+    run = collect_task_demonstrations(task, Config(**config["cfg"], tasks=[task]))
+    row: dict[str, Any] = {
+        "task": task,
+        "pool": demos_file(run.pool, f"{thesis_env_name(task)}-pool"),
+        "episodes": demos_file(
+            DemoSet(list(run.episodes), [], task), f"{thesis_env_name(task)}-log"
+        ),
+    }
+    for group in ("safe", "unsafe"):
+        pool = getattr(run.pool, group)
+        index = {id(d): i for i, d in enumerate(pool)}
+        row[group] = ",".join(str(index[id(d)]) for d in getattr(run.demos, group))
+        row[f"n_sac_{group}"] = run.n_sac.get(group, -1)
+    return [row]
+
+
+def make_demonstrations(cfg: Config, progress: bool = True) -> dict[str, DemoRun]:
     """One SAC run per task, rolled out every ``demo_every`` episodes (thesis 4.3.3).
 
     Keeps ``n = max(n_demos, max(n_demos_list))`` diverse demonstrations per group. The SAC run
@@ -233,50 +309,27 @@ def make_demonstrations(cfg: Config, progress: bool = False) -> dict[str, DemoRu
     from is ``cfg.demo_source``: with ``"auto"`` a group that got fewer than ``n`` SAC roll-outs is
     topped up to ``n`` with :func:`~thesis_lib.defender.expert_demonstrations` (the shipped ARS
     expert with action noise); ``DemoRun.n_sac`` / ``DemoRun.sources()`` say how many of each.
+    Each task is a sweep task (:func:`demonstrations_task`): a rerun reads them back (the
+    returned runs then carry no SB3 model: ``DemoRun.result`` is None).
 
     Used in: DEFENDER chapter (thesis 4.3).
     """
-    n = max(cfg.n_demos, *cfg.n_demos_list)
+    fields = {f: getattr(cfg, f) for f in DEMO_FIELDS}
+    tasks = [Task(demonstrations_task, {"task": t, "cfg": fields}) for t in cfg.tasks]
+    rows = run_tasks(
+        tasks, store=results_dir(CHAPTER) / "tasks", desc="demonstrations", progress=progress
+    )
     out = {}
-    for task in cfg.tasks:
-        run = collect_demonstrations(
-            task,
-            n_safe=n,
-            n_unsafe=n,
-            total_timesteps=cfg.demo_timesteps,
-            every=cfg.demo_every,
-            seed=cfg.seed,
-            max_episode_steps=cfg.max_episode_steps,
-            deterministic=cfg.demo_deterministic,
-            rl_overrides=_rl_overrides(cfg),
-            progress=progress,
-            allow_missing=cfg.demo_source != "sac",
-        )
-        if cfg.demo_source == "sac":
-            out[task] = run
-            continue
-        sac = (
-            {"safe": run.pool.safe, "unsafe": run.pool.unsafe}
-            if cfg.demo_source == "auto"
-            else {"safe": [], "unsafe": []}
-        )
-        need = {g: max(0, n - len(sac[g])) for g in sac}
-        extra = expert_demonstrations(
-            task,
-            n_safe=need["safe"],
-            n_unsafe=need["unsafe"],
-            seed=cfg.seed,
-            max_episode_steps=cfg.max_episode_steps,
-        )
-        pool = DemoSet([*sac["safe"], *extra.safe], [*sac["unsafe"], *extra.unsafe], task)
-        demos = DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), task)
-        out[task] = DemoRun(
-            demos,
-            pool,
-            run.episodes,
-            run.result,
-            {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])},
-        )
+    for r in rows.to_dict(orient="records"):
+        pool = load_demos_file(r["pool"])
+        episodes = load_demos_file(r["episodes"]).safe
+        kept = {
+            g: [getattr(pool, g)[int(i)] for i in str(r[g]).split(",") if i != ""]
+            for g in ("safe", "unsafe")
+        }
+        n_sac = {g: int(r[f"n_sac_{g}"]) for g in ("safe", "unsafe") if int(r[f"n_sac_{g}"]) >= 0}
+        demos = DemoSet(kept["safe"], kept["unsafe"], r["task"])
+        out[r["task"]] = DemoRun(demos, pool, episodes, None, n_sac)
     return out
 
 
