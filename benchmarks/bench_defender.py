@@ -39,8 +39,13 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from thesis_lib.defender import DYNAMICS_TRAIN_EVERY, DefenderWrapper, Demonstration, DynamicsModel
-from thesis_lib.defender.experiments import THESIS_STATE_STRATEGIES
+from thesis_lib.defender import (
+    DYNAMICS_TRAIN_EVERY,
+    THESIS_STATE_STRATEGIES,
+    DefenderWrapper,
+    Demonstration,
+    DynamicsModel,
+)
 
 
 def parse_args() -> argparse.Namespace:

@@ -21,7 +21,7 @@ from thesis_lib.book import (
     resolve_chapter,
     validate_parameters,
 )
-from thesis_lib.book.survey import count_values, duplicate_citations, load_survey, split_values
+from thesis_lib.chapters.survey import count_values, duplicate_citations, load_survey, split_values
 
 
 @dataclasses.dataclass

@@ -230,14 +230,14 @@ def test_embedding_reward_env_is_eq_4_2():
 
 
 def test_chapter_config_rejects_unknown_names():
-    from thesis_lib.clfd.experiments import ClfdChapterConfig
+    from thesis_lib.chapters.clfd import Config
 
     with pytest.raises(ValueError, match="Unknown encoder 'vgg'"):
-        ClfdChapterConfig(encoders=["vgg"])
+        Config(encoders=["vgg"])
     with pytest.raises(ValueError, match="Unknown camera 'left'"):
-        ClfdChapterConfig(seen_cameras=["front", "left"])
+        Config(seen_cameras=["front", "left"])
     with pytest.raises(ValueError, match="both seen and unseen"):
-        ClfdChapterConfig(unseen_cameras=["front"])
+        Config(unseen_cameras=["front"])
 
 
 def test_demonstration_earns_the_best_embedding_reward_at_its_end():
@@ -280,10 +280,11 @@ def test_reader_reads_videos(tmp_path):
 
 
 def test_chapter_experiments_at_tiny_scale(tmp_path, monkeypatch):
-    from thesis_lib.clfd import experiments as ex
+    from thesis_lib.chapters import clfd as ex
 
     monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
-    cfg = ex.ClfdChapterConfig(
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
+    cfg = ex.Config(
         n_demos=3,
         image_size=16,
         encoders=["tcn"],
@@ -297,33 +298,44 @@ def test_chapter_experiments_at_tiny_scale(tmp_path, monkeypatch):
         rl_steps=3,
         compat_encoders=["tcn"],
     )
-    data = ex.load_data(cfg)
-    t41, models, hist = ex.run_table_4_1(cfg, data)
+    t41 = ex.run_table_4_1(cfg)
     assert list(t41["method"]) == ["untrained", "CLfD", "TCN"]
     assert t41["alignment_error_pct"].between(0, 100).all()
-    cmp = ex.thesis_table_4_1(t41, {"scale": "tiny"})
+    store = tmp_path / "results" / "02_clfd" / "tasks"
+    assert len(list(store.glob("*.json"))) == 2  # one task per trained encoder
+    hist = ex.run_training_histories(cfg)
+    assert list(hist["method"]) == ["CLfD", "TCN"] and set(hist["epoch"]) == {1}
+    cmp = ex.compare_table_4_1(t41, {"scale": "tiny"})
     assert cmp.loc[cmp.dataset == "Pouring", "what differs"].eq("not run").all()
-    compat = ex.run_paper_compat(cfg, data, models)
+    compat = ex.run_paper_compat(cfg)
     assert list(compat["paper_compat"]) == [False, True]
     assert (
         compat.loc[0, "alignment_error_pct"] == t41.loc[1, "alignment_error_pct"]
     )  # reused, not retrained
-    t42 = ex.run_table_4_2(cfg, data, models[("tcn", "clfd")])
+    assert len(list(store.glob("*.json"))) == 3  # only the paper_compat encoder was added
+    model = ex.chapter_encoder(cfg)
+    assert ex.alignment_error_examples()["identical"] == 0.0
+    seen = ex.camera_pairs(cfg.seen_cameras)
+    assert ex.mean_alignment_error(model, ex.load_data(cfg)["test"], seen) == pytest.approx(
+        t41.loc[1, "alignment_error_pct"]
+    )  # the weights read back from the store are the trained ones
+    t42 = ex.run_table_4_2(cfg)
     assert list(t42["viewpoints"]) == ["Seen", "Seen + Unseen", "Unseen"]
     assert t42["accuracy_pct"].between(0, 100).all()
-    rl = ex.run_fig_4_4(cfg, data, models)
+    rl = ex.run_fig_4_4(cfg)
     assert len(rl) == 2 and {"return", "final_grip_box_distance", "expert_return"} <= set(
         rl.columns
     )
 
 
-def test_pouring_rows_run_on_a_pouring_layout_folder(tmp_path):
-    from thesis_lib.clfd import experiments as ex
+def test_pouring_rows_run_on_a_pouring_layout_folder(tmp_path, monkeypatch):
+    from thesis_lib.chapters import clfd as ex
 
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
     for split in ("train", "val", "test"):
         (tmp_path / split).mkdir()
         _write_views(tmp_path / split, f"pour_{split}", [8, 8], size=16)
-    cfg = ex.ClfdChapterConfig(
+    cfg = ex.Config(
         image_size=16,
         encoders=["tcn"],
         methods=["clfd"],
@@ -335,11 +347,11 @@ def test_pouring_rows_run_on_a_pouring_layout_folder(tmp_path):
     )
     pouring = ex.load_pouring(cfg)
     assert pouring["train"].cameras == ("view0", "view1") and len(pouring["test"].videos[0]) == 6
-    t41, _, _ = ex.run_table_4_1(cfg, pouring, dataset="Pouring")
-    cmp = ex.thesis_table_4_1(t41, {"scale": "tiny"})
+    t41 = ex.run_table_4_1(cfg, dataset="Pouring")
+    cmp = ex.compare_table_4_1(t41, {"scale": "tiny"})
     row = cmp[(cmp.dataset == "Pouring") & (cmp.encoder == "TCN") & (cmp.method == "CLfD")].iloc[0]
     assert (
         row["paper"] == 19.84 and 0 <= row["ours"] <= 100 and "not run" not in row["what differs"]
     )
     with pytest.raises(FileNotFoundError, match="no \\['train', 'val', 'test'\\] sub-folder"):
-        ex.load_pouring(ex.ClfdChapterConfig(pouring_dir=str(tmp_path / "train")))
+        ex.load_pouring(ex.Config(pouring_dir=str(tmp_path / "train")))

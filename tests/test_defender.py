@@ -310,9 +310,13 @@ def test_wrapper_trains_with_sb3(walk_demos, algo):
 
 
 @pytest.mark.parametrize("algo", ["SAC", "TD3"])
-def test_wrapper_with_sb3_directly_and_its_episode_log(walk_demos, algo):
+def test_wrapper_with_sb3_directly_and_its_episode_log(walk_demos, algo, tmp_path, monkeypatch):
     """The issue's usage: ``SAC("MlpPolicy", DefenderWrapper(...)).learn(...)``, then read the log."""
+    import tempfile
+
     import stable_baselines3 as sb3
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # SB3's own logger makes a folder there
 
     env = make_walk(walk_demos, safe_method="MeanDemoW5", unsafe_method="MeanDemoW10")
     model = getattr(sb3, algo)(
@@ -420,10 +424,12 @@ def test_expert_demonstrations_make_both_groups(tmp_path):
         expert_demonstrations("Pendulum-v1", n_safe=1, n_unsafe=1)
 
 
-def test_make_demonstrations_tops_up_a_missing_group():
+def test_make_demonstrations_tops_up_a_missing_group(tmp_path, monkeypatch):
     """200 SAC steps on InvertedDoublePendulum: no roll-out balances 20 steps, so "auto" takes the safe
     group from the expert and the thesis's recipe alone ("sac") fails with a clear message."""
-    from thesis_lib.defender import experiments as ex
+    from thesis_lib.chapters import defender as ex
+
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
 
     kw = dict(
         tasks=["InvertedDoublePendulum-v5"],
@@ -434,21 +440,20 @@ def test_make_demonstrations_tops_up_a_missing_group():
         net_arch=[16, 16],
         batch_size=32,
     )
-    runs = ex.make_demonstrations(ex.DefenderConfig(**kw))
+    runs = ex.make_demonstrations(ex.Config(**kw))
     run = runs["InvertedDoublePendulum-v5"]
     assert run.n_sac["safe"] == 0 and run.n_sac["unsafe"] > 3
     assert run.sources() == {"safe": (0, 3), "unsafe": (3, 0)}
-    table = ex.demo_table(runs, ex.DefenderConfig(**kw))
+    table = ex.demo_table(runs, ex.Config(**kw))
     assert table.recipe.tolist() == ["ARS expert + noise", "SAC roll-outs (thesis)"]
     assert (
-        "came from the shipped ARS expert"
-        in ex.describe_demonstrations(runs, ex.DefenderConfig(**kw))[0]
+        "came from the shipped ARS expert" in ex.describe_demonstrations(runs, ex.Config(**kw))[0]
     )
     assert len(run.episodes) > 0 and all(
         len(d.actions) <= 20 for d in run.episodes
     )  # the ablation's log
     with pytest.raises(RuntimeError, match="0 safe .* expert_demonstrations"):
-        ex.make_demonstrations(ex.DefenderConfig(**kw, demo_source="sac"))
+        ex.make_demonstrations(ex.Config(**kw, demo_source="sac"))
 
 
 def test_strategy_ablation_scores(walk_demos):
@@ -488,7 +493,7 @@ def test_long_trajectories_past_the_buffer(name, cap):
 
 # --------------------------------------------------------------------------- experiments (tables)
 def _fake_runs():
-    from thesis_lib.defender.experiments import RUN_COLUMNS
+    from thesis_lib.chapters.defender import RUN_COLUMNS
 
     rows = []
     for seed in (0, 1):
@@ -535,7 +540,7 @@ def _fake_runs():
 
 
 def test_summarise_and_compare_with_thesis():
-    from thesis_lib.defender.experiments import compare_table_4_5, compare_tables, summarise
+    from thesis_lib.chapters.defender import compare_table_4_5, compare_tables, summarise
 
     summary = summarise(_fake_runs())
     row = summary[(summary.algo == "SAC") & (summary.strategy != "none")].iloc[0]
@@ -556,7 +561,7 @@ def test_summarise_and_compare_with_thesis():
 
 
 def test_defender_config_errors():
-    from thesis_lib.defender.experiments import DefenderConfig
+    from thesis_lib.chapters.defender import Config as DefenderConfig
 
     with pytest.raises(ValueError, match="Did you mean: 'MeanDemoW10'"):
         DefenderConfig(state_strategies=["MeanDemoW5/MeanDemoW1O"])
@@ -571,11 +576,14 @@ def test_defender_config_errors():
 
 
 @pytest.mark.slow
-def test_chapter_pipeline_at_tiny_scale():
-    """make_demonstrations -> ablation -> Tables 4.3-4.5 on Hopper with a 20-step horizon."""
-    from thesis_lib.defender import experiments as ex
+def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
+    """make_demonstrations -> ablation -> Tables 4.3-4.5 on Hopper with a 20-step horizon, each
+    grid through the sweep store; a second pass reads every task back and trains nothing."""
+    from thesis_lib.chapters import defender as ex
 
-    cfg = ex.DefenderConfig(
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+
+    cfg = ex.Config(
         tasks=["Hopper-v5"],
         max_episode_steps=20,
         demo_timesteps=600,
@@ -595,9 +603,31 @@ def test_chapter_pipeline_at_tiny_scale():
         "state",
         "state_action",
     }
-    t45 = ex.run_table_4_5(cfg, runs, reuse=tables, progress=False)
+    t45 = ex.run_table_4_5(cfg, runs, progress=False)
     assert sorted(t45.runs.n_demos) == [2, 3] and set(t45.runs.algo) == {"SAC"}
-    assert (
-        set(t45.episodes.algo) == {"SAC"} and len(t45.episodes) == t45.runs.n_episodes.sum()
-    )  # reused run only
+    assert set(t45.episodes.algo) == {"SAC"} and len(t45.episodes) == t45.runs.n_episodes.sum()
     assert (tables.episodes.crashed & tables.episodes.filtered).sum() == 0
+    store = tmp_path / "03_defender" / "tasks"
+    assert len(list(store.glob("*.json"))) == 1 + 2 + 6 + 1  # Table 4.5's 3-demo run is 4.3's
+    shared = tables.runs[(tables.runs.algo == "SAC") & (tables.runs.trajectory == "state")]
+    pd.testing.assert_frame_equal(
+        t45.runs[t45.runs.n_demos == 3].reset_index(drop=True), shared.reset_index(drop=True)
+    )
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a finished task ran again")
+
+    monkeypatch.setattr(ex, "train_run", no_training)
+    monkeypatch.setattr(ex, "strategy_ablation", no_training)
+    monkeypatch.setattr(ex, "collect_demonstrations", no_training)
+    back = ex.make_demonstrations(cfg)["Hopper-v5"]
+    run = runs["Hopper-v5"]
+    assert back.n_sac == run.n_sac and back.sources() == run.sources()
+    assert [d.length for d in back.demos.safe] == [d.length for d in run.demos.safe]
+    assert all(
+        np.array_equal(a.observations, b.observations)
+        for a, b in zip(back.pool.unsafe, run.pool.unsafe)
+    )
+    pd.testing.assert_frame_equal(ex.run_ablation(cfg, runs, progress=False), scores)
+    again = ex.run_tables_4_3_4_4(cfg, runs, progress=False)
+    pd.testing.assert_frame_equal(again.runs, tables.runs)

@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 import torch
 
-from thesis_lib.mdlt.experiments import (
-    MDLTExperimentConfig,
+from thesis_lib.chapters.mdlt import (
+    Config,
     aist_folds,
     phantomdance_folds,
     run_fold,
@@ -56,8 +56,9 @@ def _sequences(n_genres=2, n_music=3, T=50, seed=0):
     return out
 
 
-def _tiny_cfg(**kw) -> MDLTExperimentConfig:
+def _tiny_cfg(**kw) -> Config:
     base = dict(
+        variants=["transformer", "mamba"],
         data_size="smoke",
         iterations=30,
         batch_size=8,
@@ -70,7 +71,7 @@ def _tiny_cfg(**kw) -> MDLTExperimentConfig:
         **TINY,
     )
     base.update(kw)
-    return MDLTExperimentConfig(**base)
+    return Config(**base)
 
 
 # ---------------------------------------------------------------------------------- metrics
@@ -376,6 +377,35 @@ def test_run_fold_scores_models_and_baselines():
     )
 
 
+def test_table_6_2_folds_run_as_resumable_tasks(tmp_path, monkeypatch):
+    """run_table_6_2's sweep tasks give run_fold's rows; a second call trains nothing; each task
+    leaves its checkpoint and predictions under the results, none in the temp dir."""
+    import tempfile
+
+    from thesis_lib.chapters import mdlt as ch
+
+    seqs = _sequences(2, 3, T=40)
+    monkeypatch.setattr(ch, "_cached_sequences", lambda *a: tuple(seqs))
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    cfg = _tiny_cfg(iterations=5, n_folds=1, genres=[])
+    run = ch.run_table_6_2(cfg)
+    tr, va = aist_folds(seqs, None, 1)[0]
+    direct = run_fold(tr, va, cfg, "All Genres", 0).rows
+    cols = [c for c in direct.columns if c != "train_s"]
+    pd.testing.assert_frame_equal(run.rows[cols], direct[cols])
+    out = tmp_path / "results" / "06_mdlt"
+    assert len(list((out / "tasks").glob("*.json"))) == 3  # two variants + the baselines
+    assert len(list((out / "checkpoints").glob("All_Genres_fold0_*.pt"))) == 2
+    assert ch.example_checkpoint(cfg, "mamba").is_file()
+    assert np.array_equal(run.examples["predictions"]["mamba"][0].shape, va[0].angles.shape)
+    monkeypatch.setattr(ch, "train_model", lambda *a, **k: pytest.fail("trained again"))
+    again = ch.run_table_6_2(cfg)
+    pd.testing.assert_frame_equal(again.rows, run.rows)
+    assert list((tmp_path / "tmp").iterdir()) == []
+
+
 # ---------------------------------------------------------------------------------- dance command
 
 
@@ -487,10 +517,10 @@ def test_init_output_at_starts_at_the_given_pose(variant):
 
 
 def test_mute_features_reach_the_models_and_bad_names_fail():
-    from thesis_lib.mdlt.experiments import MDLTExperimentConfig
-
     with pytest.raises(ValueError, match="mute_features"):
-        MDLTExperimentConfig(mute_features=["tempo"])
+        Config(mute_features=["tempo"])
+    with pytest.raises(ValueError, match="probe_mute"):
+        Config(probe_mute=["tempo"])
     seqs = _sequences(1, 3, T=60)
     cfg = _tiny_cfg(iterations=2, mute_features=["tempogram"])
     _, _, scaler = train_model("mamba", seqs[:2], seqs[2:], cfg)

@@ -136,6 +136,17 @@ def test_episode_logger_continues_across_learn_calls():
     )
 
 
+def test_training_leaves_no_log_folder_in_the_temp_dir(tmp_path, monkeypatch):
+    """SB3's default logger makes an empty SB3-<time> folder per learn(); make_model's does not."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    model = make_model(RLConfig(total_timesteps=1, **NO_LEARNING), env=planned([None], horizon=5))
+    model.learn(6)
+    model.learn(6, reset_num_timesteps=False)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_same_seed_same_episodes_td3():
     config = RLConfig(
         algo="TD3", total_timesteps=600, learning_starts=100, net_arch=[32, 32], device="cpu"
@@ -258,7 +269,7 @@ def test_learning_curves_resume_from_cache(tmp_path, monkeypatch):
 
     from thesis_lib.rl import learning_curves
 
-    train_mod = sys.modules["thesis_lib.rl.train"]  # the package re-exports the function `train`
+    train_mod = sys.modules["thesis_lib.rl.training"]
 
     kwargs = dict(
         algos=["TD3"],

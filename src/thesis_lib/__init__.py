@@ -21,7 +21,7 @@ warnings.filterwarnings("ignore", message="IProgress not found")
 
 __version__ = "0.1.0"
 
-_SUBPACKAGES = ("book", "dtw", "rl", "seq", "data", "background", "defender", "clfd", "mdlt", "ur3")
+_SUBPACKAGES = ("book", "dtw", "rl", "seq", "data", "defender", "clfd", "mdlt", "ur3", "chapters")
 
 __all__ = ["__version__", *_SUBPACKAGES]
 

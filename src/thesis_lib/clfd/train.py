@@ -41,7 +41,12 @@ METHOD_LABELS = {"clfd": "CLfD", "tcn": "TCN", "cmc": "CMC"}
 ENCODER_LABELS = {"resnet18": "Resnet18", "tcn": "TCN"}
 
 
-def _pairs_of(cameras: Sequence[str]) -> list[tuple[str, str]]:
+def camera_pairs(cameras: Sequence[str]) -> list[tuple[str, str]]:
+    """Every unordered pair of ``cameras``, in order.
+
+    >>> camera_pairs(["front", "top", "overhead"])
+    [('front', 'top'), ('front', 'overhead'), ('top', 'overhead')]
+    """
     return [(a, b) for i, a in enumerate(cameras) for b in cameras[i + 1 :]]
 
 
@@ -49,7 +54,7 @@ def mean_alignment_error(
     model: CLfD, data: MultiViewVideos, pairs: Sequence[tuple[str, str]] | None = None
 ) -> float:
     """Alignment error (%) averaged over the videos of ``data`` and the camera ``pairs`` (default: all pairs)."""
-    pairs = list(pairs) if pairs is not None else _pairs_of(data.cameras)
+    pairs = list(pairs) if pairs is not None else camera_pairs(data.cameras)
     errs = []
     for video in data.videos:
         cams = sorted({c for p in pairs for c in p}, key=data.cameras.index)
@@ -237,7 +242,7 @@ class CLfD:
         if epochs < 1:
             raise ValueError(f"epochs must be >= 1, got {epochs}.")
         if val is not None and eval_every:
-            eval_pairs = list(eval_pairs) if eval_pairs is not None else _pairs_of(cameras)
+            eval_pairs = list(eval_pairs) if eval_pairs is not None else camera_pairs(cameras)
         rng = np.random.default_rng(self.seed)
         torch.manual_seed(self.seed)
         params = list(self.encoder.parameters()) + list(self.projection.parameters())

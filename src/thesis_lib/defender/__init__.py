@@ -8,7 +8,9 @@
 - :func:`collect_demonstrations`, :func:`select_diverse`, :func:`save_demonstrations`,
   :func:`load_demonstrations` demonstrations as the authors made them;
 - :mod:`~thesis_lib.defender.ablation` the offline strategy ablation (4.3.2);
-- :mod:`~thesis_lib.defender.experiments` Tables 4.3-4.5 (4.3.3) for the chapter notebook.
+  :data:`THESIS_STATE_STRATEGIES` / :data:`THESIS_STATE_ACTION_STRATEGIES` the thesis's top 5.
+
+Tables 4.3-4.5 (4.3.3) are the chapter's: :mod:`thesis_lib.chapters.defender`.
 
 Choices (each documented where it is made): exact DTW with L1 local cost over the whole episode
 so far, and a tie fires the filter (Algorithm 2 steps only if Safe < Unsafe); ``paper_compat=True``
@@ -65,6 +67,8 @@ from thesis_lib.defender.methods import (
     ALIASES,
     METHODS,
     STRATEGIES,
+    THESIS_STATE_ACTION_STRATEGIES,
+    THESIS_STATE_STRATEGIES,
     WINDOWINGS,
     Method,
     Strategy,
@@ -88,6 +92,8 @@ __all__ = [
     "METHODS",
     "PAPER_MAX_TRAJECTORY",
     "STRATEGIES",
+    "THESIS_STATE_ACTION_STRATEGIES",
+    "THESIS_STATE_STRATEGIES",
     "TRAJECTORIES",
     "WINDOWINGS",
     "DefenderWrapper",

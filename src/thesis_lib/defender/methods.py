@@ -236,3 +236,16 @@ def method_cost(
         x, demos, metric=metric, x_window=m.x_window, y_window=m.y_window(len(x))
     )
     return aggregate(costs, m.aggregation)
+
+
+THESIS_STATE_STRATEGIES: tuple[str, ...] = (
+    "MinDemoW5/MinDemoW10", "MeanBothW5/MeanBothW5", "MeanBothW10/MeanBothW10",
+    "MeanDemoW5/MeanDemoW10", "MinDemoW10/MinDemoW10",
+)  # fmt: skip
+"""The thesis's top 5 for state trajectories, as printed in Table 4.3 (safe/unsafe)."""
+
+THESIS_STATE_ACTION_STRATEGIES: tuple[str, ...] = (
+    "MeanBothW5/MeanBothW5", "MeanBothW10/MeanBothW10", "MinTrajW5/MinTrajW10",
+    "MinBoth/MinTrajW10", "MinBoth/MinTrajW5",
+)  # fmt: skip
+"""The thesis's top 5 for state-action trajectories, as printed in Table 4.4."""

@@ -1,5 +1,8 @@
 """Music-to-dance translation (thesis chapter 6): audio features, poses -> UR3 joint angles,
-AIST++/PhantomDance readers, the default offline data set, MDLT-T and MDLT-M."""
+AIST++/PhantomDance readers, the default offline data set, MDLT-T and MDLT-M, their trainer,
+metrics and baselines, and :func:`dance` (:mod:`~thesis_lib.mdlt.translate`: any music file to
+joint angles with a trained checkpoint). Tables 6.1-6.3 are the chapter's:
+:mod:`thesis_lib.chapters.mdlt`."""
 
 from __future__ import annotations
 
@@ -25,19 +28,6 @@ from .audio import (
 )
 
 # --- model side (models, metrics, training, dance command) ---
-from .dance import DanceResult, animate_arm, dance, plot_angles, ur3_joint_positions
-from .experiments import (
-    MDLTChapterConfig,
-    MDLTExperimentConfig,
-    aist_folds,
-    phantomdance_folds,
-    run_fold,
-    run_table_6_2,
-    run_table_6_3,
-    summarize,
-    table_6_1,
-    train_model,
-)
 from .metrics import (
     BASELINES,
     aje,
@@ -58,3 +48,4 @@ from .readers import (
 from .sync import nearest_pose_indices, synchronize
 from .synth import GENRES, default_dataset
 from .train import DanceWindows, MDLTTrainer, load_checkpoint, save_checkpoint
+from .translate import DanceResult, animate_arm, dance, plot_angles, ur3_joint_positions

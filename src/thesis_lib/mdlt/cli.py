@@ -13,7 +13,7 @@ import sys
 
 
 def _cmd_dance(args: argparse.Namespace) -> int:
-    from thesis_lib.mdlt.dance import dance
+    from thesis_lib.mdlt.translate import dance
 
     result = dance(
         args.audio,

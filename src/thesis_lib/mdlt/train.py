@@ -250,7 +250,7 @@ def load_checkpoint(
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(
-            f"No checkpoint at '{path}'. Train one with thesis_lib.mdlt.experiments.train_model "
+            f"No checkpoint at '{path}'. Train one with thesis_lib.chapters.mdlt.train_model "
             "(or the 06_mdlt chapter with save_checkpoint) first."
         )
     try:

@@ -46,7 +46,7 @@ from thesis_lib.rl.callbacks import (
     is_crash,
 )
 from thesis_lib.rl.config import ALGOS, AUTO_NOISE, RLConfig
-from thesis_lib.rl.train import (
+from thesis_lib.rl.training import (
     CURVE_COLUMNS,
     EVAL_COLUMNS,
     Predictor,
@@ -57,6 +57,7 @@ from thesis_lib.rl.train import (
     learning_curves,
     make_action_noise,
     make_model,
+    silent_logger,
     train,
 )
 
@@ -106,5 +107,6 @@ __all__ = [
     "learning_curves",
     "make_action_noise",
     "make_model",
+    "silent_logger",
     "train",
 ]

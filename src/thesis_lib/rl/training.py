@@ -19,6 +19,7 @@ import torch
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.noise import (
     ActionNoise,
     NormalActionNoise,
@@ -129,8 +130,22 @@ def _policy_for(env: gym.Env | VecEnv) -> str:
     return "MultiInputPolicy" if isinstance(env.observation_space, gym.spaces.Dict) else "MlpPolicy"
 
 
+def silent_logger() -> Logger:
+    """An SB3 logger that keeps its records in memory and writes no file.
+
+    SB3's default (`configure_logger`) creates an empty `SB3-<date-time>` folder in the system
+    temp directory at every `learn()`; a model given this logger (`model.set_logger(...)`)
+    leaves nothing behind. `make_model` sets it on every model it builds.
+
+    Used in: every RL chapter, through `make_model`.
+    """
+    return Logger(folder=None, output_formats=[])
+
+
 def make_model(config: RLConfig, env: gym.Env | VecEnv | None = None) -> BaseAlgorithm:
     """Build (seeded, untrained) the SB3 model `config` describes, on `env` or on `config.env_id`.
+
+    The model logs to :func:`silent_logger` (no `SB3-*` folder in the temp directory).
 
     Used in: Background (thesis 2.5-2.7), DEFENDER (4.3).
     """
@@ -151,7 +166,9 @@ def make_model(config: RLConfig, env: gym.Env | VecEnv | None = None) -> BaseAlg
         n_envs,
     )
     cls = _algo_class(config.algo)
-    return cls(_policy_for(env), env, action_noise=noise, **config.sb3_kwargs())
+    model = cls(_policy_for(env), env, action_noise=noise, **config.sb3_kwargs())
+    model.set_logger(silent_logger())
+    return model
 
 
 def train(

@@ -1,7 +1,13 @@
 """The CLfD chapter's experiments (thesis 4.2.2): Table 4.1, Table 4.2, Fig 4.4 and the paper_compat check.
 
-Each function takes the chapter config (:class:`ClfdChapterConfig`, whose fields are the
-notebook's parameters) and returns tidy DataFrames; the notebook only narrates and plots.
+Each function takes the chapter config (:class:`Config`, whose fields are the notebook's
+parameters) and returns tidy DataFrames; the notebook only narrates and plots.
+
+The encoder x method grid of Table 4.1 (and the paper_compat encoders, and the encoders of
+Fig 4.4) runs through :func:`thesis_lib.sweep.run_tasks`: one task per trained encoder
+(:func:`train_encoder_task`), its rows stored under ``results/02_clfd/tasks`` and its weights
+under ``results/02_clfd/models``, so an interrupted chapter resumes and an encoder needed by
+several tables is trained once.
 
 Used in: chapter 02_clfd.
 """
@@ -9,15 +15,18 @@ Used in: chapter 02_clfd.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from thesis_lib.book import compare_with_paper
+from thesis_lib.book import compare_with_paper, results_dir
 from thesis_lib.clfd.data import MultiViewVideos, make_pick_place_dataset
 from thesis_lib.clfd.env import CAMERAS, STAGES, MultiViewPickPlace, run_demonstration
+from thesis_lib.clfd.losses import nt_xent
 from thesis_lib.clfd.metrics import (
+    alignment_error,
     balanced_indices,
     classifier_accuracy,
     pca_2d,
@@ -29,13 +38,16 @@ from thesis_lib.clfd.train import (
     METHOD_LABELS,
     METHODS,
     CLfD,
-    _pairs_of,
+    camera_pairs,
     mean_alignment_error,
 )
+from thesis_lib.sweep import Task, config_hash, run_tasks
+
+CHAPTER = "02_clfd"
 
 
 @dataclass
-class ClfdChapterConfig:
+class Config:
     """Parameters of notebook 02_clfd (the smoke defaults; ``params/02_clfd.full.yml`` = the thesis's scale)."""
 
     seed: int = 0
@@ -120,17 +132,15 @@ class ClfdChapterConfig:
             )
 
 
-def load_data(cfg: ClfdChapterConfig) -> dict[str, MultiViewVideos]:
+def load_data(cfg: Config) -> dict[str, MultiViewVideos]:
     """The pick-and-place data set of the config (rendered once, then cached)."""
     return make_pick_place_dataset(cfg.n_demos, cfg.image_size, cfg.seed, progress=cfg.progress)
 
 
-def load_pouring(cfg: ClfdChapterConfig) -> dict[str, MultiViewVideos] | None:
+def load_pouring(cfg: Config) -> dict[str, MultiViewVideos] | None:
     """Multi-View Pouring's splits from ``cfg.pouring_dir`` (None when it is not set)."""
     if not cfg.pouring_dir:
         return None
-    from pathlib import Path
-
     from thesis_lib.clfd.data import read_multiview_folder
 
     root = Path(cfg.pouring_dir).expanduser()
@@ -146,9 +156,7 @@ def load_pouring(cfg: ClfdChapterConfig) -> dict[str, MultiViewVideos] | None:
     }
 
 
-def build_model(
-    cfg: ClfdChapterConfig, encoder: str, method: str, paper_compat: bool = False
-) -> CLfD:
+def build_model(cfg: Config, encoder: str, method: str, paper_compat: bool = False) -> CLfD:
     width = cfg.resnet_width if encoder == "resnet18" else cfg.tcn_width
     return CLfD(
         encoder=encoder,
@@ -163,22 +171,64 @@ def build_model(
     )
 
 
-def _seen(cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos]) -> tuple[list[str], list[str]]:
+def _seen(cfg: Config, data: dict[str, MultiViewVideos]) -> tuple[list[str], list[str]]:
     """Seen and unseen cameras: the config's for the pick-and-place set, every view for other data."""
     if set(cfg.seen_cameras) <= set(data["train"].cameras):
         return cfg.seen_cameras, [c for c in cfg.unseen_cameras if c in data["train"].cameras]
     return list(data["train"].cameras), []
 
 
-def train_model(
-    cfg: ClfdChapterConfig,
-    data: dict[str, MultiViewVideos],
-    encoder: str,
-    method: str,
-    paper_compat: bool = False,
-) -> CLfD:
-    """Train one encoder on the seen cameras of the training split, keeping the best validation checkpoint."""
-    model = build_model(cfg, encoder, method, paper_compat)
+#: Config fields an encoder's training depends on (a task's config holds them).
+TRAIN_FIELDS = (
+    "seed", "n_demos", "image_size", "epochs", "batch_size", "lr", "temperature", "resnet_width",
+    "tcn_width", "eval_every", "seen_cameras", "unseen_cameras", "pouring_dir",
+    "pouring_max_frames", "device",
+)  # fmt: skip
+
+
+def load_dataset(cfg: Config, dataset: str = "PickPlace") -> dict[str, MultiViewVideos]:
+    """``"PickPlace"`` (:func:`load_data`) or ``"Pouring"`` (:func:`load_pouring`)."""
+    if dataset == "PickPlace":
+        return load_data(cfg)
+    if dataset == "Pouring":
+        data = load_pouring(cfg)
+        if data is None:
+            raise ValueError("The Pouring rows need pouring_dir (Multi-View Pouring's videos).")
+        return data
+    raise ValueError(f"Unknown dataset {dataset!r}. Valid: PickPlace, Pouring.")
+
+
+def encoder_task(
+    cfg: Config, encoder: str, method: str, paper_compat: bool = False, dataset: str = "PickPlace"
+) -> Task:
+    """The task that trains one encoder with one method (:func:`train_encoder_task`)."""
+    config = {
+        "dataset": dataset,
+        "encoder": encoder,
+        "method": method,
+        "paper_compat": bool(paper_compat),
+        "cfg": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+    }
+    return Task(train_encoder_task, config)
+
+
+def model_path(config: dict[str, Any]) -> Path:
+    """Where :func:`train_encoder_task` keeps the weights of the encoder of ``config``."""
+    return results_dir(CHAPTER) / "models" / f"{config_hash(config)}.pt"
+
+
+def train_encoder_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """Sweep task: train one encoder (keeping the best validation checkpoint), save its weights.
+
+    Returns:
+        One row per epoch (``epoch``, ``loss``, ``val_alignment_error``), each with the model's
+        Table 4.1 numbers (``alignment_error_pct``, ``val_best_pct``, ``test_seen_unseen_pct``).
+
+    Used in: CLfD chapter (thesis 4.2.2), through :func:`train_encoders`.
+    """
+    cfg = Config(**config["cfg"])
+    data = load_dataset(cfg, config["dataset"])
+    model = build_model(cfg, config["encoder"], config["method"], config["paper_compat"])
     model.fit(
         data["train"],
         epochs=cfg.epochs,
@@ -187,14 +237,66 @@ def train_model(
         eval_every=cfg.eval_every,
         progress=cfg.progress,
     )
+    path = model_path(config)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    model.save(path)
+    numbers = _ae_row(cfg, data, model)
+    return [{**row, **numbers} for row in model.history.to_dict(orient="records")]
+
+
+def train_encoders(cfg: Config, tasks: list[Task], desc: str) -> pd.DataFrame:
+    """Run (or read back) encoder tasks: their rows, with ``dataset``, ``encoder``, ``method``
+    (the tables' labels) and ``paper_compat`` columns."""
+    unique = list({t.key: t for t in tasks}.values())
+    rows = run_tasks(unique, store=results_dir(CHAPTER) / "tasks", desc=desc)
+    keys = pd.DataFrame(
+        [
+            {
+                "task_key": t.key,
+                "dataset": t.config["dataset"],
+                "encoder": ENCODER_LABELS[t.config["encoder"]],
+                "method": METHOD_LABELS[t.config["method"]],
+                "paper_compat": t.config["paper_compat"],
+            }
+            for t in unique
+        ]
+    )
+    return rows.merge(keys, on="task_key", how="left")
+
+
+def trained_encoder(cfg: Config, encoder: str, method: str, paper_compat: bool = False) -> CLfD:
+    """The encoder of one task, trained (or read back) through the sweep store."""
+    task = encoder_task(cfg, encoder, method, paper_compat)
+    path = model_path(dict(task.config))
+    store = results_dir(CHAPTER) / "tasks"
+    rows = run_tasks([task], store=store, desc="encoder", progress=False)
+    if not path.is_file():  # a stored result whose weights were deleted: train again
+        rows = run_tasks([task], store=store, desc="encoder", force=True, progress=False)
+    model = build_model(cfg, encoder, method, paper_compat).load(path)
+    model.history = rows[["epoch", "loss", "val_alignment_error"]].reset_index(drop=True)
     return model
 
 
-def _ae_row(
-    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLfD
-) -> dict[str, float]:
+def chapter_encoder(cfg: Config) -> CLfD:
+    """The encoder of Table 4.2 and the embedding figure: CLfD on ``cfg.rl_encoder``'s backbone
+    (the first Table 4.1 encoder when that one is not in the grid)."""
+    if cfg.rl_encoder in cfg.encoders and "clfd" in cfg.methods:
+        return trained_encoder(cfg, cfg.rl_encoder, "clfd", cfg.paper_compat)
+    enc, m = cfg.encoders[0], cfg.methods[0]
+    return trained_encoder(cfg, enc, m, cfg.paper_compat and m == "clfd")
+
+
+def _table_4_1_tasks(cfg: Config, dataset: str) -> list[Task]:
+    return [
+        encoder_task(cfg, enc, m, cfg.paper_compat and m == "clfd", dataset)
+        for enc in cfg.encoders
+        for m in cfg.methods
+    ]
+
+
+def _ae_row(cfg: Config, data: dict[str, MultiViewVideos], model: CLfD) -> dict[str, float]:
     seen_cams, unseen_cams = _seen(cfg, data)
-    seen = _pairs_of(seen_cams)
+    seen = camera_pairs(seen_cams)
     unseen = [(a, b) for a in seen_cams for b in unseen_cams]
     h = model.history
     return {
@@ -206,56 +308,95 @@ def _ae_row(
     }
 
 
-def run_table_4_1(
-    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], dataset: str = "PickPlace"
-) -> tuple[pd.DataFrame, dict, pd.DataFrame]:
+AE_COLUMNS = ("alignment_error_pct", "val_best_pct", "test_seen_unseen_pct")
+
+
+def run_table_4_1(cfg: Config, dataset: str = "PickPlace") -> pd.DataFrame:
     """Train every encoder × method and measure the alignment error (Table 4.1).
 
     Returns:
-        ``(table, models, histories)``: one table row per encoder × method (plus an untrained
-        encoder per backbone as a floor), with ``alignment_error_pct`` = test-split error on
-        pairs of seen cameras at the best validation checkpoint, ``val_best_pct`` = the lowest
-        validation error (how the thesis reports), ``test_seen_unseen_pct`` = test error between
-        a seen and an unseen camera; ``models[(encoder, method)]``; training histories.
+        One row per encoder × method (plus an untrained encoder per backbone as a floor), with
+        ``alignment_error_pct`` = test-split error on pairs of seen cameras at the best
+        validation checkpoint, ``val_best_pct`` = the lowest validation error (how the thesis
+        reports), ``test_seen_unseen_pct`` = test error between a seen and an unseen camera.
         ``dataset`` labels the rows ("PickPlace", or "Pouring" for :func:`load_pouring`'s data,
         whose views are all "seen").
     """
-    rows, models, hist = [], {}, []
+    data = load_dataset(cfg, dataset)
+    trained = train_encoders(cfg, _table_4_1_tasks(cfg, dataset), desc=f"Table 4.1 ({dataset})")
+    first = trained.groupby("task_key", sort=False).head(1).set_index(["encoder", "method"])
+    rows = []
     for enc in cfg.encoders:
         untrained = build_model(cfg, enc, "clfd")
+        label = ENCODER_LABELS[enc]
         rows.append(
             {
                 "dataset": dataset,
-                "encoder": ENCODER_LABELS[enc],
+                "encoder": label,
                 "method": "untrained",
                 **_ae_row(cfg, data, untrained),
             }
         )
         for m in cfg.methods:
-            compat = cfg.paper_compat and m == "clfd"
-            model = train_model(cfg, data, enc, m, compat)
-            models[(enc, m)] = model
+            r = first.loc[(label, METHOD_LABELS[m])]
             rows.append(
                 {
                     "dataset": dataset,
-                    "encoder": ENCODER_LABELS[enc],
+                    "encoder": label,
                     "method": METHOD_LABELS[m],
-                    **_ae_row(cfg, data, model),
+                    **{c: float(r[c]) for c in AE_COLUMNS},
                 }
             )
-            hist.append(
-                model.history.assign(
-                    dataset=dataset, encoder=ENCODER_LABELS[enc], method=METHOD_LABELS[m]
-                )
-            )
-    return (
-        pd.DataFrame(rows),
-        models,
-        pd.concat(hist, ignore_index=True) if hist else pd.DataFrame(),
+    return pd.DataFrame(rows)
+
+
+def run_training_histories(cfg: Config, dataset: str = "PickPlace") -> pd.DataFrame:
+    """Loss and validation alignment error per epoch of every Table 4.1 encoder.
+
+    Columns ``epoch, loss, val_alignment_error, dataset, encoder, method``.
+    """
+    trained = train_encoders(cfg, _table_4_1_tasks(cfg, dataset), desc=f"Table 4.1 ({dataset})")
+    cols = ["epoch", "loss", "val_alignment_error", "dataset", "encoder", "method"]
+    return trained[cols].reset_index(drop=True)
+
+
+def run_dataset_table(cfg: Config) -> pd.DataFrame:
+    """Per split: demonstrations, frames per camera, mean length and the share of pick frames."""
+    return pd.DataFrame(
+        [
+            {
+                "split": s,
+                "demonstrations": len(d),
+                "frames per camera": d.n_frames,
+                "mean length": np.mean([len(v) for v in d.videos]),
+                "pick frames %": 100 * np.mean(np.concatenate(d.stages) == 0),
+            }
+            for s, d in load_data(cfg).items()
+        ]
     )
 
 
-def thesis_table_4_1(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
+def nt_xent_check(cfg: Config) -> tuple[float, float]:
+    """NT-Xent of 4 orthogonal pairs (anchor = positive) and the same value by hand."""
+    import torch
+
+    z = torch.eye(8)[:4]  # 4 pairs, anchor = positive, orthogonal across pairs
+    tau = cfg.temperature
+    by_hand = -np.log(np.exp(1 / tau) / (np.exp(1 / tau) + 2 * (4 - 1)))
+    return float(nt_xent(z, z, tau)), float(by_hand)
+
+
+def alignment_error_examples() -> dict[str, float]:
+    """Alignment error of a random embedding against itself, shifted by 3 frames, and random."""
+    e = np.random.default_rng(0).normal(size=(30, 32))
+    return {
+        "identical": alignment_error(e, e),
+        "shifted by 3 frames": round(alignment_error(e, np.roll(e, 3, axis=0)), 1),
+        "random": round(alignment_error(e, np.random.default_rng(1).normal(size=(30, 32))), 1),
+    }
+
+
+def compare_table_4_1(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
     """Table 4.1 beside the thesis (the Pouring rows are 'not run' unless ``pouring_dir`` was given)."""
     ours = table[table["method"] != "untrained"]
     return compare_with_paper(
@@ -267,26 +408,19 @@ def thesis_table_4_1(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFra
     )
 
 
-def run_paper_compat(
-    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models: dict
-) -> pd.DataFrame:
+def run_paper_compat(cfg: Config) -> pd.DataFrame:
     """CLfD trained with and without the authors' bug (anchor view never in the loss), same seed.
 
-    Models already trained for Table 4.1 are reused.
+    Encoders already trained for Table 4.1 are read back from the sweep store.
     """
-    rows = []
-    for enc in cfg.compat_encoders:
-        for compat in (False, True):
-            model = models.get((enc, "clfd")) if compat == cfg.paper_compat else None
-            model = model or train_model(cfg, data, enc, "clfd", compat)
-            rows.append(
-                {
-                    "encoder": ENCODER_LABELS[enc],
-                    "paper_compat": compat,
-                    **_ae_row(cfg, data, model),
-                }
-            )
-    return pd.DataFrame(rows)
+    tasks = [
+        encoder_task(cfg, enc, "clfd", compat)
+        for enc in cfg.compat_encoders
+        for compat in (False, True)
+    ]
+    trained = train_encoders(cfg, tasks, desc="paper_compat")
+    first = trained.groupby("task_key", sort=False).head(1)
+    return first[["encoder", "paper_compat", *AE_COLUMNS]].reset_index(drop=True)
 
 
 def _features(
@@ -301,15 +435,14 @@ def _features(
     return np.concatenate(feats), np.concatenate(labels)
 
 
-def run_table_4_2(
-    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], model: CLfD
-) -> pd.DataFrame:
-    """Stage classification from frozen features (Table 4.2).
+def run_table_4_2(cfg: Config) -> pd.DataFrame:
+    """Stage classification from frozen features of :func:`chapter_encoder` (Table 4.2).
 
     For each viewpoint set (seen, seen + unseen, unseen) an MLP with two layers is trained on the
     features of the training demonstrations' frames from those cameras (classes balanced) and
     tested on the test demonstrations' frames from the same cameras (balanced).
     """
+    data, model = load_data(cfg), chapter_encoder(cfg)
     rng = np.random.default_rng(cfg.seed)
     sets = {
         "Seen": cfg.seen_cameras,
@@ -337,15 +470,14 @@ def run_table_4_2(
     return pd.DataFrame(rows)
 
 
-def thesis_table_4_2(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
+def compare_table_4_2(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
+    """Table 4.2 beside the thesis."""
     return compare_with_paper(
         "4.2", table, on=["viewpoints"], value="accuracy_pct", differs=differs
     )
 
 
-def run_fig_4_4(
-    cfg: ClfdChapterConfig, data: dict[str, MultiViewVideos], models: dict
-) -> pd.DataFrame:
+def run_fig_4_4(cfg: Config) -> pd.DataFrame:
     """DDPG on the pick stage with each encoder's features and Eq 4.2 reward (Fig 4.4); one row per episode.
 
     The guiding demonstration is a fresh one (not in the data set), as in the thesis.
@@ -355,7 +487,10 @@ def run_fig_4_4(
     demo_seed = cfg.seed * 100_000 + 99_999  # outside the data set's seeds
     out = []
     for m in cfg.rl_methods:
-        model = models.get((cfg.rl_encoder, m)) or train_model(cfg, data, cfg.rl_encoder, m)
+        in_table = cfg.rl_encoder in cfg.encoders and m in cfg.methods
+        model = trained_encoder(
+            cfg, cfg.rl_encoder, m, in_table and cfg.paper_compat and m == "clfd"
+        )
         ep = train_embedding_agent(
             model,
             demo_seed,
@@ -477,9 +612,37 @@ def plot_embedding_pca(
     return fig
 
 
-def summary_numbers(t41: pd.DataFrame) -> dict[str, Any]:
-    """Small facts the chapter prints: best method per encoder, CLfD vs baselines."""
-    out = {}
+def run_rl_summary(cfg: Config, episodes: pd.DataFrame) -> pd.DataFrame:
+    """Fig 4.4 in numbers: per encoder, the mean over the last quarter of the episodes of the
+    return, the final gripper-box distance and the share of episodes that lifted the box."""
+    last = episodes.groupby("encoder").tail(max(1, cfg.rl_episodes // 4))
+    return (
+        last.groupby("encoder", sort=False)
+        .agg(
+            mean_return=("return", "mean"),
+            final_grip_box_distance_m=("final_grip_box_distance", "mean"),
+            box_lifted_share=("box_lifted", "mean"),
+        )
+        .reset_index()
+    )
+
+
+def describe_numbers(t41: pd.DataFrame, compat: pd.DataFrame, t42: pd.DataFrame) -> list[str]:
+    """The lines the chapter prints under "Reading the numbers": test alignment error per
+    encoder and method, the untrained floor, the paper_compat effect and the stage accuracy."""
+    lines = []
     for enc, g in t41[t41["method"] != "untrained"].groupby("encoder"):
-        out[enc] = g.set_index("method")["alignment_error_pct"].round(2).to_dict()
-    return out
+        row = g.set_index("method")["alignment_error_pct"].round(2).to_dict()
+        lines.append(f"{enc}: test alignment error (%) by method: {row}")
+    floor = (
+        t41[t41.method == "untrained"]
+        .set_index("encoder")["alignment_error_pct"]
+        .round(1)
+        .to_dict()
+    )
+    lines.append(f"untrained floor: {floor}")
+    bug = compat.set_index(["encoder", "paper_compat"])["alignment_error_pct"].round(1).to_dict()
+    lines.append(f"paper_compat (bug) vs fixed: {bug}")
+    acc = t42.set_index("viewpoints")["accuracy_pct"].round(1).to_dict()
+    lines.append(f"stage accuracy (%): {acc}")
+    return lines

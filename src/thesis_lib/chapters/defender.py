@@ -1,4 +1,4 @@
-"""The experiments of the DEFENDER chapter (thesis 4.3.2-4.3.3), as functions returning DataFrames.
+"""The DEFENDER chapter (thesis 4.3.2-4.3.3): its :class:`Config`, tables and figures.
 
 ``notebooks/03_defender.ipynb`` calls these in order:
 
@@ -11,67 +11,91 @@
    SAC with MeanDemoW5/MeanDemoW10 and 10/20/50 demonstrations.
 4. :func:`summarise` mean ± std over seeds, % Time; :func:`compare_tables` beside the thesis.
 
+The ablation (one task per task x trajectory kind, :func:`ablation_task`) and the training runs
+(one task per task x algorithm x strategy x seed, :func:`train_task`) run through
+:func:`thesis_lib.sweep.run_tasks`, stored under ``results/03_defender/tasks``: an interrupted
+chapter resumes, and a run that Tables 4.3-4.4 and 4.5 share is trained once. The tasks read
+their demonstrations from content-addressed files under ``results/03_defender/demos``
+(:func:`demos_file`), so a task's key changes when its demonstrations do.
+
 Used in: DEFENDER chapter (thesis 4.3).
 """
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from thesis_lib.defender.ablation import rank_strategies, strategy_ablation
-from thesis_lib.defender.demos import (
+from thesis_lib.book import results_dir
+from thesis_lib.defender import (
+    METHODS,
+    THESIS_STATE_ACTION_STRATEGIES,
+    THESIS_STATE_STRATEGIES,
+    DefenderWrapper,
     DemoRun,
     DemoSet,
     collect_demonstrations,
     expert_demonstrations,
+    load_demonstrations,
+    parse_method,
+    parse_strategy,
+    save_demonstrations,
+    save_demonstrations_minari,
     select_diverse,
 )
-from thesis_lib.defender.methods import parse_strategy
-from thesis_lib.defender.wrapper import DefenderWrapper
+from thesis_lib.defender.ablation import (
+    plot_strategy_heatmap,
+    rank_strategies,
+    strategy_ablation,
+)
+from thesis_lib.sweep import Task, run_tasks
+
+CHAPTER = "03_defender"
 
 __all__ = [
+    "CHAPTER",
+    "DEMO_SOURCES",
     "RUN_COLUMNS",
     "THESIS_STATE_ACTION_STRATEGIES",
     "THESIS_STATE_STRATEGIES",
-    "DEMO_SOURCES",
-    "DefenderConfig",
+    "Config",
     "TableRuns",
+    "ablation_task",
     "compare_table_4_5",
     "compare_tables",
+    "compare_top_strategies",
     "crash_curves",
     "demo_table",
+    "demos_file",
     "demos_subset",
     "describe_demonstrations",
     "describe_effects",
     "make_demonstrations",
+    "plot_ablation_heatmap",
     "plot_curves",
+    "plot_curves_table_4_5",
     "rank_thesis_strategies",
     "run_ablation",
+    "run_methods_table",
+    "run_paper_compat_effect",
     "run_table_4_5",
     "run_tables_4_3_4_4",
+    "runs_from_episodes",
+    "save_demonstration_files",
+    "scale_note",
     "summarise",
     "thesis_env_name",
     "top_strategies",
     "train_run",
+    "train_task",
 ]
-
-THESIS_STATE_STRATEGIES: tuple[str, ...] = (
-    "MinDemoW5/MinDemoW10", "MeanBothW5/MeanBothW5", "MeanBothW10/MeanBothW10",
-    "MeanDemoW5/MeanDemoW10", "MinDemoW10/MinDemoW10",
-)  # fmt: skip
-"""The thesis's top 5 for state trajectories, as printed in Table 4.3 (safe/unsafe)."""
-
-THESIS_STATE_ACTION_STRATEGIES: tuple[str, ...] = (
-    "MeanBothW5/MeanBothW5", "MeanBothW10/MeanBothW10", "MinTrajW5/MinTrajW10",
-    "MinBoth/MinTrajW10", "MinBoth/MinTrajW5",
-)  # fmt: skip
-"""The thesis's top 5 for state-action trajectories, as printed in Table 4.4."""
 
 DEMO_SOURCES: tuple[str, ...] = ("sac", "expert", "auto")
 """Where :func:`make_demonstrations` takes demonstrations from: ``"sac"`` the thesis's recipe only
@@ -87,7 +111,7 @@ RUN_COLUMNS: tuple[str, ...] = (
 
 
 @dataclass
-class DefenderConfig:
+class Config:
     """Parameters of ``notebooks/03_defender.ipynb`` (one field per notebook parameter).
 
     Defaults are the smoke scale (a few minutes on 2 CPU cores; ``params/03_defender.smoke.yml``
@@ -154,7 +178,7 @@ class DefenderConfig:
         for name in ("demo_timesteps", "demo_every", "n_demos", "train_timesteps", "batch_size"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"DefenderConfig.{name} must be a positive int, got {value!r}.")
+                raise ValueError(f"Config.{name} must be a positive int, got {value!r}.")
         for name in (
             "max_episode_steps",
             "train_episodes",
@@ -165,16 +189,12 @@ class DefenderConfig:
             if value is not None and (
                 isinstance(value, bool) or not isinstance(value, int) or value < 1
             ):
-                raise ValueError(
-                    f"DefenderConfig.{name} must be a positive int or None, got {value!r}."
-                )
+                raise ValueError(f"Config.{name} must be a positive int or None, got {value!r}.")
         if not self.seeds or not self.tasks or not self.algos:
-            raise ValueError("DefenderConfig needs at least one seed, one task and one algo.")
+            raise ValueError("Config needs at least one seed, one task and one algo.")
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
-            raise ValueError(
-                f"Unknown algo {bad[0]!r} in DefenderConfig.algos. Valid: {', '.join(ALGOS)}."
-            )
+            raise ValueError(f"Unknown algo {bad[0]!r} in Config.algos. Valid: {', '.join(ALGOS)}.")
         if not self.n_demos_list or any(int(n) < 1 for n in self.n_demos_list):
             raise ValueError(f"n_demos_list must list positive counts, got {self.n_demos_list!r}.")
         for s in [*self.state_strategies, *self.state_action_strategies]:
@@ -205,7 +225,83 @@ def _make_env(task: str, horizon: int | None) -> gym.Env:
     return gym.make(task, max_episode_steps=horizon) if horizon else gym.make(task)
 
 
-def make_demonstrations(cfg: DefenderConfig, progress: bool = False) -> dict[str, DemoRun]:
+#: Config fields the demonstrations depend on (each :func:`demonstrations_task` config holds them).
+DEMO_FIELDS = (
+    "seed", "max_episode_steps", "demo_timesteps", "demo_every", "demo_deterministic",
+    "demo_source", "n_demos", "n_demos_list", "net_arch", "learning_rate", "batch_size",
+)  # fmt: skip
+
+
+def collect_task_demonstrations(task: str, cfg: Config, progress: bool = False) -> DemoRun:
+    """One SAC run on ``task``, rolled out every ``demo_every`` episodes, topped up from the
+    shipped expert as ``cfg.demo_source`` says (see :func:`make_demonstrations`)."""
+    n = max(cfg.n_demos, *cfg.n_demos_list)
+    run = collect_demonstrations(
+        task,
+        n_safe=n,
+        n_unsafe=n,
+        total_timesteps=cfg.demo_timesteps,
+        every=cfg.demo_every,
+        seed=cfg.seed,
+        max_episode_steps=cfg.max_episode_steps,
+        deterministic=cfg.demo_deterministic,
+        rl_overrides=_rl_overrides(cfg),
+        progress=progress,
+        allow_missing=cfg.demo_source != "sac",
+    )
+    if cfg.demo_source == "sac":
+        return run
+    sac = (
+        {"safe": run.pool.safe, "unsafe": run.pool.unsafe}
+        if cfg.demo_source == "auto"
+        else {"safe": [], "unsafe": []}
+    )
+    need = {g: max(0, n - len(sac[g])) for g in sac}
+    extra = expert_demonstrations(
+        task,
+        n_safe=need["safe"],
+        n_unsafe=need["unsafe"],
+        seed=cfg.seed,
+        max_episode_steps=cfg.max_episode_steps,
+    )
+    pool = DemoSet([*sac["safe"], *extra.safe], [*sac["unsafe"], *extra.unsafe], task)
+    demos = DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), task)
+    return DemoRun(
+        demos,
+        pool,
+        run.episodes,
+        run.result,
+        {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])},
+    )
+
+
+def demonstrations_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """Sweep task: :func:`collect_task_demonstrations` for ``config["task"]``.
+
+    Writes the pool and the SAC run's training episodes (:func:`demos_file`) and returns one row:
+    ``task``, ``pool``, ``episodes`` (file names), ``n_sac_safe`` / ``n_sac_unsafe`` (-1: all
+    SAC) and ``safe`` / ``unsafe`` (the kept demonstrations, comma-separated pool indices).
+
+    Used in: DEFENDER chapter (thesis 4.3.3), through :func:`make_demonstrations`.
+    """
+    task = config["task"]
+    run = collect_task_demonstrations(task, Config(**config["cfg"], tasks=[task]))
+    row: dict[str, Any] = {
+        "task": task,
+        "pool": demos_file(run.pool, f"{thesis_env_name(task)}-pool"),
+        "episodes": demos_file(
+            DemoSet(list(run.episodes), [], task), f"{thesis_env_name(task)}-log"
+        ),
+    }
+    for group in ("safe", "unsafe"):
+        pool = getattr(run.pool, group)
+        index = {id(d): i for i, d in enumerate(pool)}
+        row[group] = ",".join(str(index[id(d)]) for d in getattr(run.demos, group))
+        row[f"n_sac_{group}"] = run.n_sac.get(group, -1)
+    return [row]
+
+
+def make_demonstrations(cfg: Config, progress: bool = True) -> dict[str, DemoRun]:
     """One SAC run per task, rolled out every ``demo_every`` episodes (thesis 4.3.3).
 
     Keeps ``n = max(n_demos, max(n_demos_list))`` diverse demonstrations per group. The SAC run
@@ -213,54 +309,31 @@ def make_demonstrations(cfg: DefenderConfig, progress: bool = False) -> dict[str
     from is ``cfg.demo_source``: with ``"auto"`` a group that got fewer than ``n`` SAC roll-outs is
     topped up to ``n`` with :func:`~thesis_lib.defender.expert_demonstrations` (the shipped ARS
     expert with action noise); ``DemoRun.n_sac`` / ``DemoRun.sources()`` say how many of each.
+    Each task is a sweep task (:func:`demonstrations_task`): a rerun reads them back (the
+    returned runs then carry no SB3 model: ``DemoRun.result`` is None).
 
     Used in: DEFENDER chapter (thesis 4.3).
     """
-    n = max(cfg.n_demos, *cfg.n_demos_list)
+    fields = {f: getattr(cfg, f) for f in DEMO_FIELDS}
+    tasks = [Task(demonstrations_task, {"task": t, "cfg": fields}) for t in cfg.tasks]
+    rows = run_tasks(
+        tasks, store=results_dir(CHAPTER) / "tasks", desc="demonstrations", progress=progress
+    )
     out = {}
-    for task in cfg.tasks:
-        run = collect_demonstrations(
-            task,
-            n_safe=n,
-            n_unsafe=n,
-            total_timesteps=cfg.demo_timesteps,
-            every=cfg.demo_every,
-            seed=cfg.seed,
-            max_episode_steps=cfg.max_episode_steps,
-            deterministic=cfg.demo_deterministic,
-            rl_overrides=_rl_overrides(cfg),
-            progress=progress,
-            allow_missing=cfg.demo_source != "sac",
-        )
-        if cfg.demo_source == "sac":
-            out[task] = run
-            continue
-        sac = (
-            {"safe": run.pool.safe, "unsafe": run.pool.unsafe}
-            if cfg.demo_source == "auto"
-            else {"safe": [], "unsafe": []}
-        )
-        need = {g: max(0, n - len(sac[g])) for g in sac}
-        extra = expert_demonstrations(
-            task,
-            n_safe=need["safe"],
-            n_unsafe=need["unsafe"],
-            seed=cfg.seed,
-            max_episode_steps=cfg.max_episode_steps,
-        )
-        pool = DemoSet([*sac["safe"], *extra.safe], [*sac["unsafe"], *extra.unsafe], task)
-        demos = DemoSet(select_diverse(pool.safe, n), select_diverse(pool.unsafe, n), task)
-        out[task] = DemoRun(
-            demos,
-            pool,
-            run.episodes,
-            run.result,
-            {"safe": len(sac["safe"]), "unsafe": len(sac["unsafe"])},
-        )
+    for r in rows.to_dict(orient="records"):
+        pool = load_demos_file(r["pool"])
+        episodes = load_demos_file(r["episodes"]).safe
+        kept = {
+            g: [getattr(pool, g)[int(i)] for i in str(r[g]).split(",") if i != ""]
+            for g in ("safe", "unsafe")
+        }
+        n_sac = {g: int(r[f"n_sac_{g}"]) for g in ("safe", "unsafe") if int(r[f"n_sac_{g}"]) >= 0}
+        demos = DemoSet(kept["safe"], kept["unsafe"], r["task"])
+        out[r["task"]] = DemoRun(demos, pool, episodes, None, n_sac)
     return out
 
 
-def _rl_overrides(cfg: DefenderConfig) -> dict[str, Any]:
+def _rl_overrides(cfg: Config) -> dict[str, Any]:
     return {
         "net_arch": list(cfg.net_arch),
         "learning_rate": cfg.learning_rate,
@@ -268,7 +341,7 @@ def _rl_overrides(cfg: DefenderConfig) -> dict[str, Any]:
     }
 
 
-def demo_table(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) -> pd.DataFrame:
+def demo_table(demo_runs: dict[str, DemoRun], cfg: Config) -> pd.DataFrame:
     """Per task and group: SAC roll-outs seen, demonstrations kept and where they came from.
 
     Used in: DEFENDER chapter (thesis 4.3).
@@ -306,7 +379,7 @@ def _recipe(counts: tuple[int, int]) -> str:
     return "SAC roll-outs, topped up from ARS expert"
 
 
-def describe_demonstrations(demo_runs: dict[str, DemoRun], cfg: DefenderConfig) -> list[str]:
+def describe_demonstrations(demo_runs: dict[str, DemoRun], cfg: Config) -> list[str]:
     """One sentence per task: which recipe each group used and why.
 
     Used in: DEFENDER chapter (thesis 4.3), so the narration follows the run.
@@ -345,7 +418,58 @@ def demos_subset(run: DemoRun, n: int) -> DemoSet:
 
 
 # --------------------------------------------------------------------------- ablation
-def run_ablation(cfg: DefenderConfig, runs: dict[str, DemoRun]) -> pd.DataFrame:
+def demos_file(demos: DemoSet, label: str = "") -> str:
+    """Write ``demos`` to ``results/03_defender/demos/<label>-<content hash>.npz`` (once) and
+    return the file's name, which a sweep task's config holds (:func:`load_demos_file` reads it).
+
+    The name carries a hash of every array, so a task's key changes when its demonstrations do.
+    """
+    h = hashlib.sha256(str(demos.env_id).encode())
+    for group in ("safe", "unsafe"):
+        h.update(group.encode())
+        for d in getattr(demos, group):
+            for a in (d.observations, d.actions, d.rewards):
+                arr = np.ascontiguousarray(a)
+                h.update(str((arr.dtype.str, arr.shape)).encode())
+                h.update(arr.tobytes())
+            h.update(bytes([bool(d.terminated), bool(d.truncated)]))
+    name = f"{label or thesis_env_name(str(demos.env_id))}-{h.hexdigest()[:16]}.npz"
+    path = results_dir(CHAPTER) / "demos" / name
+    if not path.is_file():
+        tmp = path.with_name(path.stem + ".part.npz")
+        save_demonstrations(demos, tmp)
+        tmp.replace(path)
+    return name
+
+
+def load_demos_file(name: str) -> DemoSet:
+    """Read a file :func:`demos_file` wrote."""
+    return load_demonstrations(results_dir(CHAPTER) / "demos" / name)
+
+
+def ablation_task(config: dict[str, Any]) -> pd.DataFrame:
+    """Sweep task: the 576-strategy ablation of one task's logged episodes, one trajectory kind.
+
+    Config keys: ``task``, ``trajectory``, ``episodes`` and ``demos`` (:func:`demos_file` names:
+    the logged SAC episodes as a safe-only set, and the demonstrations), ``horizon``,
+    ``max_trajectory``, ``n_jobs``.
+
+    Used in: DEFENDER chapter (thesis 4.3.2), through :func:`run_ablation`.
+    """
+    scores = strategy_ablation(
+        load_demos_file(config["episodes"]).safe,
+        load_demos_file(config["demos"]),
+        trajectory=config["trajectory"],
+        horizon=config["horizon"],
+        max_trajectory=config["max_trajectory"],
+        n_jobs=config["n_jobs"],
+    )
+    scores.insert(0, "trajectory", config["trajectory"])
+    scores.insert(0, "task", config["task"])
+    return scores
+
+
+def run_ablation(cfg: Config, runs: dict[str, DemoRun], progress: bool = True) -> pd.DataFrame:
     """The 576-strategy ablation on each task's logged SAC episodes, for both trajectory kinds.
 
     Returns:
@@ -354,22 +478,26 @@ def run_ablation(cfg: DefenderConfig, runs: dict[str, DemoRun]) -> pd.DataFrame:
 
     Used in: DEFENDER chapter (thesis 4.3.2).
     """
-    frames = []
+    tasks = []
     for task, run in runs.items():
-        demos = demos_subset(run, cfg.n_demos)
+        episodes = demos_file(DemoSet(list(run.episodes), [], task), f"{thesis_env_name(task)}-log")
+        demos = demos_file(demos_subset(run, cfg.n_demos))
+        horizon = cfg.max_episode_steps or _make_env(task, None).spec.max_episode_steps
         for trajectory in ("state", "state_action"):
-            scores = strategy_ablation(
-                run.episodes,
-                demos,
-                trajectory=trajectory,
-                horizon=cfg.max_episode_steps or _make_env(task, None).spec.max_episode_steps,
-                max_trajectory=cfg.max_trajectory,
-                n_jobs=cfg.n_jobs,
-            )
-            scores.insert(0, "trajectory", trajectory)
-            scores.insert(0, "task", task)
-            frames.append(scores)
-    return pd.concat(frames, ignore_index=True)
+            config = {
+                "task": task,
+                "trajectory": trajectory,
+                "episodes": episodes,
+                "demos": demos,
+                "horizon": horizon,
+                "max_trajectory": cfg.max_trajectory,
+                "n_jobs": cfg.n_jobs,
+            }
+            tasks.append(Task(ablation_task, config))
+    rows = run_tasks(
+        tasks, store=results_dir(CHAPTER) / "tasks", desc="ablation", progress=progress
+    )
+    return rows.drop(columns="task_key")
 
 
 def top_strategies(scores: pd.DataFrame, top: int = 5) -> pd.DataFrame:
@@ -406,11 +534,18 @@ def rank_thesis_strategies(scores: pd.DataFrame) -> pd.DataFrame:
 
 
 # --------------------------------------------------------------------------- training runs
+#: Config fields a training run depends on (each :func:`train_task` config holds them).
+TRAIN_FIELDS = (
+    "max_episode_steps", "train_timesteps", "train_episodes", "net_arch", "learning_rate",
+    "batch_size", "max_trajectory", "dynamics_train_every",
+)  # fmt: skip
+
+
 def train_run(
     task: str,
     algo: str,
     seed: int,
-    cfg: DefenderConfig,
+    cfg: Config,
     demos: DemoSet | None = None,
     strategy: str | None = None,
     trajectory: str = "state",
@@ -421,7 +556,7 @@ def train_run(
     Returns:
         ``(row, episodes)``: a summary row (:data:`RUN_COLUMNS`; Acc Reward = best training
         episode return, % Crash = share of training episodes that crashed, filtered episodes not
-        counted as crashes) and the episode log with the run's keys.
+        counted as crashes) and the episode log with the run's keys and ``wall_time_s``.
 
     Used in: DEFENDER chapter (thesis 4.3.3).
     """
@@ -485,18 +620,68 @@ def train_run(
         "paper_compat": bool(paper_compat),
         "seed": int(seed),
     }
-    row = {
-        **keys,
+    row = {**keys, **_run_numbers(ep), "wall_time_s": res.wall_time_s}
+    for k, v in reversed(keys.items()):
+        ep.insert(0, k, v)
+    ep["wall_time_s"] = res.wall_time_s
+    return row, ep
+
+
+def _run_numbers(ep: pd.DataFrame) -> dict[str, Any]:
+    return {
         "acc_reward": float(ep["return"].max()) if len(ep) else np.nan,
         "crash_pct": 100 * float(ep["crashed"].mean()) if len(ep) else np.nan,
         "filtered_pct": 100 * float(ep["filtered"].mean()) if len(ep) else np.nan,
         "mean_last_100": float(ep["return"].tail(100).mean()) if len(ep) else np.nan,
         "n_episodes": len(ep),
-        "wall_time_s": res.wall_time_s,
     }
-    for k, v in reversed(keys.items()):
-        ep.insert(0, k, v)
-    return row, ep
+
+
+def train_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """Sweep task: one training run (:func:`train_run`), its episodes as long-format rows.
+
+    Config keys: ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``,
+    ``paper_compat``, ``demos`` (a :func:`demos_file` name, or None) and ``train`` (the
+    :data:`TRAIN_FIELDS` of the chapter's :class:`Config`).
+
+    Returns:
+        One row per training episode, with the run's keys and ``wall_time_s``; a run that
+        finished no episode gives one row with ``episode`` None.
+
+    Used in: DEFENDER chapter (thesis 4.3.3), through :func:`run_tables_4_3_4_4` and
+    :func:`run_table_4_5`.
+    """
+    cfg = Config(**config["train"])
+    demos = load_demos_file(config["demos"]) if config["demos"] else None
+    row, ep = train_run(
+        config["task"],
+        config["algo"],
+        config["seed"],
+        cfg,
+        demos=demos,
+        strategy=config["strategy"],
+        trajectory=config["trajectory"],
+        paper_compat=config["paper_compat"],
+    )
+    if not len(ep):
+        keys = {k: row[k] for k in RUN_COLUMNS[:9]}
+        return [{**keys, "episode": None, "wall_time_s": row["wall_time_s"]}]
+    return ep.to_dict(orient="records")
+
+
+_RUN_KEYS = list(RUN_COLUMNS[:9])
+
+
+def runs_from_episodes(episodes: pd.DataFrame) -> pd.DataFrame:
+    """One summary row per run (:data:`RUN_COLUMNS`) from :func:`train_task`'s episode rows."""
+    rows = []
+    for _, ep in episodes.groupby("task_key", sort=False):
+        first = ep.iloc[0]
+        ep = ep[ep["episode"].notna()]
+        keys = {k: first[k] for k in _RUN_KEYS}
+        keys["paper_compat"] = bool(keys["paper_compat"])
+        rows.append({**keys, **_run_numbers(ep), "wall_time_s": float(first["wall_time_s"])})
+    return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
 
 
 class TableRuns(NamedTuple):
@@ -508,24 +693,31 @@ class TableRuns(NamedTuple):
     """Every training episode, with the run's keys."""
 
 
-def _run_all(
-    specs: list[dict[str, Any]], cfg: DefenderConfig, demos_for: Any, progress: bool
-) -> TableRuns:
-    from tqdm.auto import tqdm
+def _train_spec(cfg: Config, spec: dict[str, Any], demos: DemoSet | None) -> Task:
+    strategy = spec.get("strategy")
+    config = {
+        "task": spec["task"],
+        "algo": spec["algo"],
+        "seed": int(spec["seed"]),
+        "strategy": strategy,
+        "trajectory": spec.get("trajectory", "state") if strategy else "state",
+        "paper_compat": bool(spec.get("paper_compat", False)),
+        "demos": demos_file(demos) if strategy and demos is not None else None,
+        "train": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+    }
+    return Task(train_task, config)
 
-    rows, eps = [], []
-    for spec in tqdm(specs, desc="DEFENDER runs", disable=not progress):
-        demos = demos_for(spec) if spec.get("strategy") else None
-        row, ep = train_run(cfg=cfg, demos=demos, **spec)
-        rows.append(row)
-        eps.append(ep)
-    return TableRuns(
-        pd.DataFrame(rows, columns=list(RUN_COLUMNS)), pd.concat(eps, ignore_index=True)
-    )
+
+def _run_all(tasks: list[Task], desc: str, progress: bool) -> TableRuns:
+    unique = list({t.key: t for t in tasks}.values())
+    episodes = run_tasks(unique, store=results_dir(CHAPTER) / "tasks", desc=desc, progress=progress)
+    runs = runs_from_episodes(episodes)
+    eps = episodes[episodes["episode"].notna()].drop(columns="task_key").reset_index(drop=True)
+    return TableRuns(runs, eps)
 
 
 def run_tables_4_3_4_4(
-    cfg: DefenderConfig, demo_runs: dict[str, DemoRun], progress: bool = True
+    cfg: Config, demo_runs: dict[str, DemoRun], progress: bool = True
 ) -> TableRuns:
     """SAC and TD3 with and without DEFENDER on every task and seed (Tables 4.3 and 4.4).
 
@@ -571,69 +763,40 @@ def run_tables_4_3_4_4(
                     }
                 )
     subsets = {task: demos_subset(run, cfg.n_demos) for task, run in demo_runs.items()}
-    return _run_all(specs, cfg, lambda spec: subsets[spec["task"]], progress)
+    tasks = [_train_spec(cfg, spec, subsets[spec["task"]]) for spec in specs]
+    return _run_all(tasks, "Tables 4.3-4.4", progress)
 
 
 def run_table_4_5(
-    cfg: DefenderConfig,
+    cfg: Config,
     demo_runs: dict[str, DemoRun],
-    reuse: TableRuns | None = None,
     strategy: str = "MeanDemoW5/MeanDemoW10",
     progress: bool = True,
 ) -> TableRuns:
     """SAC with DEFENDER (state trajectories, ``strategy``) and each of ``n_demos_list`` demonstrations.
 
-    A run already in ``reuse`` (same task, seed, strategy and number of demonstrations) is not
-    repeated.
+    A run Tables 4.3-4.4 already made (same task, seed, strategy and demonstrations) is read
+    back from the sweep store, not repeated; so is a count larger than the pool (it gives the
+    same demonstrations as the whole pool).
 
     Used in: DEFENDER chapter (thesis 4.3.3, Table 4.5).
     """
-    done = reuse.runs if reuse is not None else pd.DataFrame(columns=list(RUN_COLUMNS))
-    specs, kept = [], []
+    tasks = []
     for task in cfg.tasks:
-        available = min(len(demo_runs[task].pool.safe), len(demo_runs[task].pool.unsafe))
         for n in cfg.n_demos_list:
+            demos = demos_subset(demo_runs[task], n)
             for seed in cfg.seeds:
-                m = (
-                    (done.task == task)
-                    & (done.seed == seed)
-                    & (done.algo == "SAC")
-                    & (done.strategy == strategy)
-                    & (done.trajectory == "state")
-                    & (done.n_demos == min(n, available))
-                    & ~done.paper_compat.astype(bool)
-                )
-                if m.any():
-                    kept.append(done[m].iloc[[0]])
-                else:
-                    specs.append(
-                        {
-                            "task": task,
-                            "algo": "SAC",
-                            "seed": seed,
-                            "strategy": strategy,
-                            "trajectory": "state",
-                            "_n": n,
-                        }
-                    )
-    ns = {id(s): s.pop("_n") for s in specs}
-    new = _run_all(
-        specs, cfg, lambda spec: demos_subset(demo_runs[spec["task"]], ns[id(spec)]), progress
-    )
-    runs = pd.concat([*kept, new.runs], ignore_index=True) if kept else new.runs
-    eps = new.episodes
-    if reuse is not None and kept:
-        on = [
-            "task",
-            "algo",
-            "trajectory",
-            "seed",
-            "strategy",
-            "n_demos",
-            "paper_compat",
-        ]  # the reused runs only
-        eps = pd.concat([eps, reuse.episodes.merge(pd.concat(kept)[on], on=on)], ignore_index=True)
-    return TableRuns(runs.sort_values(["task", "n_demos", "seed"]).reset_index(drop=True), eps)
+                spec = {
+                    "task": task,
+                    "algo": "SAC",
+                    "seed": seed,
+                    "strategy": strategy,
+                    "trajectory": "state",
+                }
+                tasks.append(_train_spec(cfg, spec, demos))
+    out = _run_all(tasks, "Table 4.5", progress)
+    runs = out.runs.sort_values(["task", "n_demos", "seed"], kind="stable")
+    return TableRuns(runs.reset_index(drop=True), out.episodes)
 
 
 # --------------------------------------------------------------------------- summaries
@@ -818,3 +981,108 @@ def plot_curves(episodes: pd.DataFrame, window: int = 10) -> Any:
             ax_r.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+# --------------------------------------------------------------------------- the notebook's steps
+def scale_note(cfg: Config) -> str:
+    """The run's scale in one line (the "what differs" note of every comparison)."""
+    return (
+        f"{', '.join(cfg.tasks)}, horizon {cfg.max_episode_steps or 1000}, "
+        f"{cfg.train_episodes or cfg.train_timesteps} "
+        f"{'episodes' if cfg.train_episodes else 'steps'} per run, "
+        f"{len(cfg.seeds)} seed(s), {cfg.n_demos} demos per group, nets {cfg.net_arch}"
+    )
+
+
+def run_methods_table() -> pd.DataFrame:
+    """The 24 comparison methods: aggregation, windowing, the trajectory's and the
+    demonstration's side of the comparison, and whether the cost updates incrementally.
+
+    Used in: DEFENDER chapter (thesis 4.3.1).
+    """
+    rows = []
+    for m in METHODS:
+        p = parse_method(m)
+        rows.append(
+            {
+                "method": m,
+                "aggregation": p.aggregation,
+                "windowing": p.windowing_name,
+                "trajectory side": f"last {p.x_window}" if p.x_window else "all",
+                "demonstration side": {"Same": "last L (L = trajectory length)", "Full": "all"}.get(
+                    p.windowing, f"last {p.y_window(0)}" if p.y_window(0) else "all"
+                ),
+                "incremental": p.incremental,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def save_demonstration_files(demo_runs: dict[str, DemoRun], folder: str | Path) -> list[Path]:
+    """Write each task's demonstrations as ``demos_<Task>.npz`` (read back and checked) and as
+    Minari data sets under ``folder/minari`` (``thesis/defender-<task>/{safe,unsafe}-v0``).
+
+    Raises:
+        RuntimeError: a file does not read back as written.
+    """
+    folder = Path(folder)
+    paths = []
+    for task, run in demo_runs.items():
+        path = save_demonstrations(run.demos, folder / f"demos_{thesis_env_name(task)}.npz")
+        back = load_demonstrations(path)
+        written = run.demos.safe + run.demos.unsafe
+        if [d.length for d in back.safe + back.unsafe] != [d.length for d in written]:
+            raise RuntimeError(f"{path} does not read back as written.")
+        save_demonstrations_minari(run.demos, root=folder / "minari")
+        paths.append(path)
+    return paths
+
+
+def compare_top_strategies(top: pd.DataFrame) -> pd.DataFrame:
+    """Our top 5 per trajectory kind (:func:`top_strategies`) beside the thesis's Tables 4.3-4.4."""
+    thesis_top = pd.DataFrame(
+        {
+            "rank": range(1, 6),
+            "state (Table 4.3)": THESIS_STATE_STRATEGIES,
+            "state-action (Table 4.4)": THESIS_STATE_ACTION_STRATEGIES,
+        }
+    )
+    side = (
+        top.pivot(index="rank", columns="trajectory", values="strategy")
+        .rename(columns={"state": "state (ours)", "state_action": "state-action (ours)"})
+        .reset_index()
+    )
+    return side.merge(thesis_top, on="rank")
+
+
+def plot_ablation_heatmap(scores: pd.DataFrame):
+    """The ablation's scores of the 576 strategies, one heatmap per trajectory kind."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(17, 7.5))
+    for ax, kind in zip(axes, ("state", "state_action")):
+        plot_strategy_heatmap(
+            scores[scores.trajectory == kind], title=f"{kind} trajectories", ax=ax
+        )
+    return fig
+
+
+def run_paper_compat_effect(cfg: Config, summary: pd.DataFrame) -> pd.DataFrame:
+    """SAC with the first state strategy, default and ``paper_compat=True``, on the tasks of the
+    check: Acc Reward, % Crash, % filtered and % Time side by side.
+
+    Used in: DEFENDER chapter (thesis 4.3.3, the authors' setting).
+    """
+    pc = summary[
+        (summary.algo == "SAC")
+        & (summary.strategy == cfg.state_strategies[0])
+        & (summary.trajectory == "state")
+    ]
+    pc = pc[pc.task.isin(pc[pc.paper_compat.astype(bool)].task)]  # the tasks of the check
+    cols = ["task", "strategy", "paper_compat", "acc_reward_mean", "crash_pct_mean"]
+    return pc[[*cols, "filtered_pct", "time_pct"]]
+
+
+def plot_curves_table_4_5(episodes: pd.DataFrame):
+    """Learning and crash-rate curves of the Table 4.5 runs, one line per number of demonstrations."""
+    return plot_curves(episodes.assign(strategy=episodes.n_demos.map(lambda n: f"{n} demos")))

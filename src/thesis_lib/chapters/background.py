@@ -1,8 +1,10 @@
-"""Experiments and figures of the Background chapter (thesis ch. 2).
+"""The Background chapter (thesis ch. 2): its :class:`Config`, tables and figures.
 
 Each function here is one step of ``notebooks/01_background.ipynb``: the notebook narrates and
 calls; the computation lives in :mod:`thesis_lib.dtw`, :mod:`thesis_lib.seq` and
 :mod:`thesis_lib.rl`, and the figures are drawn here so that tests can run them too.
+Tables: :func:`run_attention_check`, :func:`run_ssm_check`, :func:`run_dtw_vs_fastdtw`,
+:func:`run_rl_curves` (with :func:`summarise_rl`), :func:`run_dt_tokens`.
 
 Used in: Background chapter (thesis 2.2–2.8).
 """
@@ -11,18 +13,16 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from thesis_lib import dtw as _dtw
 
-Algo = Literal["DDPG", "TD3", "SAC"]
-
 
 @dataclass
-class BackgroundConfig:
+class Config:
     """Parameters of ``notebooks/01_background.ipynb`` (one field per notebook parameter)."""
 
     seed: int = 0
@@ -136,6 +136,45 @@ def naive_distance(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.abs(x - y).sum())
 
 
+def peak_on_path() -> bool:
+    """Whether the cell (3, 5) (1-based) lies on the DTW path of :func:`delayed_example` (Fig 2.7).
+
+    >>> peak_on_path()
+    True
+    """
+    res = _dtw.dtw_path(*delayed_example(), metric="l1")
+    return (2, 4) in {tuple(p) for p in res.path.tolist()}
+
+
+def plot_dtw_matching():
+    """Figs 2.3-2.4: the one-to-one matching and the DTW matching of :func:`delayed_example`."""
+    import matplotlib.pyplot as plt
+
+    x, y = delayed_example()
+    res = _dtw.dtw_path(x, y, metric="l1")
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.2))
+    plot_matching(
+        x, y, None, ax=axes[0], title=f"Fig 2.3: one-to-one, distance = {naive_distance(x, y):g}"
+    )
+    plot_matching(x, y, res.path, ax=axes[1], title=f"Fig 2.4: DTW matching, cost = {res.cost:g}")
+    return fig
+
+
+def plot_dtw_cost_matrices():
+    """Figs 2.5-2.7: the initialised, the filled cost matrix, and the path through it."""
+    import matplotlib.pyplot as plt
+
+    res = _dtw.dtw_path(*delayed_example(), metric="l1")
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5))
+    plot_cost_matrix(res.matrix, filled=False, ax=axes[0], title="Fig 2.5: initialised")
+    plot_cost_matrix(res.matrix, ax=axes[1], title="Fig 2.6: filled")
+    plot_cost_matrix(
+        res.matrix, res.path, ax=axes[2], title=f"Fig 2.7: path, cost D[N,M] = {res.cost:g}"
+    )
+    fig.tight_layout()
+    return fig
+
+
 def plot_matching(x: np.ndarray, y: np.ndarray, pairs: np.ndarray | None, ax=None, title: str = ""):
     """Draw two 1-D sequences (y shifted down) and lines between matched points (Figs 2.3–2.4).
 
@@ -209,16 +248,11 @@ def plot_cost_matrix(
     return ax
 
 
-def dtw_vs_fastdtw(
-    lengths: list[int],
-    n_features: int,
-    n_pairs: int,
-    *,
-    radius: int = 1,
-    metric: str = "l1",
-    seed: int = 0,
-) -> pd.DataFrame:
+def run_dtw_vs_fastdtw(cfg: Config, metric: str = "l1") -> pd.DataFrame:
     """Exact DTW against FastDTW on random multi-dimensional sequences: cost error and time.
+
+    ``cfg.dtw_lengths`` sequence lengths, ``cfg.dtw_features`` features, ``cfg.dtw_pairs`` pairs
+    per length, FastDTW radius ``cfg.fastdtw_radius``, seed ``cfg.seed``.
 
     Sequences are random walks (so that they have structure to align); the second of each pair
     is 0.9–1.1× as long as the first. Timings exclude numba's one-off compilation.
@@ -228,7 +262,9 @@ def dtw_vs_fastdtw(
         rel_error_pct`` (mean of (fastdtw − exact)/exact × 100; FastDTW never finds a cheaper
         path than the exact one), ``max_rel_error_pct``, ``exact_ms``, ``fastdtw_ms``, ``speedup``.
     """
-    rng = np.random.default_rng(seed)
+    lengths, n_features, n_pairs = cfg.dtw_lengths, cfg.dtw_features, cfg.dtw_pairs
+    radius = cfg.fastdtw_radius
+    rng = np.random.default_rng(cfg.seed)
     _dtw.dtw(np.zeros((2, n_features)), np.zeros((3, n_features)), metric=metric)  # compile
     rows = []
     for n in lengths:
@@ -285,15 +321,24 @@ def plot_positional_encoding(n_positions: int, d_model: int):
     return fig
 
 
-def attention_mask_check(
-    lengths: tuple[int, ...] = (6, 4), n_heads: int = 2, head_dim: int = 8, seed: int = 0
-) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
+def run_attention_check(cfg: Config) -> pd.DataFrame:
     """Eq 2.3 with causal, padding and combined masks, checked against PyTorch's fused attention.
 
     Returns:
-        A table (mask, max |ours − torch| over real queries, weight on masked keys) and the
-        attention weights of the first sequence's first head per mask, for plotting.
+        One row per mask: ``mask``, ``max_abs_diff_vs_torch`` (over real queries),
+        ``weight_on_masked_keys``.
     """
+    return _attention_check(seed=cfg.seed)[0]
+
+
+def plot_attention_masks(cfg: Config):
+    """One heatmap of attention weights per mask (the last sequence's first head)."""
+    return plot_attention_weights(_attention_check(seed=cfg.seed)[1])
+
+
+def _attention_check(
+    lengths: tuple[int, ...] = (6, 4), n_heads: int = 2, head_dim: int = 8, seed: int = 0
+) -> tuple[pd.DataFrame, dict[str, np.ndarray]]:
     import torch
     import torch.nn.functional as F
 
@@ -349,7 +394,15 @@ def plot_attention_weights(weights: dict[str, np.ndarray]):
 # --------------------------------------------------------------------------- SSMs (2.3)
 
 
-def ssm_check(n_state: int = 8, length: int = 200, delta: float = 0.05, seed: int = 0) -> dict:
+def run_ssm_check(cfg: Config) -> pd.DataFrame:
+    """Convolution vs recurrence, and the selective scan vs the LTI system: max differences.
+
+    One row per check (``check``, ``max_abs_diff``); see :func:`ssm_example`.
+    """
+    return ssm_example(n_state=cfg.ssm_state, length=cfg.ssm_length, seed=cfg.seed)["table"]
+
+
+def ssm_example(n_state: int = 8, length: int = 200, delta: float = 0.05, seed: int = 0) -> dict:
     """ZOH-discretise a HiPPO-LegS SSM and compare the convolution (Eq 2.7) with the recurrence (Eq 2.6).
 
     Also runs the Mamba-style selective scan with Δ, B, C held constant, which must give the
@@ -405,10 +458,11 @@ def ssm_check(n_state: int = 8, length: int = 200, delta: float = 0.05, seed: in
     return {"x": x, "kernel": K, "y_recurrence": y_rec, "y_convolution": y_conv, "table": table}
 
 
-def plot_ssm(check: dict):
+def plot_ssm(cfg: Config):
     """The kernel K̄ and the two outputs (convolution and recurrence) on top of each other."""
     import matplotlib.pyplot as plt
 
+    check = ssm_example(n_state=cfg.ssm_state, length=cfg.ssm_length, seed=cfg.seed)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(12, 3.5))
     ax1.plot(check["kernel"], color="tab:purple")
     ax1.set_title("convolution kernel $\\bar K_k = C\\bar A^k \\bar B$")
@@ -425,7 +479,31 @@ def plot_ssm(check: dict):
 # --------------------------------------------------------------------------- DDPG, TD3, SAC (2.5–2.7)
 
 
-def rl_summary(episodes: pd.DataFrame, last: int = 5) -> pd.DataFrame:
+def run_rl_curves(cfg: Config, cache_dir: str | Path | None = None) -> pd.DataFrame:
+    """DDPG, TD3 and SAC on ``cfg.rl_env``: every training episode (one row each).
+
+    Args:
+        cache_dir: keep each finished (algo, seed) run there and reuse it (``cfg.rl_resume``;
+            the notebook passes ``results/01_background/rl_runs``).
+
+    Returns:
+        :data:`thesis_lib.rl.CURVE_COLUMNS` rows (algo, seed, episode, timestep, return, ...).
+    """
+    from thesis_lib.rl import learning_curves
+
+    return learning_curves(
+        cfg.rl_algos,
+        cfg.rl_env,
+        cfg.rl_timesteps,
+        cfg.rl_seeds,
+        n_jobs=cfg.n_jobs,
+        net_arch=cfg.rl_net,
+        learning_rate=cfg.rl_learning_rate,
+        cache_dir=cache_dir if cfg.rl_resume else None,
+    )
+
+
+def summarise_rl(episodes: pd.DataFrame, last: int = 5) -> pd.DataFrame:
     """First and last-``last``-episode mean returns per algorithm (mean over seeds)."""
     rows = []
     for (algo, seed), g in episodes.groupby(["algo", "seed"], sort=False):
@@ -467,7 +545,7 @@ def plot_learning_curves(episodes: pd.DataFrame, window: int = 3):
 # --------------------------------------------------------------------------- Decision Transformer (2.8)
 
 
-def dt_token_example() -> pd.DataFrame:
+def run_dt_tokens() -> pd.DataFrame:
     """A four-step trajectory laid out as DT tokens (rtg, s, a) with its returns-to-go."""
     from thesis_lib.seq import interleave_tokens, returns_to_go
 

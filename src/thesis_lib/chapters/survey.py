@@ -2,7 +2,9 @@
 
 Table 3.4 categorises 111 papers by technique, data, learned goal, inference, evaluation and
 benchmark. Several cells hold more than one value (``"Policy Learning, IRL"``); the counting
-helpers split them, so a paper counts once under each value it names.
+helpers split them, so a paper counts once under each value it names. Tables:
+:func:`load_survey` (the table itself), :func:`run_counts` (papers per value of a column),
+:func:`duplicate_citations`; figure: :func:`plot_survey`.
 
 Used in: the Survey page of the book (thesis ch. 3).
 """
@@ -13,10 +15,25 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from thesis_lib.book.compare import load_reference
+from thesis_lib.book import load_reference
 
 #: Columns of Table 3.4 whose cells may list several comma-separated values.
 MULTI_VALUED = ("technique", "data", "learned_goal", "inference", "evaluation", "benchmark")
+
+#: Columns whose value counts the Survey page saves as tables (``counts_<column>``).
+COUNTED_COLUMNS = ("technique", "learned_goal", "inference", "evaluation")
+
+
+@dataclass
+class Config:
+    """Parameters of the survey page."""
+
+    top: int = 12
+    """How many values each bar chart shows."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.top, int) or self.top < 1:
+            raise ValueError(f"top must be a positive integer, got {self.top!r}")
 
 
 def load_survey() -> pd.DataFrame:
@@ -96,13 +113,9 @@ def plot_survey(df: pd.DataFrame, *, top: int = 12):
     return fig
 
 
-@dataclass
-class SurveyConfig:
-    """Parameters of the survey page."""
+def run_counts(survey: pd.DataFrame, column: str) -> pd.DataFrame:
+    """Papers per value of ``column`` as a two-column table (``column``, ``papers``).
 
-    top: int = 12
-    """How many values each bar chart shows."""
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.top, int) or self.top < 1:
-            raise ValueError(f"top must be a positive integer, got {self.top!r}")
+    Used in: the Survey page (thesis ch. 3), one table per :data:`COUNTED_COLUMNS`.
+    """
+    return count_values(survey, column).reset_index()
