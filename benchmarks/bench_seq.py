@@ -89,11 +89,12 @@ def parse_args() -> argparse.Namespace:
 def task_sizes(task: str) -> tuple[int, int]:
     """(state size, action size) of ``task``'s environment."""
     from thesis_lib.data import make_env
-    from thesis_lib.seq.evaluation import _observation
 
     env = make_env(task)
     obs, _ = env.reset(seed=0)
-    sd = _observation([obs]).shape[1]
+    if isinstance(obs, dict):  # PointMaze/AntMaze: the models read obs["observation"]
+        obs = obs["observation"]
+    sd = int(np.asarray(obs).size)
     ad = int(np.prod(env.action_space.shape))
     env.close()
     return sd, ad

@@ -285,12 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
         "thesis_lib.ur3.cli",
         "thesis_lib.book.study_cli",
     ):
-        try:
-            mod = importlib.import_module(module)
-        except ModuleNotFoundError as err:  # that package is not written yet
-            if err.name and module.startswith(err.name):
-                continue
-            raise
+        mod = importlib.import_module(module)
         mod.register(sub)
     return parser
 

@@ -337,6 +337,9 @@ def train_deep_expert(
         )
         model = algo("MlpPolicy", env, **kw)
         st.steps, st.snapshots = 0, []
+    from .experts import _silent_logger
+
+    model.set_logger(_silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
 
     def checkpoint() -> None:
         _atomic_save(model.save, folder / "model.zip")

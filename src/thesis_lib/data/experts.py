@@ -133,6 +133,13 @@ class PolicyRecord:
     """Quick return of every snapshot of the training run, by step (``mlp`` policies)."""
 
 
+def _silent_logger() -> Any:
+    """An SB3 logger that writes no file (see :func:`thesis_lib.rl.silent_logger`)."""
+    from stable_baselines3.common.logger import Logger
+
+    return Logger(folder=None, output_formats=[])
+
+
 def _bounds(task: str) -> tuple[np.ndarray, np.ndarray]:
     import gymnasium as gym
 
@@ -361,6 +368,7 @@ def _train(
         seed=cfg.seed,
         verbose=0,
     )
+    model.set_logger(_silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
     low, high = _bounds(task)
     ws, ms, vs, steps, rets = [], [], [], [], []
     t0 = time.time()
