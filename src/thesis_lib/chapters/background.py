@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pandas as pd
@@ -248,7 +249,9 @@ def plot_cost_matrix(
     return ax
 
 
-def run_dtw_vs_fastdtw(cfg: Config, metric: str = "l1") -> pd.DataFrame:
+def run_dtw_vs_fastdtw(
+    cfg: Config, metric: Literal["l1", "l2", "sqeuclidean"] = "l1"
+) -> pd.DataFrame:
     """Exact DTW against FastDTW on random multi-dimensional sequences: cost error and time.
 
     ``cfg.dtw_lengths`` sequence lengths, ``cfg.dtw_features`` features, ``cfg.dtw_pairs`` pairs

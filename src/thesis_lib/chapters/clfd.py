@@ -369,7 +369,7 @@ def run_dataset_table(cfg: Config) -> pd.DataFrame:
                 "demonstrations": len(d),
                 "frames per camera": d.n_frames,
                 "mean length": np.mean([len(v) for v in d.videos]),
-                "pick frames %": 100 * np.mean(np.concatenate(d.stages) == 0),
+                "pick frames %": 100 * np.mean(np.concatenate(_stages(d)) == 0),
             }
             for s, d in load_data(cfg).items()
         ]
@@ -423,12 +423,18 @@ def run_paper_compat(cfg: Config) -> pd.DataFrame:
     return first[["encoder", "paper_compat", *AE_COLUMNS]].reset_index(drop=True)
 
 
+def _stages(data: MultiViewVideos) -> list[np.ndarray]:
+    if data.stages is None:
+        raise ValueError("These videos carry no stage labels (pick/place); label them first.")
+    return data.stages
+
+
 def _features(
     model: CLfD, data: MultiViewVideos, cameras: list[str]
 ) -> tuple[np.ndarray, np.ndarray]:
     idx = data.camera_index(cameras)
     feats, labels = [], []
-    for v, s in zip(data.videos, data.stages):
+    for v, s in zip(data.videos, _stages(data)):
         f = model.embed(v[:, idx])  # (T, C, D)
         feats.append(f.reshape(-1, f.shape[-1]))
         labels.append(np.repeat(s, len(idx)))
@@ -515,6 +521,8 @@ def plot_example_frames(seed: int = 0, image_size: int = 120, n_times: int = 3):
     env = MultiViewPickPlace(image_size=image_size)
     demo = run_demonstration(env, seed, render=True)
     env.close()
+    if demo.frames is None:
+        raise RuntimeError("the demonstration was run without rendering")
     times = np.linspace(0, len(demo.stages) - 1, n_times).round().astype(int)
     fig, axes = plt.subplots(
         n_times, len(CAMERAS), figsize=(2.2 * len(CAMERAS), 2.3 * n_times), squeeze=False

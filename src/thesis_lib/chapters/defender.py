@@ -27,7 +27,7 @@ import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple, cast
 
 import gymnasium as gym
 import numpy as np
@@ -213,6 +213,11 @@ class Config:
 
 
 # --------------------------------------------------------------------------- demonstrations
+def _episode_limit(env: gym.Env) -> int | None:
+    """The environment's registered episode limit, if any."""
+    return None if env.spec is None else env.spec.max_episode_steps
+
+
 def thesis_env_name(task: str) -> str:
     """The thesis's table label of a gymnasium id: ``"Hopper-v5"`` -> ``"Hopper"``.
 
@@ -483,7 +488,7 @@ def run_ablation(cfg: Config, runs: dict[str, DemoRun], progress: bool = True) -
     for task, run in runs.items():
         episodes = demos_file(DemoSet(list(run.episodes), [], task), f"{thesis_env_name(task)}-log")
         demos = demos_file(demos_subset(run, cfg.n_demos))
-        horizon = cfg.max_episode_steps or _make_env(task, None).spec.max_episode_steps
+        horizon = cfg.max_episode_steps or _episode_limit(_make_env(task, None))
         for trajectory in ("state", "state_action"):
             config = {
                 "task": task,
@@ -575,7 +580,7 @@ def train_run(
             demos.unsafe,
             safe_method=safe_s,
             unsafe_method=unsafe_s,
-            trajectory=trajectory,
+            trajectory=cast(Literal["state", "state_action"], trajectory),
             max_trajectory=cfg.max_trajectory,
             paper_compat=paper_compat,
             seed=seed,
@@ -590,7 +595,7 @@ def train_run(
     callbacks = []
     steps = cfg.train_timesteps
     if cfg.train_episodes:
-        horizon = cfg.max_episode_steps or env.spec.max_episode_steps or 1000
+        horizon = cfg.max_episode_steps or _episode_limit(env) or 1000
         steps = (
             cfg.train_episodes * horizon
         )  # an upper bound; the callback stops at the episode count
@@ -728,7 +733,7 @@ def run_tables_4_3_4_4(
 
     Used in: DEFENDER chapter (thesis 4.3.3).
     """
-    specs = []
+    specs: list[dict[str, Any]] = []
     for task in cfg.tasks:
         for seed in cfg.seeds:
             for algo in cfg.algos:

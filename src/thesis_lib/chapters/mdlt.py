@@ -32,7 +32,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal, NamedTuple, cast
 
 import numpy as np
 import pandas as pd
@@ -40,7 +40,13 @@ import torch
 
 from thesis_lib.book import compare_with_paper, results_dir
 from thesis_lib.mdlt.metrics import BASELINES, aje, evaluate_songs, mean_pose_baseline
-from thesis_lib.mdlt.models import MDLTConfig, build_model, init_output_at
+from thesis_lib.mdlt.models import (
+    MDLTConfig,
+    MDLTMamba,
+    MDLTTransformer,
+    build_model,
+    init_output_at,
+)
 from thesis_lib.mdlt.train import DanceWindows, MDLTTrainer
 from thesis_lib.seq.trainer import TrainConfig
 from thesis_lib.sweep import Task, config_hash, run_tasks
@@ -276,12 +282,10 @@ def load_sequences(
     Used in: MDLT chapter (thesis 6.3).
     """
     from thesis_lib.mdlt import readers
+    from thesis_lib.mdlt.synth import default_dataset
 
-    if root is None:
-        from thesis_lib.mdlt.synth import default_dataset
-
-        root = default_dataset(layout=layout, size=size, seed=seed)
-    return readers.load_aist(root) if layout == "aist" else readers.load_phantomdance(root)
+    where = default_dataset(layout=layout, size=size, seed=seed) if root is None else root
+    return readers.load_aist(where) if layout == "aist" else readers.load_phantomdance(where)
 
 
 def aist_folds(sequences: Sequence, genre: str | None, n_folds: int = 6) -> list[tuple[list, list]]:
@@ -357,7 +361,7 @@ def train_model(
     scaler: Any = None,
     checkpoint_path: str | None = None,
     seed_offset: int = 0,
-) -> tuple[torch.nn.Module, pd.DataFrame, Any]:
+) -> tuple[MDLTTransformer | MDLTMamba, pd.DataFrame, Any]:
     """Train one MDLT model on ``train`` (validating on ``val`` every ``cfg.eval_every`` steps).
 
     Returns ``(model in eval mode, training history, scaler)``.
@@ -459,7 +463,11 @@ def fold_model(
         seed_offset=seed_offset,
     )
     train_s = time.perf_counter() - t0
-    preds = model.generate([scaler.transform(s.features).astype(np.float32) for s in val])
+    # a list of songs in, a list of (T, 4) angle arrays out
+    preds = cast(
+        list[np.ndarray],
+        model.generate([scaler.transform(s.features).astype(np.float32) for s in val]),
+    )
     best = (
         history["eval_return"].min()
         if "eval_return" in history and history["eval_return"].notna().any()
@@ -589,7 +597,9 @@ def fold_task(config: dict[str, Any]) -> pd.DataFrame:
             config["method"], train, val, cfg, scaler, config["seed_offset"], ckpt
         )
         preds = {config["method"]: p}
-    arrays = {f"{m}/{i}": np.asarray(a) for m, ps in preds.items() for i, a in enumerate(ps)}
+    arrays: dict[str, Any] = {
+        f"{m}/{i}": np.asarray(a) for m, ps in preds.items() for i, a in enumerate(ps)
+    }
     np.savez_compressed(predictions_path(config), **arrays)
     rows.insert(0, "fold", config["fold"])
     rows.insert(0, "experiment", config["experiment"])
@@ -680,7 +690,7 @@ def run_table_6_3(cfg: Config) -> TableRun:
         "phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed
     )
     n = len(phantomdance_folds(sequences, 10, cfg.pd_folds))
-    splits = [("PhantomDance", None, i) for i in range(n)]
+    splits: list[tuple[str, str | None, int]] = [("PhantomDance", None, i) for i in range(n)]
     return _run_splits(cfg, "phantomdance", splits, "Table 6.3 folds")
 
 
@@ -723,7 +733,7 @@ def summarize(rows: pd.DataFrame) -> pd.DataFrame:
 # ----------------------------------------------------------------------------------------------
 # the notebook's steps
 
-THESIS_MODEL = {
+THESIS_MODEL: dict[str, Any] = {
     "d_model": 128,
     "n_layers": 6,
     "n_heads": 8,

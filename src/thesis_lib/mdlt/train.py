@@ -12,6 +12,7 @@ Used in: MDLT chapter (thesis 6.4, 6.5).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -235,8 +236,8 @@ def save_checkpoint(
 
 
 def load_checkpoint(
-    path: str | Path, device: str = "cpu"
-) -> tuple[torch.nn.Module, Any, dict[str, Any]]:
+    path: str | os.PathLike[str], device: str = "cpu"
+) -> tuple[MDLTTransformer | MDLTMamba, Any, dict[str, Any]]:
     """Rebuild ``(model in eval mode, feature scaler, meta)`` from a checkpoint.
 
     Reads both :class:`MDLTTrainer` checkpoints and :func:`save_checkpoint` files.
