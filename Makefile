@@ -59,6 +59,7 @@ LINT_PATHS := src tests benchmarks notebooks book/_ext
 lint: $(STAMP)
 	$(VENV)/bin/ruff check $(LINT_PATHS)
 	$(VENV)/bin/ruff format --check $(LINT_PATHS)
+	$(VENV)/bin/mypy
 
 format: $(STAMP)
 	$(VENV)/bin/ruff format $(LINT_PATHS)

@@ -25,7 +25,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -187,7 +187,7 @@ class Config:
     """Environment steps per timed inference episode."""
     timing_infer_episodes: int = 2
     """Timed inference episodes per method and mode (after one untimed)."""
-    dataset_size: str = "smoke"
+    dataset_size: Literal["smoke", "full"] = "smoke"
     """Size of the generated data sets: a key of ``thesis_lib.data.PROFILE_SIZES`` (``smoke``
     20k transitions, ``full`` D4RL's 1M). Not the chapter's profile (``thesis run --profile``),
     which picks the parameter file."""
@@ -420,7 +420,9 @@ def run_parameter_counts(
         HDTConfig,
     )
 
-    size = dict(state_dim=state_dim, act_dim=act_dim, K=K, d_model=d_model, n_layers=n_layers)
+    size: dict[str, Any] = dict(
+        state_dim=state_dim, act_dim=act_dim, K=K, d_model=d_model, n_layers=n_layers
+    )
 
     def n_params(model: torch.nn.Module) -> int:
         return sum(p.numel() for p in model.parameters())
@@ -691,7 +693,9 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
             )
             venv = _timing_env(task)
             torch.manual_seed(cfg.seed)
-            model = build_model(method, seq, arch, float(np.max(venv.single_action_space.high)))
+            model: Any = build_model(
+                method, seq, arch, float(np.max(venv.single_action_space.high))
+            )
             trainer = Trainer(
                 model,
                 seq,

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -144,7 +144,7 @@ class Config:
     max_eval_steps: int | None = 100
     """Cap on evaluation episode length (``None``: the task's time limit). Maze2D always runs
     whole episodes (:func:`~thesis_lib.seq.evaluation.eval_step_cap`)."""
-    dataset_size: str = "smoke"
+    dataset_size: Literal["smoke", "full"] = "smoke"
     """Size of the generated data sets: a key of ``thesis_lib.data.PROFILE_SIZES`` (``smoke``
     20k transitions, ``full`` D4RL's 1M). Not the chapter's profile (``thesis run --profile``),
     which picks the parameter file."""
@@ -578,7 +578,7 @@ def thesis_labels(task: str, tier: str, table: str) -> tuple[str, str]:
     """``(task, dataset)`` as thesis Table ``table`` prints them, e.g. ``('Maze 2D', 'umaze')``."""
     if task.startswith("maze2d-"):
         return "Maze 2D", task.split("-", 1)[1]
-    name = _TASK_NAMES.get(task, task)
+    name: Any = _TASK_NAMES.get(task, task)
     if isinstance(name, dict):
         name = name[table]
     return name, _TIER_NAMES.get(tier, tier)
@@ -724,11 +724,11 @@ def compare_table_5_3(
         summary["method"].isin(["BC", "DT", "HDT"]) & summary["target"].isin(["none", "max"])
     ]
     s = _labelled(s, "5.3")
-    cols = {"BC": "bc", "DT": "dt", "HDT": "hdt"}
+    paper_cols = {"BC": "bc", "DT": "dt", "HDT": "hdt"}
     frames = []
     for method, g in s.groupby("method", sort=False):
-        c = _compare("5.3", g, ["task", "dataset"], cols[method], differs)
-        frames.append(c.assign(method=cols[method]))
+        c = _compare("5.3", g, ["task", "dataset"], paper_cols[method], differs)
+        frames.append(c.assign(method=paper_cols[method]))
     avg = pd.DataFrame(
         [{"task_id": t, "tier_id": r, "data_avg": v} for (t, r), v in data_avg.items()]
     )

@@ -240,6 +240,7 @@ def combine_masks(
         )
 
     if key_padding_mask is None:
+        assert attn_mask is not None  # checked above: at least one mask is given
         allowed = attn_mask if attn_mask.ndim == 3 else attn_mask[None]  # (B, T, T)
     else:
         B, T = key_padding_mask.shape

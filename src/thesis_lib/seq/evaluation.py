@@ -187,7 +187,7 @@ def evaluate(
     """
     import gymnasium as gym
 
-    cfg = model.config
+    cfg: Any = model.config  # every sequence model keeps its config as ``.config``
     uses_rtg = bool(getattr(cfg, "use_rtg", False) or getattr(cfg, "low_use_rtg", False))
     if uses_rtg and target_return is None:
         raise ValueError(
@@ -231,6 +231,7 @@ def evaluate(
     task = task or task_name
     if venv is None:
         n = min(n_episodes, 100) if n_envs is None else int(n_envs)
+        assert factory is not None  # _env_factory gives a factory whenever no vector env
         venv = gym.vector.SyncVectorEnv([factory] * n)
         close = True
     else:
@@ -270,25 +271,26 @@ def evaluate(
                 progress,
             )
             take = min(len(r), n_episodes - done_so_far)
-            returns.append(r[:take]), lengths.append(ep_len[:take])
+            returns.append(r[:take])
+            lengths.append(ep_len[:take])
             done_so_far += take
     finally:
         model.train(was_training)
         if close:
             venv.close()
     ret, lens = np.concatenate(returns), np.concatenate(lengths)
-    scores = None
+    scores: np.ndarray | None = None
     if task is not None:
         from thesis_lib.data import normalized_score
 
-        scores = normalized_score(task, ret, missing="none")
-        scores = None if scores is None else np.atleast_1d(np.asarray(scores, dtype=np.float64))
+        norm = normalized_score(task, ret, missing="none")
+        scores = None if norm is None else np.atleast_1d(np.asarray(norm, dtype=np.float64))
     return EvalResult(ret, lens, scores)
 
 
 def _run_round(model, venv, seed, H, mean, std, target_return, rtg_scale, device, progress):
     """One batch of ``venv.num_envs`` episodes. Returns (returns, lengths)."""
-    cfg = model.config
+    cfg: Any = model.config  # every sequence model keeps its config as ``.config``
     N, K, sd, ad = venv.num_envs, cfg.K, cfg.state_dim, cfg.act_dim
     obs, _ = venv.reset(seed=seed)
     obs = _observation(obs)

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Literal, NamedTuple
+from typing import Literal, NamedTuple, cast
 
 import torch
 import torch.nn.functional as F
@@ -397,8 +397,9 @@ class MambaMixer(nn.Module):
         A = torch.arange(1, c.d_state + 1, dtype=torch.float32).repeat(c.d_inner, 1)  # (d_inner, N)
         self.A_log = nn.Parameter(torch.log(A))
         self.D = nn.Parameter(torch.ones(c.d_inner))
-        self.A_log._no_weight_decay = True  # as mamba_ssm: optimisers may skip decay on these
-        self.D._no_weight_decay = True
+        # as mamba_ssm: optimisers may skip decay on these
+        setattr(self.A_log, "_no_weight_decay", True)  # noqa: B010 - Parameter has no such field
+        setattr(self.D, "_no_weight_decay", True)  # noqa: B010
         self.out_proj = nn.Linear(c.d_inner, c.d_model, bias=c.bias)
         self._init_dt()
 
@@ -416,7 +417,7 @@ class MambaMixer(nn.Module):
         )
         dt = dt.clamp(min=c.dt_init_floor)
         self.dt_proj.bias.copy_(dt + torch.log(-torch.expm1(-dt)))  # inverse of softplus
-        self.dt_proj.bias._no_reinit = True
+        setattr(self.dt_proj.bias, "_no_reinit", True)  # noqa: B010
 
     def _ssm_params(self, x: torch.Tensor):
         """Δ (before bias and softplus), B, C from the conv output ``x`` (..., d_inner)."""
@@ -529,18 +530,18 @@ class MambaBlock(nn.Module):
         super().__init__()
         self.norm = nn.RMSNorm(config.d_model, eps=config.norm_eps)
         self.mixer = MambaMixer(config, scan_backend)
+        self.norm2: nn.RMSNorm | None = None
+        self.mlp: GatedMLP | None = None
         if config.gated_mlp:
             self.norm2 = nn.RMSNorm(config.d_model, eps=config.norm_eps)
             self.mlp = GatedMLP(config.d_model, config.mlp_hidden_value)
-        else:
-            self.norm2 = self.mlp = None
 
     def forward(self, x: torch.Tensor, return_state: bool = False):
         """``(B, L, d_model) -> (B, L, d_model)`` (and the :class:`LayerState` with ``return_state``)."""
         out = self.mixer(self.norm(x), return_state=return_state)
         h, state = out if return_state else (out, None)
         x = x + h
-        if self.mlp is not None:
+        if self.mlp is not None and self.norm2 is not None:
             x = x + self.mlp(self.norm2(x))
         return (x, state) if return_state else x
 
@@ -548,7 +549,7 @@ class MambaBlock(nn.Module):
         """One token ``(B, d_model)`` -> ``(y_t, new state)``."""
         h, state = self.mixer.step(self.norm(x_t), state)
         x_t = x_t + h
-        if self.mlp is not None:
+        if self.mlp is not None and self.norm2 is not None:
             x_t = x_t + self.mlp(self.norm2(x_t))
         return x_t, state
 
@@ -585,11 +586,16 @@ class Mamba(nn.Module):
         self.norm_f = nn.RMSNorm(config.d_model, eps=config.norm_eps) if config.final_norm else None
         self._rescale_residual_projections()
 
+    @property
+    def blocks(self) -> list[MambaBlock]:
+        """The layers, typed (``nn.ModuleList`` items are plain modules to a type checker)."""
+        return [cast(MambaBlock, b) for b in self.layers]
+
     @torch.no_grad()
     def _rescale_residual_projections(self) -> None:
         """GPT-2/mamba_ssm init: residual-branch outputs scaled by 1/sqrt(branches * n_layers)."""
         n = self.config.n_layers * (2 if self.config.gated_mlp else 1)
-        for block in self.layers:
+        for block in self.blocks:
             block.mixer.out_proj.weight /= math.sqrt(n)
             if block.mlp is not None:
                 block.mlp.fc2.weight /= math.sqrt(n)
@@ -635,7 +641,7 @@ class Mamba(nn.Module):
         """Zero :class:`MambaState` for ``batch`` sequences, as before their first token."""
         if not isinstance(batch, int) or isinstance(batch, bool) or batch <= 0:
             raise ValueError(f"Expect `batch` to be a positive int, actually: {batch!r}.")
-        states = [block.mixer.allocate_state(batch, device, dtype) for block in self.layers]
+        states = [block.mixer.allocate_state(batch, device, dtype) for block in self.blocks]
         return MambaState(
             torch.stack([s.conv for s in states]), torch.stack([s.ssm for s in states])
         )
@@ -698,7 +704,7 @@ class Mamba(nn.Module):
         for t in range(x.shape[1]):
             x_t = x[:, t]
             convs, ssms = [], []
-            for i, block in enumerate(self.layers):
+            for i, block in enumerate(self.blocks):
                 x_t, s = block.step(x_t, LayerState(state.conv[i], state.ssm[i]))
                 convs.append(s.conv)
                 ssms.append(s.ssm)

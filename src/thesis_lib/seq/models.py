@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import torch
 import torch.nn as nn
@@ -116,7 +116,7 @@ class _ModelConfig:
     """Context length: the number of time steps a window (and an evaluation history) holds."""
 
     @classmethod
-    def for_data(cls, seq: object, **kwargs: object):
+    def for_data(cls, seq: Any, **kwargs: Any):
         """A config sized for a :class:`~thesis_lib.data.SequenceDataset`: its state and action sizes and K.
 
         Example:
@@ -125,7 +125,7 @@ class _ModelConfig:
             >>> DTConfig.for_data(seq, n_layers=2)
             DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layers=2, n_heads=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, use_rtg=True)
         """
-        sizes = dict(
+        sizes: dict[str, Any] = dict(
             state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=int(seq.K)
         )
         return cls(**{**sizes, **kwargs})
@@ -233,7 +233,7 @@ class HDTConfig(_TransformerConfig):
 
 
 def _check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tuple[int, int]:
-    cfg = model.config
+    cfg: Any = model.config  # every sequence model keeps its config as ``.config``
     name = type(model).__name__
     missing = [k for k in keys if k not in batch]
     if missing:
@@ -289,7 +289,7 @@ def _action_key(paper_compat: bool) -> str:
     return "prev_actions" if paper_compat else "actions"
 
 
-def _rsa_tokens(model: nn.Module, batch: Tensors) -> list[torch.Tensor]:
+def _rsa_tokens(model: Any, batch: Tensors) -> list[torch.Tensor]:
     """``[rtg_t,] s_t, a_t`` embeddings of a DT-style model (``embed_rtg``/``embed_state``/``embed_action``)."""
     tokens = [
         model.embed_state(batch["states"]),

@@ -133,7 +133,7 @@ def build_model(method: str, seq: Any, arch: ArchSpec, max_action: float = 1.0) 
     Used in: HDT, Decision Mamba and UR3 deployment chapters.
     """
     check_methods([method])
-    sizes = dict(
+    sizes: dict[str, Any] = dict(
         state_dim=int(seq.states.shape[-1]),
         act_dim=int(seq.actions.shape[-1]),
         K=arch.K,
@@ -141,15 +141,17 @@ def build_model(method: str, seq: Any, arch: ArchSpec, max_action: float = 1.0) 
     )
     if method == "BC":
         return BC(BCConfig(**sizes, dropout=arch.dropout, hidden_dim=arch.bc_hidden_dim))
-    common = dict(d_model=arch.d_model, n_layers=arch.n_layers, paper_compat=arch.paper_compat)
+    common: dict[str, Any] = dict(
+        d_model=arch.d_model, n_layers=arch.n_layers, paper_compat=arch.paper_compat
+    )
     if method in ("DT", "DT-noRTG", "HDT", "HDT-RTG"):
-        tf = dict(
+        tf: dict[str, Any] = dict(
             n_heads=arch.n_heads, dropout=arch.dropout, max_timestep=arch.max_timestep, **common
         )
         if method.startswith("DT"):
             return DecisionTransformer(DTConfig(**sizes, use_rtg=method == "DT", **tf))
         return HDT(HDTConfig(**sizes, low_use_rtg=method == "HDT-RTG", **tf))
-    mb = dict(gated_mlp=arch.gated_mlp, eval_mode=arch.eval_mode, **common)
+    mb: dict[str, Any] = dict(gated_mlp=arch.gated_mlp, eval_mode=arch.eval_mode, **common)
     if method == "HDM":
         return HDM(HDMConfig(**sizes, **mb))
     return DecisionMamba(DMConfig(**sizes, use_rtg=method == "DM-RTG", **mb))

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -118,7 +118,8 @@ class VectorEnvPool:
     """
 
     def __init__(self, task: str) -> None:
-        self.task, self.envs = task, {}
+        self.task = task
+        self.envs: dict[int, Any] = {}
 
     def __call__(self, n: int) -> Any:
         """A ``SyncVectorEnv`` of ``n`` copies of the task's environment."""
@@ -179,12 +180,13 @@ def run_offline(
         raise ValueError("run_offline needs the task's name (task=...) or an envs factory.")
     seed = train.seed
     sg = subgoal_fn(arch.paper_compat) if method in HIERARCHICAL_METHODS else None
-    extra = {} if train.rtg_scale is None else {"rtg_scale": train.rtg_scale}
+    extra: dict[str, Any] = {} if train.rtg_scale is None else {"rtg_scale": train.rtg_scale}
     seq = SequenceDataset(
         dataset, K=arch.K, subgoal_fn=sg, paper_compat=arch.paper_compat, seed=seed, **extra
     )
     own_envs = envs is None
-    pool = VectorEnvPool(task) if own_envs else envs
+    pool: Any = VectorEnvPool(cast(str, task)) if envs is None else envs
+    targets: dict[str, float | None]
     if method in RTG_METHODS:
         targets = {k: v for k, v in target_returns(dataset).items() if k in eval.targets}
     else:
@@ -195,7 +197,7 @@ def run_offline(
         venv = pool(n * len(targets))  # every target's episodes in one batch of environments
         max_action = float(np.max(venv.single_action_space.high))
         torch.manual_seed(seed)
-        model = build_model(method, seq, arch, max_action)
+        model: Any = build_model(method, seq, arch, max_action)
         base_mode = model.config.resolved_eval_mode if method in MAMBA_METHODS else "window"
         per_episode = None if method not in RTG_METHODS else np.repeat(list(targets.values()), n)
         max_steps = eval.max_steps if task is None else eval_step_cap(task, eval.max_steps)

@@ -34,7 +34,7 @@ Used in: Background chapter (thesis 2.3); Decision Mamba chapter.
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -46,7 +46,7 @@ import torch.nn.functional as F
 # Validation helpers
 
 
-def _as_finite(name: str, x: object, ndims: tuple[int, ...]) -> np.ndarray:
+def _as_finite(name: str, x: Any, ndims: tuple[int, ...]) -> np.ndarray:
     arr = np.asarray(x, dtype=np.float64) if not np.iscomplexobj(x) else np.asarray(x)
     if np.iscomplexobj(arr):
         raise ValueError(f"Expect `{name}` to be real, got complex dtype {arr.dtype}.")

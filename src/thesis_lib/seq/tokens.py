@@ -19,6 +19,8 @@ Used in: Background chapter (thesis 2.8); DT, HDT, MDLT chapters.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 import torch
@@ -80,7 +82,7 @@ def interleave_tokens(
     if rtg_arr.ndim != 1:
         raise ValueError(f"Expect `rtg` of shape (T,), got shape {rtg_arr.shape}.")
     T = rtg_arr.shape[0]
-    per_modality = [
+    per_modality: list[list[Any]] = [
         [float(v) for v in rtg_arr],
         _per_step("states", states, T),
         _per_step("actions", actions, T),

@@ -25,7 +25,7 @@ import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pandas as pd
@@ -185,7 +185,7 @@ class Trainer:
             self._rng_state = torch.get_rng_state()
         if self.config.grad_clip > 0:
             groups = (
-                self.model.clip_groups()
+                cast(Any, self.model).clip_groups()
                 if hasattr(self.model, "clip_groups")
                 else [list(self.model.parameters())]
             )
@@ -232,7 +232,7 @@ class Trainer:
         try:
             while self.iteration < total:
                 row = self.step()
-                row["lr"] = self.scheduler.get_last_lr()[0]
+                row["lr"] = float(self.scheduler.get_last_lr()[0])
                 row["eval_return"] = math.nan
                 if (
                     self.eval_fn is not None
@@ -269,7 +269,9 @@ class Trainer:
         """Everything a resumed run needs."""
         return {
             "model_class": type(self.model).__name__,
-            "model_config": asdict(self.model.config) if hasattr(self.model, "config") else None,
+            "model_config": asdict(cast(Any, self.model).config)
+            if hasattr(self.model, "config")
+            else None,
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "scheduler": self.scheduler.state_dict(),
