@@ -1,4 +1,7 @@
-"""Where the project, its notebooks and its results are on disk."""
+"""Where things are on disk: the project, its notebooks, results, data sets and caches.
+
+Every location the library writes to comes from here, each with its environment variable.
+"""
 
 from __future__ import annotations
 
@@ -49,3 +52,26 @@ def results_dir(chapter: str | None = None) -> Path:
     path = base / chapter if chapter else base
     path.mkdir(parents=True, exist_ok=True)
     return path
+
+
+def minari_root() -> Path:
+    """Minari's data-set root: ``$MINARI_DATASETS_PATH`` or ``~/.minari/datasets``."""
+    p = os.environ.get("MINARI_DATASETS_PATH")
+    return Path(p) if p else Path.home() / ".minari" / "datasets"
+
+
+def data_dir() -> Path:
+    """Where generated data sets are written: ``$THESIS_DATA_DIR``, else :func:`minari_root`.
+
+    The CLfD videos and the MDLT music and feature caches live under it too.
+    """
+    p = os.environ.get("THESIS_DATA_DIR")
+    return Path(p) if p else minari_root()
+
+
+def cache_dir(name: str | None = None) -> Path:
+    """Long-lived working files that are not results (e.g. expert-training runs):
+    ``$THESIS_CACHE_DIR``, else ``~/.cache/thesis_lib``; with ``name``, that sub-folder."""
+    p = os.environ.get("THESIS_CACHE_DIR")
+    base = Path(p) if p else Path.home() / ".cache" / "thesis_lib"
+    return base / name if name else base

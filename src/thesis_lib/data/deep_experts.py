@@ -151,8 +151,9 @@ def runs_dir() -> Path:
     ``THESIS_CACHE_DIR`` defaults to ``~/.cache/thesis_lib``. A run folder holds the model,
     its replay buffer (about 0.1-0.5 GB) and the exported snapshots; nothing there is shipped.
     """
-    base = Path(os.environ.get("THESIS_CACHE_DIR", Path.home() / ".cache" / "thesis_lib"))
-    return base / "expert_runs"
+    from thesis_lib.book.paths import cache_dir
+
+    return cache_dir("expert_runs")
 
 
 def _backend(name: str) -> str:

@@ -29,23 +29,13 @@ from typing import Any
 
 import numpy as np
 
+from thesis_lib.book.paths import data_dir, minari_root  # every on-disk location: book.paths
+
 from .tasks import NAMESPACE, TASKS, parse_dataset_id
 
 
 class EpisodeFormatError(ValueError):
     """An episode whose arrays do not fit together (e.g. observations ≠ actions + 1)."""
-
-
-def minari_root() -> Path:
-    """Minari's data-set root: ``$MINARI_DATASETS_PATH`` or ``~/.minari/datasets``."""
-    p = os.environ.get("MINARI_DATASETS_PATH")
-    return Path(p) if p else Path.home() / ".minari" / "datasets"
-
-
-def data_dir() -> Path:
-    """Where generated data sets are written: ``$THESIS_DATA_DIR``, else :func:`minari_root`."""
-    p = os.environ.get("THESIS_DATA_DIR")
-    return Path(p) if p else minari_root()
 
 
 def search_dirs() -> list[Path]:
