@@ -359,8 +359,8 @@ def test_every_task_generates_every_tier_at_smoke_scale():
         for tier in spec.tiers:
             if spec.kind == "mujoco" and tier != "random" and not has_policies(task):
                 continue
-            ds = load(generate(task, tier, profile="smoke", seed=0))
-            n = data.PROFILE_SIZES["smoke"]
+            ds = load(generate(task, tier, size="smoke", seed=0))
+            n = data.DATASET_SIZES["smoke"]
             want = 2 * n if tier == "medium-expert" else n
             assert ds.n_transitions == want, (task, tier)
 

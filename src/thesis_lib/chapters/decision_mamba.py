@@ -188,7 +188,7 @@ class Config:
     timing_infer_episodes: int = 2
     """Timed inference episodes per method and mode (after one untimed)."""
     dataset_size: Literal["smoke", "full"] = "smoke"
-    """Size of the generated data sets: a key of ``thesis_lib.data.PROFILE_SIZES`` (``smoke``
+    """Size of the generated data sets: a key of ``thesis_lib.data.DATASET_SIZES`` (``smoke``
     20k transitions, ``full`` D4RL's 1M). Not the chapter's profile (``thesis run --profile``),
     which picks the parameter file."""
     n_transitions: int | None = None

@@ -145,7 +145,7 @@ class Config:
     """Cap on evaluation episode length (``None``: the task's time limit). Maze2D always runs
     whole episodes (:func:`~thesis_lib.seq.evaluation.eval_step_cap`)."""
     dataset_size: Literal["smoke", "full"] = "smoke"
-    """Size of the generated data sets: a key of ``thesis_lib.data.PROFILE_SIZES`` (``smoke``
+    """Size of the generated data sets: a key of ``thesis_lib.data.DATASET_SIZES`` (``smoke``
     20k transitions, ``full`` D4RL's 1M). Not the chapter's profile (``thesis run --profile``),
     which picks the parameter file."""
     n_transitions: int | None = None
@@ -159,7 +159,7 @@ class Config:
     """Progress bars of the runs."""
 
     def __post_init__(self) -> None:
-        from thesis_lib.data import PROFILE_SIZES
+        from thesis_lib.data import DATASET_SIZES
 
         for name in (
             "datasets",
@@ -188,9 +188,9 @@ class Config:
                 )
         check_methods(self.methods, METHODS)
         check_methods(self.compat_methods, METHODS)
-        if self.dataset_size not in PROFILE_SIZES:
+        if self.dataset_size not in DATASET_SIZES:
             raise ValueError(
-                f"Unknown dataset_size {self.dataset_size!r}. Valid: {', '.join(PROFILE_SIZES)}."
+                f"Unknown dataset_size {self.dataset_size!r}. Valid: {', '.join(DATASET_SIZES)}."
             )
         if (
             self.iterations < 1

@@ -32,7 +32,7 @@ from .deep_experts import (
 from .experts import LinearPolicy, load_policy, load_policy_record, train_experts
 from .maze import WaypointExpert, bfs_distances
 from .recipe import (
-    PROFILE_SIZES,
+    DATASET_SIZES,
     action_noise_for,
     generate,
     get_dataset,
@@ -68,7 +68,7 @@ __all__ = [
     "EpisodeFormatError",
     "LinearPolicy",
     "OfflineDataset",
-    "PROFILE_SIZES",
+    "DATASET_SIZES",
     "QUALITY_TARGETS",
     "SequenceBatch",
     "SequenceDataset",

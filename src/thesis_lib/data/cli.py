@@ -27,7 +27,7 @@ def _generate(args: argparse.Namespace) -> int:
                 task,
                 tier,
                 n_transitions=args.n_transitions,
-                profile=args.profile,
+                size=args.size,
                 seed=args.seed,
                 action_noise=args.action_noise,
             )
@@ -172,12 +172,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--tier", default="all", help="expert|medium|medium-replay|medium-expert|random|all"
     )
     g.add_argument(
-        "--profile",
+        "--size",
         choices=["smoke", "full"],
         default="smoke",
         help="smoke: 20k transitions; full: D4RL's 1M",
     )
-    g.add_argument("--n-transitions", type=int, default=None, help="overrides --profile")
+    g.add_argument("--n-transitions", type=int, default=None, help="overrides --size")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--action-noise", type=float, default=None, help="std; default per task kind")
     g.set_defaults(func=_generate)

@@ -39,7 +39,7 @@ import numpy as np
 from .storage import Episode, OfflineDataset, find_dataset, load, write_dataset
 from .tasks import TaskSpec, check_tier, gen_dataset_id, get_task
 
-Profile = Literal["smoke", "full"]
+DatasetSize = Literal["smoke", "full"]
 
 #: version of the recipe, stored in each set's ``thesis_info``. 2: TQC experts for
 #: Walker2d/HalfCheetah/Ant, one seed per tier (medium-expert's halves independent).
@@ -59,8 +59,8 @@ def tier_seed(seed: int, tier: str) -> int:
     return int(ss.generate_state(1)[0])
 
 
-#: transitions per data set by profile (D4RL's full size is 1M; medium-expert doubles).
-PROFILE_SIZES: dict[str, int] = {"smoke": 20_000, "full": 1_000_000}
+#: transitions per data set by size (D4RL's full size is 1M; medium-expert doubles).
+DATASET_SIZES: dict[str, int] = {"smoke": 20_000, "full": 1_000_000}
 
 #: default action-noise std per task kind. Maze: D4RL's maze2d used a noisy planner.
 #: MuJoCo: 0, because the linear ARS policies are brittle (measured on 30k transitions:
@@ -358,7 +358,7 @@ def generate(
     task: str,
     tier: str,
     n_transitions: int | None = None,
-    profile: Profile = "smoke",
+    size: DatasetSize = "smoke",
     seed: int = 0,
     action_noise: float | None = None,
     overwrite: bool = True,
@@ -368,8 +368,8 @@ def generate(
     Args:
         task: e.g. ``"hopper"``, ``"maze2d-umaze"``.
         tier: ``expert``, ``medium``, ``medium-replay``, ``medium-expert``, ``random``.
-        n_transitions: size; ``PROFILE_SIZES[profile]`` when ``None``.
-        profile: ``smoke`` (20k transitions) or ``full`` (D4RL's 1M).
+        n_transitions: size; ``DATASET_SIZES[size]`` when ``None``.
+        size: ``smoke`` (20k transitions) or ``full`` (D4RL's 1M); not a chapter profile.
         seed: roll-out seed; same seed, same arrays.
         action_noise: action-noise std; per-kind default when ``None``.
         overwrite: replace an existing set.
@@ -382,12 +382,12 @@ def generate(
     """
     spec = get_task(task)
     dataset_id = gen_dataset_id(task, tier)
-    n = PROFILE_SIZES[profile] if n_transitions is None else int(n_transitions)
+    n = DATASET_SIZES[size] if n_transitions is None else int(n_transitions)
     t0 = time.time()
     eps, info = make_episodes(task, tier, n, seed, action_noise)
     rets = np.array([e.episode_return for e in eps])
     info.update(
-        profile=profile if n_transitions is None else "custom",
+        size=size if n_transitions is None else "custom",
         rollout_s=round(time.time() - t0, 2),
         return_mean=float(rets.mean()),
         return_std=float(rets.std()),
@@ -410,7 +410,7 @@ def generate(
 def get_dataset(
     task: str,
     tier: str,
-    profile: Profile = "smoke",
+    size: DatasetSize = "smoke",
     seed: int = 0,
     n_transitions: int | None = None,
 ) -> OfflineDataset:
@@ -421,7 +421,7 @@ def get_dataset(
     use at the chosen scale and cached under :func:`thesis_lib.data.storage.data_dir`.
     """
     dataset_id = gen_dataset_id(task, tier)
-    n = PROFILE_SIZES[profile] if n_transitions is None else int(n_transitions)
+    n = DATASET_SIZES[size] if n_transitions is None else int(n_transitions)
     if find_dataset(dataset_id) is not None:
         ds = load(dataset_id)
         ti = ds.metadata.get("thesis_info", {})
@@ -438,7 +438,7 @@ def get_dataset(
 
 __all__ = [
     "GENERATOR_VERSION",
-    "PROFILE_SIZES",
+    "DATASET_SIZES",
     "generate",
     "get_dataset",
     "make_env",
