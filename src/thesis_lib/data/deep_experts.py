@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from .experts import evaluate  # one roll-out loop for ARS and TQC policies
 from .tasks import get_task
 
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # SB3's and sbx's clamp of the actor's log-std
@@ -209,26 +210,6 @@ def export_actor(model: Any, backend: str) -> MLPPolicy:
     return MLPPolicy(ws, bs, low, high)
 
 
-def evaluate_policy(
-    policy: Callable[[np.ndarray], np.ndarray], task: str, n_episodes: int, seed: int = 10_000
-) -> np.ndarray:
-    """Undiscounted returns of a deterministic ``policy`` over seeded episodes, ``(n,)``."""
-    from .recipe import make_env
-
-    env = make_env(task)
-    out = np.empty(n_episodes)
-    for e in range(n_episodes):
-        obs, _ = env.reset(seed=seed + e)
-        ret, done = 0.0, False
-        while not done:
-            obs, r, term, trunc, _ = env.step(policy(obs))
-            ret += float(r)
-            done = term or trunc
-        out[e] = ret
-    env.close()
-    return out
-
-
 def _atomic_save(save: Callable[[Path], object], dest: Path) -> None:
     """Write via ``save(tmp)`` then rename over ``dest``: never a half-written file."""
     tmp = dest.with_name(dest.name + ".tmp")
@@ -358,7 +339,7 @@ def train_deep_expert(
         pol = export_actor(model, backend)
         name = f"step{st.steps:08d}.npz"
         _savez(folder / "snapshots" / name, pol.to_arrays())
-        r = evaluate_policy(pol, task, cfg.snapshot_eval_episodes, seed=0)
+        r = evaluate(pol, task, cfg.snapshot_eval_episodes, seed=0)
         score = normalized_score(task, float(r.mean()), missing="none")
         snap = {
             "step": st.steps,
@@ -377,7 +358,7 @@ def train_deep_expert(
             and score is not None
             and (score >= cfg.target_normalized)
         ):
-            rc = evaluate_policy(pol, task, cfg.confirm_episodes, seed=1_000)
+            rc = evaluate(pol, task, cfg.confirm_episodes, seed=1_000)
             sc = normalized_score(task, float(rc.mean()), missing="none")
             snap["confirm_normalized"] = sc
             log(f"{task}: confirmation on {cfg.confirm_episodes} episodes: {sc:.1f}")
@@ -457,21 +438,21 @@ def ship_deep_expert(
 
     quick = sorted(snaps, key=lambda s: s["return"], reverse=True)[:5]
     sel = {
-        s["step"]: float(evaluate_policy(pol[s["step"]], task, n_select_episodes, 100).mean())
+        s["step"]: float(evaluate(pol[s["step"]], task, n_select_episodes, 100).mean())
         for s in quick
     }
     log(f"{task}: expert candidates (step: return over {n_select_episodes}) {sel}")
     exp_step = max(sel, key=lambda k: sel[k])
-    exp_r = evaluate_policy(pol[exp_step], task, n_eval_episodes, eval_seed)
+    exp_r = evaluate(pol[exp_step], task, n_eval_episodes, eval_seed)
     target = medium_target(task, float(exp_r.mean()), medium_fraction)
     before = [s for s in snaps if s["step"] < exp_step]
     near = sorted(before, key=lambda s: abs(s["return"] - target))[:3]
     msel = {
-        s["step"]: float(evaluate_policy(pol[s["step"]], task, n_select_episodes, 100).mean())
+        s["step"]: float(evaluate(pol[s["step"]], task, n_select_episodes, 100).mean())
         for s in near
     }
     med_step = min(msel, key=lambda k: abs(msel[k] - target))
-    med_r = evaluate_policy(pol[med_step], task, n_eval_episodes, eval_seed)
+    med_r = evaluate(pol[med_step], task, n_eval_episodes, eval_seed)
     log(
         f"{task}: expert step {exp_step} return {exp_r.mean():.0f}; medium step {med_step} "
         f"return {med_r.mean():.0f} (target {target:.0f})"
@@ -541,7 +522,6 @@ __all__ = [
     "DeepExpertConfig",
     "MLPPolicy",
     "RunState",
-    "evaluate_policy",
     "export_actor",
     "runs_dir",
     "ship_deep_expert",

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -213,9 +214,14 @@ def load_policy(task: str, which: str = "expert") -> Any:
 
 
 def evaluate(
-    policy: LinearPolicy, task: str, n_episodes: int = 10, seed: int = 10_000
+    policy: Callable[[np.ndarray], np.ndarray],
+    task: str,
+    n_episodes: int = 10,
+    seed: int = 10_000,
 ) -> np.ndarray:
-    """Undiscounted returns of ``policy`` over ``n_episodes`` seeded episodes, shape ``(n,)``."""
+    """Undiscounted returns of a deterministic ``policy`` (a :class:`LinearPolicy`, an
+    :class:`~thesis_lib.data.deep_experts.MLPPolicy`, any ``obs -> action``) over ``n_episodes``
+    seeded episodes, shape ``(n,)``."""
     import gymnasium as gym
 
     env = gym.make(get_task(task).env_id)
