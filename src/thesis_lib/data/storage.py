@@ -179,19 +179,26 @@ class OfflineDataset:
         return gym.make(self.env_id, **kwargs)
 
 
-def _missing_message(dataset_id: str) -> str:
-    roots = " or ".join(str(r) for r in search_dirs())
-    msg = f"No Minari dataset '{dataset_id}' under {roots}."
+def _generate_command(dataset_id: str) -> str | None:
+    """How to make ``dataset_id`` here (one of ours), or ``None`` (a real Minari/D4RL set)."""
     try:
         ns, task, tier, _ = parse_dataset_id(dataset_id)
     except ValueError:
-        ns = task = tier = ""
-    if ns == NAMESPACE and task in TASKS:
-        msg += (
-            f" Create it with 'thesis data generate --task {task} --tier {tier}' "
-            f"(or thesis_lib.data.generate('{task}', '{tier}')),"
-            " or set MINARI_DATASETS_PATH to an existing copy."
-        )
+        return None
+    if ns != NAMESPACE or task not in TASKS:
+        return None
+    return (
+        f"'thesis data generate --task {task} --tier {tier}' "
+        f"(or thesis_lib.data.generate('{task}', '{tier}'))"
+    )
+
+
+def _missing_message(dataset_id: str) -> str:
+    roots = " or ".join(str(r) for r in search_dirs())
+    msg = f"No Minari dataset '{dataset_id}' under {roots}."
+    command = _generate_command(dataset_id)
+    if command:
+        msg += f" Create it with {command}, or set MINARI_DATASETS_PATH to an existing copy."
     else:
         msg += (
             " Set MINARI_DATASETS_PATH to the directory holding it (e.g. a copy of a real "
@@ -251,15 +258,9 @@ class DamagedDatasetError(OSError):
 
 def _damaged_message(dataset_id: str, path: Path, err: BaseException) -> str:
     msg = f"Data set '{dataset_id}' at {path} is damaged and cannot be read ({err})."
-    try:
-        ns, task, tier, _ = parse_dataset_id(dataset_id)
-    except ValueError:
-        ns = task = tier = ""
-    if ns == NAMESPACE and task in TASKS:
-        msg += (
-            f" Rebuild it with 'thesis data generate --task {task} --tier {tier}' "
-            f"(or thesis_lib.data.generate('{task}', '{tier}'))."
-        )
+    command = _generate_command(dataset_id)
+    if command:
+        msg += f" Rebuild it with {command}."
     else:
         msg += f" Delete {path} and copy or download the data set again."
     return msg
