@@ -7,9 +7,12 @@ These are the slow tests (marked ``slow``): they execute notebooks through paper
 from __future__ import annotations
 
 import json
+import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import nbformat
@@ -216,3 +219,40 @@ def test_executed_chapter_shows_its_parameters_once(tmp_path):
     assert defaults == [["parameters", "remove-cell"]]
     assert len(injected) == 1 and "n = 3" in nb.cells[injected[0]].source
     assert "remove-cell" not in tags[injected[0]]
+
+
+# Ctrl-C on `thesis run` interrupts the running cell (the kernel runs in its own session).
+LOOP = """
+import pathlib, time
+out = pathlib.Path("ticks")
+out.mkdir(exist_ok=True)
+for i in range(600):          # about a minute unless interrupted
+    (out / f"{i:04d}").touch()
+    time.sleep(0.1)
+"""
+
+
+def test_ctrl_c_stops_the_chapter_and_says_it_can_resume(tmp_path):
+    _write_project(tmp_path, LOOP)
+    env = {**os.environ, "THESIS_PROJECT_ROOT": str(tmp_path)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "thesis_lib.cli", "run", "demo", "--quiet"],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    ticks = tmp_path / "ticks"
+    deadline = time.monotonic() + 120  # safety net only: the loop starts within seconds
+    while not (ticks.is_dir() and len(list(ticks.iterdir())) >= 3):
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "the notebook never started"
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)  # what Ctrl-C in the terminal sends
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    assert "interrupted in cell" in err and "resumes" in err
+    n = len(list(ticks.iterdir()))
+    time.sleep(0.5)
+    assert len(list(ticks.iterdir())) == n < 600  # the kernel stopped writing
