@@ -135,6 +135,58 @@ def test_unknown_config_field_is_an_error(project):
         st.study_tasks(st.load_study("04_hdt"))
 
 
+def test_scale_check_runs_beside_the_study_and_stays_out_of_the_verdicts(project):
+    checked = {
+        **STUDY,
+        "scale_check": {"config": {"settings": ["a"], "seeds": [0, 1, 2], "offset": -40.0}},
+    }
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(checked))
+    rows = st.run_study("04_hdt", progress=False)
+    assert len(CALLS) == 20 + 2 * 3  # the study's 20 runs and the check's 6
+    check = rows[rows["scale"] == "check"]
+    assert len(check) == 6 and set(check["setting"]) == {"a"}
+    # the check's runs (offset -40, far below) would move the effect if they were counted
+    res = st.evaluate_study("04_hdt", reps=300)
+    assert res[res.claim == "C3"].iloc[0].effect == pytest.approx(10.0)
+
+
+def test_reuse_copies_the_same_tasks_from_another_study(project, monkeypatch):
+    st.run_study("04_hdt", progress=False)
+    other = {**STUDY, "study": "fake-05-v1", "chapter": "05_decision_mamba", "reuse": ["04_hdt"]}
+    (project / "params" / "05_decision_mamba.study.yml").write_text(yaml.safe_dump(other))
+    CALLS.clear()
+    rows = st.run_study("05_decision_mamba", progress=False)
+    assert CALLS == [] and len(rows) == 20  # every task was the 04 study's: none trained again
+    rec = json.loads(
+        next((project / "studies" / "05_decision_mamba" / "tasks").glob("*.json")).read_text()
+    )
+    assert rec["study"] == "fake-05-v1" and rec["reused_from"]["chapter"] == "04_hdt"
+    assert st.write_study_summary(st.load_study("05_decision_mamba"), list(rows.task_key.unique()))[
+        "complete"
+    ]
+
+
+def test_a_comparison_reported_apart_does_not_decide_the_claim(project):
+    apart = {
+        **STUDY,
+        "comparisons": [
+            {"claim": "C3", "x": "HDT", "y": "DT", "kind": "superior"},
+            {"claim": "C3", "x": "DT", "y": "HDT", "kind": "superior", "counts": False},
+        ],
+    }
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(apart))
+    st.run_study("04_hdt", progress=False)
+    res = st.evaluate_study("04_hdt", reps=300)
+    assert list(res.verdict) == ["holds", "fails"]
+    claims = st.write_claims(reps=300).set_index("claim")
+    assert claims.verdict["C3"] == "holds" and "reported apart" in claims.comparisons["C3"]
+
+
+def test_bad_scale_check_is_an_error():
+    with pytest.raises(ValueError, match="scale_check"):
+        st.parse_study({**STUDY, "scale_check": {"settings": ["a"]}})
+
+
 REPO = Path(__file__).resolve().parents[1]
 COMMITTED = sorted((REPO / "studies").glob("*/run.json"))
 

@@ -38,8 +38,10 @@ STUDY_KEYS = {
     "comparisons",
     "budget_cpu_hours",
     "scale_check",
+    "reuse",
     "notes",
 }
+SCALE_CHECK_KEYS = {"config", "note"}
 REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
 DEFAULT_COLUMNS = {"method": "method", "setting": "setting", "seed": "seed"}
 
@@ -58,6 +60,10 @@ class Study:
     columns: dict[str, str] = field(default_factory=lambda: dict(DEFAULT_COLUMNS))
     budget_cpu_hours: float | None = None
     scale_check: dict[str, Any] | None = None
+    """``config``: overrides of ``config`` for a second scale on one setting, run beside the
+    study and tagged ``scale: check`` (not used by the comparisons); ``note``: why."""
+    reuse: list[str] = field(default_factory=list)
+    """Chapters whose finished study tasks are copied in when a task is the same (same key)."""
     notes: str = ""
     path: Path | None = None
 
@@ -100,6 +106,15 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     for c in data["comparisons"]:
         check_comparison(c)
     cols = {**DEFAULT_COLUMNS, **(data.get("columns") or {})}
+    check = data.get("scale_check")
+    if check is not None:
+        if not isinstance(check, Mapping) or set(check) - SCALE_CHECK_KEYS:
+            raise ValueError(
+                f"scale_check{where} must be a mapping with keys {sorted(SCALE_CHECK_KEYS)}"
+            )
+    reuse = data.get("reuse") or []
+    if isinstance(reuse, str):
+        reuse = [reuse]
     return Study(
         study=str(data["study"]),
         chapter=str(data["chapter"]),
@@ -110,7 +125,8 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
         secondary=data.get("secondary"),
         columns=cols,
         budget_cpu_hours=data.get("budget_cpu_hours"),
-        scale_check=data.get("scale_check"),
+        scale_check=dict(check) if check is not None else None,
+        reuse=[str(r) for r in reuse],
         notes=str(data.get("notes", "")),
         path=path,
     )
@@ -136,20 +152,64 @@ def chapter_module(chapter: str) -> Any:
     return importlib.import_module(module_name(chapter))
 
 
-def study_config(study: Study) -> Any:
-    """The chapter's ``Config`` with the study's overrides (an unknown field is an error)."""
+def study_config(study: Study, scale: str = "study") -> Any:
+    """The chapter's ``Config`` with the study's overrides (an unknown field is an error);
+    ``scale="check"``: with the scale check's overrides on top."""
     from thesis_lib.book.params import config_from_namespace
 
     mod = chapter_module(study.chapter)
-    return config_from_namespace(mod.Config, study.config, f"{study.chapter} (study {study.study})")
+    values = dict(study.config)
+    if scale == "check":
+        if not study.scale_check or not study.scale_check.get("config"):
+            raise ValueError(f"study {study.study} has no scale_check config")
+        values.update(study.scale_check["config"])
+    return config_from_namespace(mod.Config, values, f"{study.chapter} (study {study.study})")
 
 
 def study_tasks(study: Study) -> list[Any]:
-    """The study's tasks, from the chapter module's ``study_tasks(cfg)``."""
+    """The study's tasks, from the chapter module's ``study_tasks(cfg)``: the scale check's
+    first (their configs carry ``scale: check``), then the study's own."""
+    from thesis_lib.sweep import Task
+
     mod = chapter_module(study.chapter)
     if not hasattr(mod, "study_tasks"):
         raise NotImplementedError(f"{mod.__name__} of {study.chapter} has no study_tasks(cfg) yet")
-    return list(mod.study_tasks(study_config(study)))
+    tasks = list(mod.study_tasks(study_config(study)))
+    if study.scale_check and study.scale_check.get("config"):
+        check = mod.study_tasks(study_config(study, "check"))
+        # first: CLAIMS.md asks for the scale check before the study
+        tasks = [Task(t.fn, {**t.config, "scale": "check"}, t.resources) for t in check] + tasks
+    return tasks
+
+
+def reuse_tasks(study: Study, keys: list[str]) -> int:
+    """Copy finished tasks with the same key from the studies in ``study.reuse`` into this
+    study's store (each record notes where it came from); returns how many were copied.
+
+    A record is reused only if it was written under its own study's current hash."""
+    from thesis_lib.sweep import TaskStore
+
+    own = TaskStore(studies_dir(study.chapter) / "tasks")
+    n = 0
+    for chapter in study.reuse:
+        other = load_study(chapter)
+        store = TaskStore(studies_dir(chapter) / "tasks")
+        for k in keys:
+            if own.has(k) or not store.has(k):
+                continue
+            rec = store.read(k)
+            if rec.get("study_hash") != other.hash:
+                continue
+            own.write(
+                rec,
+                {
+                    "study": study.study,
+                    "study_hash": study.hash,
+                    "reused_from": {"study": other.study, "chapter": chapter},
+                },
+            )
+            n += 1
+    return n
 
 
 def run_study(
@@ -168,6 +228,8 @@ def run_study(
     study = load_study(chapter)
     tasks = study_tasks(study)
     out = studies_dir(chapter)
+    if study.reuse and not force:
+        reuse_tasks(study, [t.key for t in tasks])
     rows = run_tasks(
         tasks,
         out / "tasks",
@@ -244,6 +306,8 @@ def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
             f"run 'thesis study {chapter}' first"
         )
     rows = study_rows(study)
+    if "scale" in rows:
+        rows = rows[rows["scale"].fillna("study") == "study"]
     c = study.columns
     res = evaluate_comparisons(
         rows,
@@ -330,6 +394,7 @@ __all__ = [
     "study_config",
     "study_path",
     "study_rows",
+    "reuse_tasks",
     "study_tasks",
     "write_claims",
     "write_study_summary",

@@ -977,3 +977,95 @@ def format_table_5_5(
     )
     cols = [f"{m} {d}" if d != "none" else m for m, d in order]
     return wide[[c for c in cols if c in wide.columns]]
+
+
+def study_tasks(cfg: Config) -> list[Any]:
+    """The tasks of the chapter's pre-registered study (``params/05_decision_mamba.study.yml``).
+
+    Every data set x seed x method of ``cfg`` at ``cfg.arch``, each reduced to one row by
+    :func:`thesis_lib.chapters.hdt.study_run`, and the timings of C6 (:func:`timing_task`)
+    on every ``timing_datasets`` x seed x method. A DT or HDT run here has the same task key as
+    the HDT chapter's study run of the same settings, so the study file's ``reuse: [04_hdt]``
+    copies it instead of training it again.
+
+    Used in: ``thesis study 05_decision_mamba``.
+    """
+    from thesis_lib.chapters.hdt import study_task
+    from thesis_lib.sweep import Task
+
+    arch = cfg.arch_spec()
+    tasks = [
+        study_task(cfg, m, d, s, arch) for d in cfg.datasets for s in cfg.seeds for m in cfg.methods
+    ]
+    timing = {
+        k: getattr(cfg, k)
+        for k in (
+            "timing_arch",
+            "timing_batch_size",
+            "timing_train_iters",
+            "timing_infer_steps",
+            "timing_infer_episodes",
+            "dataset_size",
+            "n_transitions",
+        )
+    }
+    tasks += [
+        Task(timing_task, {"method": m, "dataset": d, "seed": s, **timing})
+        for d in cfg.timing_datasets
+        for s in cfg.seeds
+        for m in cfg.methods
+    ]
+    return tasks
+
+
+def timing_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One C6 study task: Table 5.6's timings of one method on one environment, one repeat.
+
+    ``config`` holds ``method, dataset, seed`` (the repeat: model init and episode starts) and
+    the ``timing_*``, ``dataset_size`` and ``n_transitions`` fields of :class:`Config`. Returns
+    one row: ``method, setting ("<task/tier> (timing)"), seed, scale``, the ms per training
+    iteration (``train_ms``) and per action (``act_ms_window``; DM/HDM also
+    ``act_ms_recurrent``), and the speeds ``train_per_s``, ``act_per_s_window``,
+    ``act_per_s_recurrent`` and ``act_per_s`` (each method's own way: DM/HDM recurrent,
+    DT/HDT window); higher is better, as the study's comparisons read them.
+
+    Used in: ``thesis study 05_decision_mamba`` (C6).
+    """
+    cfg = Config(
+        methods=[config["method"]],
+        seed=int(config["seed"]),
+        timing_datasets=[config["dataset"]],
+        **{
+            k: config[k]
+            for k in (
+                "timing_arch",
+                "timing_batch_size",
+                "timing_train_iters",
+                "timing_infer_steps",
+                "timing_infer_episodes",
+                "dataset_size",
+                "n_transitions",
+            )
+        },
+    )
+    t = run_table_5_6(cfg)
+    ms = {
+        ("train" if p == "train" else f"act_{m}"): float(v)
+        for p, m, v in zip(t.phase, t["mode"], t.time_ms_mean)
+    }
+    row: dict[str, Any] = {
+        "method": config["method"],
+        "setting": f"{config['dataset']} (timing)",
+        "seed": int(config["seed"]),
+        "scale": config.get("scale", "study"),
+        "arch": config["timing_arch"],
+        "train_ms": ms["train"],
+        "act_ms_window": ms["act_window"],
+        "act_ms_recurrent": ms.get("act_recurrent", np.nan),
+    }
+    row["train_per_s"] = 1e3 / row["train_ms"]
+    row["act_per_s_window"] = 1e3 / row["act_ms_window"]
+    row["act_per_s_recurrent"] = 1e3 / row["act_ms_recurrent"]
+    own = "act_ms_recurrent" if config["method"] in MAMBA_METHODS else "act_ms_window"
+    row["act_per_s"] = 1e3 / row[own]  # each method acting its own way (DM/HDM: recurrent)
+    return [row]

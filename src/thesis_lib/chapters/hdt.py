@@ -886,3 +886,134 @@ def plot_training_curves(curves: pd.DataFrame, ncols: int = 4) -> Any:
     )
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     return fig
+
+
+# ------------------------------------------------------------------------------------ the study
+
+#: The columns of a study run (one row per run: method, setting, seed).
+STUDY_COLUMNS = [
+    "method", "setting", "task", "tier", "seed", "scale", "base_method", "paper_compat", "target",
+    "iterations", "evaluations", "score_final", "score_best", "return_final", "return_best",
+    "length_final", "train_s",
+]  # fmt: skip
+#: The ArchSpec fields each kind of method reads: a study task carries only these, so the
+#: same run asked for by two chapters (DT in 04 and 05) has one key.
+_ARCH_FIELDS = {
+    "BC": ("K", "dropout", "bc_hidden_dim", "paper_compat"),
+    "transformer": ("d_model", "n_layers", "n_heads", "K", "dropout", "max_timestep", "paper_compat"),
+    "mamba": ("d_model", "n_layers", "K", "gated_mlp", "eval_mode", "paper_compat"),
+}  # fmt: skip
+
+
+def arch_fields(method: str, arch: ArchSpec) -> dict[str, Any]:
+    """The fields of ``arch`` that ``method`` reads (the rest are the ArchSpec defaults).
+
+    Example:
+        >>> arch_fields("BC", ArchSpec(d_model=64))
+        {'K': 20, 'dropout': 0.1, 'bc_hidden_dim': 256, 'paper_compat': False}
+    """
+    from thesis_lib.seq.registry import MAMBA_METHODS
+
+    kind = "BC" if method == "BC" else "mamba" if method in MAMBA_METHODS else "transformer"
+    d = asdict(arch)
+    return {k: d[k] for k in _ARCH_FIELDS[kind]}
+
+
+def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One study task: a whole offline run reduced to one row (:data:`STUDY_COLUMNS`).
+
+    ``config`` is an :func:`offline_task` config plus ``label`` (the method's name in the
+    study, e.g. ``"HDT-compat"``) and ``scale`` (``"check"`` for a study's scale-check runs,
+    see :mod:`thesis_lib.book.study`; default ``"study"``). RTG methods are evaluated at the data set's max return
+    (CLAIMS.md, C1). ``score_final`` is the last evaluation's mean D4RL-normalised score (the
+    primary metric); ``score_best`` the best evaluation during training (the thesis's);
+    ``return_*`` the same in raw returns.
+
+    Used in: HDT chapter and Decision Mamba chapter studies (``thesis study``).
+    """
+    import time
+
+    t0 = time.process_time()
+    curves = pd.DataFrame(
+        offline_task({k: v for k, v in config.items() if k not in ("label", "scale")})
+    )
+    train_s = time.process_time() - t0
+    curves = curves.sort_values("iteration", kind="stable")
+    target = "none" if curves["target"].eq("none").all() else "max"
+    run = curves[curves["target"] == target]
+    last = run.iloc[-1]
+    return [
+        {
+            "method": config.get("label", config["method"]),
+            "setting": config["dataset"],
+            "task": last["task"],
+            "tier": last["tier"],
+            "seed": int(last["seed"]),
+            "scale": config.get("scale", "study"),
+            "base_method": config["method"],
+            "paper_compat": bool(config["arch"].get("paper_compat", False)),
+            "target": target,
+            "iterations": int(last["iteration"]),
+            "evaluations": len(run),
+            "score_final": float(last["score_mean"]),
+            "score_best": float(run["score_mean"].max()),
+            "return_final": float(last["return_mean"]),
+            "return_best": float(run["return_mean"].max()),
+            "length_final": float(last["length_mean"]),
+            "train_s": round(train_s, 1),
+        }
+    ]
+
+
+def study_task(
+    cfg: Any,
+    method: str,
+    dataset: str,
+    seed: int,
+    arch: ArchSpec,
+    label: str | None = None,
+) -> Any:
+    """The :class:`~thesis_lib.sweep.Task` of one study run of ``cfg`` (an HDT or DM Config).
+
+    Used in: HDT chapter and Decision Mamba chapter studies.
+    """
+    from thesis_lib.sweep import Task
+
+    ev = EvalSpec(episodes=cfg.eval_episodes, max_steps=cfg.max_eval_steps, targets=("max",))
+    train = cfg.train_spec(seed)
+    config: dict[str, Any] = {
+        "method": method,
+        "dataset": dataset,
+        "dataset_size": cfg.dataset_size,
+        "n_transitions": cfg.n_transitions,
+        "arch": arch_fields(method, arch),
+        "train": asdict(train) | {"progress": False},
+        "eval": asdict(ev),
+    }
+    if label and label != method:
+        config["label"] = label
+    return Task(study_run, config)
+
+
+def study_tasks(cfg: Config) -> list[Any]:
+    """The tasks of the chapter's pre-registered study (``params/04_hdt.study.yml``).
+
+    Every data set x seed x method of ``cfg`` (``seeds`` only; no extra seeds), and
+    ``compat_methods`` with ``paper_compat=True`` (as ``"<method>-compat"``) on
+    ``compat_dataset`` (the authors' behaviours measured beside the thesis's text).
+
+    Used in: ``thesis study 04_hdt``.
+    """
+    tasks = [
+        study_task(cfg, m, d, s, cfg.arch(False))
+        for d in cfg.datasets
+        for s in cfg.seeds
+        for m in cfg.methods
+    ]
+    if cfg.compat_dataset:
+        tasks += [
+            study_task(cfg, m, cfg.compat_dataset, s, cfg.arch(True), label=f"{m}-compat")
+            for s in cfg.seeds
+            for m in cfg.compat_methods
+        ]
+    return tasks

@@ -220,6 +220,8 @@ def compare(
 
     The effect is ``aggregate(x) - aggregate(y)`` over all (seed, setting) scores of the
     settings both methods ran (``settings`` to choose), with a stratified bootstrap interval.
+    Without ``settings``, a setting counts where both methods have the metric (a study's
+    timing rows and score rows can share the methods); a missing value there is an error.
     """
     if aggregate not in AGGREGATES:
         raise ValueError(f"aggregate must be one of {sorted(AGGREGATES)}, got {aggregate!r}")
@@ -228,9 +230,10 @@ def compare(
     for m in (x, y):
         if m not in known:
             raise ValueError(f"no rows for method {m!r}; methods: {sorted(known)}")
-    if settings is None:
-        sx = set(rows.loc[rows[method_col] == x, setting_col])
-        sy = set(rows.loc[rows[method_col] == y, setting_col])
+    if settings is None:  # the settings where both methods have the metric
+        has = rows[rows[metric].notna()] if metric in rows else rows
+        sx = set(has.loc[has[method_col] == x, setting_col])
+        sy = set(has.loc[has[method_col] == y, setting_col])
         settings = sorted(sx & sy)
         if not settings:
             raise ValueError(f"{x} and {y} share no setting")

@@ -89,6 +89,7 @@ COMPARISON_KEYS = {
     "settings",
     "label",
     "note",
+    "counts",
 }
 
 
@@ -136,7 +137,14 @@ def evaluate_comparisons(
             setting_col=setting_col,
             seed_col=seed_col,
         )
-        out.append({"claim": spec["claim"], "label": spec.get("label", ""), **c.to_dict()})
+        out.append(
+            {
+                "claim": spec["claim"],
+                "label": spec.get("label", ""),
+                "counts": bool(spec.get("counts", True)),
+                **c.to_dict(),
+            }
+        )
     return pd.DataFrame(out)
 
 
@@ -145,11 +153,16 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
 
     A claim *holds* when every comparison of it holds, *fails* when any fails, and is
     *inconclusive* otherwise. Its effect and interval are those of its first comparison
-    (the study file lists the headline comparison first).
+    (the study file lists the headline comparison first). Comparisons pre-registered with
+    ``counts: false`` (reported apart, e.g. C3's sparse-reward settings) are listed but do
+    not take part in the verdict.
     """
     rows = []
     for claim, grp in comparisons.groupby("claim", sort=False):
-        v = grp["verdict"].tolist()
+        counted = grp[grp["counts"].astype(bool)] if "counts" in grp else grp
+        if counted.empty:  # every comparison reported apart: they are all the claim has
+            counted = grp
+        v = counted["verdict"].tolist()
         verdict = (
             "fails"
             if "fails" in v
@@ -157,7 +170,7 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
             if all(x == "holds" for x in v)
             else ("inconclusive")
         )
-        head = grp.iloc[0]
+        head = counted.iloc[0]
         rows.append(
             {
                 "claim": claim,
@@ -170,7 +183,9 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
                 "seeds": int(grp["seeds"].min()),
                 "settings": int(grp["settings"].max()),
                 "comparisons": "; ".join(
-                    f"{r.x} vs {r.y} ({r.metric}): {r.verdict} [{r.ci_low:.3g}, {r.ci_high:.3g}]"
+                    f"{r.x} vs {r.y} ({r.metric}"
+                    + ("" if getattr(r, "counts", True) else ", reported apart")
+                    + f"): {r.verdict} [{r.ci_low:.3g}, {r.ci_high:.3g}]"
                     for r in grp.itertuples()
                 ),
             }
