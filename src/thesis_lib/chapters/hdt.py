@@ -933,6 +933,9 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     """
     import time
 
+    import torch
+
+    torch.set_num_threads(1)  # small models: one core per run, the study runs one per core
     t0 = time.process_time()
     curves = pd.DataFrame(
         offline_task({k: v for k, v in config.items() if k not in ("label", "scale")})
