@@ -200,3 +200,60 @@ def test_committed_studies_match_their_parameter_files(run_json, monkeypatch):
         f"{run_json} was computed from another {info['study_file']}: the study file changed "
         "after the study started (start a new study id instead)"
     )
+
+
+# ------------------------------------------------------------------ a chapter's evidence section
+
+
+def test_evidence_section_before_during_and_after_the_study(project):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from thesis_lib.chapters import evidence as evi
+
+    ev = evi.load_evidence("04_hdt", reps=200)
+    assert "not run yet" in evi.status_line(ev) and ev.rows.empty
+    assert set(evi.comparisons_table(ev).verdict) == {"pending"}
+    evi.plot_per_setting(ev)  # an empty study still draws (a note)
+
+    st.run_study("04_hdt", progress=False)
+    ev = evi.load_evidence("04_hdt", reps=200)
+    assert ev.complete and "20/20 tasks (complete)" in evi.status_line(ev)
+    table = evi.per_setting_table(ev)
+    hdt_a = table[(table.method == "HDT") & (table.setting == "a")].iloc[0]
+    # seeds 0-4 add -1, 0, 1, -1, 0 to HDT's 60 + offset 1: mean 60.8
+    assert hdt_a["mean"] == pytest.approx(60.8) and hdt_a.seeds == 5
+    assert hdt_a.ci_low <= 60.8 <= hdt_a.ci_high
+    comp = evi.comparisons_table(ev)
+    assert list(comp.verdict) == ["holds", "fails"]
+    assert comp.effect.iloc[0] == pytest.approx(10.0)
+    fig = evi.plot_comparisons(ev)
+    assert len(fig.axes[0].get_yticks()) == 2
+    evi.plot_per_setting(ev)
+
+
+def test_scale_check_table_ranks_both_scales(project):
+    from thesis_lib.chapters import evidence as evi
+
+    checked = {
+        **STUDY,
+        "scale_check": {"config": {"settings": ["a"], "seeds": [0, 1, 2], "offset": 5.0}},
+    }
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(checked))
+    st.run_study("04_hdt", progress=False)
+    t = evi.scale_check_table(evi.load_evidence("04_hdt", reps=200)).set_index("method")
+    assert t.loc["HDT", "check"] == pytest.approx(65.0)  # 60 + 5, seeds 0-2 add -1, 0, 1
+    assert t.loc["HDT", "rank (study)"] == t.loc["HDT", "rank (check)"] == 1
+    assert t.loc["DT", "seeds (check)"] == 3
+
+
+def test_claim_readings_say_where_we_differ_and_why(project):
+    from thesis_lib.chapters import evidence as evi
+
+    assert set(evi.claim_readings(evi.load_evidence("04_hdt", reps=200)).ours) == {"pending"}
+    st.run_study("04_hdt", progress=False)
+    read = evi.claim_readings(evi.load_evidence("04_hdt", reps=200), reps=200).set_index("claim")
+    assert read.loc["C3", "ours"] == "holds" and "may differ" not in read.loc["C3", "reading"]
+    assert (
+        read.loc["C2", "ours"] == "fails" and "may differ because of" in read.loc["C2", "reading"]
+    )

@@ -62,8 +62,12 @@ __all__ = [
     "run_table_5_5",
     "run_table_5_6",
     "run_timing_ratios",
+    "study_summary_dm",
+    "study_tasks",
+    "study_timing",
     "summarize_dm",
     "thesis_labels_5_5",
+    "timing_task",
 ]
 
 DM_METHODS: tuple[str, ...] = ("DT", "HDT", "DM-RTG", "DM-noRTG", "HDM")
@@ -1069,3 +1073,52 @@ def timing_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     own = "act_ms_recurrent" if config["method"] in MAMBA_METHODS else "act_ms_window"
     row["act_per_s"] = 1e3 / row[own]  # each method acting its own way (DM/HDM: recurrent)
     return [row]
+
+
+def study_summary_dm(rows: pd.DataFrame, eval_mode: str = "recurrent") -> pd.DataFrame:
+    """The study's score rows as :func:`summarize_dm` output (raw returns), so that
+    :func:`compare_table_5_5` sets the thesis's Table 5.5 beside them.
+
+    Used in: Decision Mamba chapter ("Evidence at study scale").
+    """
+    keys = ["method", "task", "tier", "target"]
+    runs = rows.dropna(subset=["return_final"]) if "return_final" in rows else rows.iloc[:0]
+    if runs.empty:
+        cols = ["best_mean", "best_std", "final_mean", "final_std", "n_seeds"]
+        return pd.DataFrame(columns=[*keys, "arch", "eval_mode", *cols])
+    g = runs.groupby(keys, sort=False)
+    out = pd.DataFrame({
+        "best_mean": g["return_best"].mean(), "best_std": g["return_best"].std(ddof=0),
+        "final_mean": g["return_final"].mean(), "final_std": g["return_final"].std(ddof=0),
+        "n_seeds": g["seed"].nunique(),
+    }).reset_index()  # fmt: skip
+    out["eval_mode"] = [eval_mode if m in MAMBA_METHODS else "window" for m in out.method]
+    out["arch"] = "study"
+    return out
+
+
+def study_timing(rows: pd.DataFrame) -> pd.DataFrame:
+    """C6 from the study's timing rows: per environment and method, the mean ms per training
+    iteration and per action (windowed; DM/HDM also recurrent) over the repeats, and each
+    method's times over the DT's on the same environment.
+
+    Used in: Decision Mamba chapter ("Evidence at study scale").
+    """
+    cols = ["train_ms", "act_ms_window", "act_ms_recurrent"]
+    t = rows.dropna(subset=["train_ms"]) if "train_ms" in rows else rows.iloc[:0]
+    if t.empty:
+        return pd.DataFrame(columns=["setting", "method", *cols])
+    out = t.groupby(["setting", "method"], sort=False)[cols].mean()
+    out["repeats"] = t.groupby(["setting", "method"], sort=False)["seed"].nunique()
+    dt = out.xs("DT", level="method") if "DT" in out.index.get_level_values("method") else None
+    if dt is not None:
+        envs = out.index.get_level_values("setting")
+        out["train / DT"] = out["train_ms"].to_numpy() / dt["train_ms"].reindex(envs).to_numpy()
+        out["act (window) / DT"] = (
+            out["act_ms_window"].to_numpy() / dt["act_ms_window"].reindex(envs).to_numpy()
+        )
+        out["act (own way) / DT"] = (
+            out["act_ms_recurrent"].fillna(out["act_ms_window"]).to_numpy()
+            / dt["act_ms_window"].reindex(envs).to_numpy()
+        )
+    return out.reset_index()

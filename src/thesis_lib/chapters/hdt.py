@@ -44,6 +44,7 @@ __all__ = [
     "compare_table_5_2",
     "compare_table_5_3",
     "compare_win_counts",
+    "arch_fields",
     "load_datasets",
     "offline_task",
     "plot_maze_subgoals",
@@ -56,6 +57,10 @@ __all__ = [
     "run_paper_compat",
     "run_seed_spread",
     "run_subgoal_stats",
+    "study_run",
+    "study_summary",
+    "study_task",
+    "study_tasks",
     "summarize",
     "thesis_labels",
 ]
@@ -1020,3 +1025,26 @@ def study_tasks(cfg: Config) -> list[Any]:
             for m in cfg.compat_methods
         ]
     return tasks
+
+
+def study_summary(rows: pd.DataFrame) -> pd.DataFrame:
+    """Study rows (one per run) as :func:`summarize` output, so that the thesis's tables can
+    be set beside them (:func:`compare_table_5_1`, :func:`compare_table_5_3`).
+
+    Used in: HDT chapter and Decision Mamba chapter ("Evidence at study scale").
+    """
+    keys = ["method", "task", "tier", "target"]
+    if rows.empty:
+        return pd.DataFrame(columns=keys + ["best_return", "final_return_mean", "n_seeds"])
+    g = rows.groupby(keys, sort=False)
+    out = pd.DataFrame({
+        "best_return": g["return_best"].mean(),
+        "best_return_std": g["return_best"].std(ddof=0),
+        "best_score": g["score_best"].mean(),
+        "final_return_mean": g["return_final"].mean(),
+        "final_return_std": g["return_final"].std(ddof=0),
+        "final_score_mean": g["score_final"].mean(),
+        "final_score_std": g["score_final"].std(ddof=0),
+        "n_seeds": g["seed"].nunique(),
+    }).reset_index()  # fmt: skip
+    return out

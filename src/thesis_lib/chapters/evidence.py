@@ -1,0 +1,392 @@
+"""A chapter's section "Evidence at study scale": its committed study, read and shown.
+
+Every chapter with a pre-registered study (``params/<chapter>.study.yml``) renders the same
+things from ``studies/<chapter>/``, which ``thesis study <chapter>`` writes; nothing here
+trains or evaluates a model, and the book build never reruns a study.
+
+* :func:`load_evidence`: the study, its rows (study scale and scale check apart), its
+  ``run.json`` and, once the study is complete, its pre-registered comparisons and verdicts;
+* :func:`status_line`: what has run, at which commit, at what cost;
+* :func:`per_setting_table`, :func:`plot_per_setting`: each method's mean per setting with a
+  95% bootstrap interval over seeds (the dot-and-interval plot), the secondary metric beside;
+* :func:`comparisons_table`, :func:`plot_comparisons`: the claims' comparisons (effect, 95%
+  stratified interval, P(X > Y), verdict), or why they are pending;
+* :func:`scale_check_table`: the scale check's level and ranking at both scales;
+* :func:`secondary_comparisons`, :func:`claim_readings`: the verdicts on the thesis's metric
+  too, and per claim where our answer differs from the thesis's and what may explain it.
+
+Used in: HDT chapter and Decision Mamba chapter ("Evidence at study scale"), and every
+chapter that gets a study.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "Evidence",
+    "claim_readings",
+    "comparisons_table",
+    "load_evidence",
+    "per_setting_table",
+    "plot_comparisons",
+    "plot_per_setting",
+    "scale_check_table",
+    "secondary_comparisons",
+    "status_line",
+]
+
+
+@dataclass
+class Evidence:
+    """A chapter's committed study.
+
+    Attributes:
+        study: the :class:`~thesis_lib.book.study.Study` (its parameter file).
+        rows: the study-scale rows (one per run; ``scale == "study"``).
+        check: the scale check's rows, with the study-scale rows of the same setting.
+        info: ``run.json`` (``{}`` before the study ran).
+        comparisons: the evaluated comparisons (empty until the study is complete).
+    """
+
+    study: Any
+    rows: pd.DataFrame
+    check: pd.DataFrame
+    info: dict[str, Any]
+    comparisons: pd.DataFrame = field(default_factory=pd.DataFrame)
+
+    @property
+    def complete(self) -> bool:
+        """Every pre-registered task has run under this study file."""
+        return bool(self.info.get("complete")) and self.info.get("study_hash") == self.study.hash
+
+
+def load_evidence(chapter: str, reps: int = 10_000) -> Evidence:
+    """Read ``studies/<chapter>/`` (the rows of this study file's tasks).
+
+    Raises:
+        FileNotFoundError: the chapter has no study file.
+    """
+    from thesis_lib.book import study as st
+
+    study = st.load_study(chapter)
+    rows = st.study_rows(study)
+    info_p = st.studies_dir(chapter) / "run.json"
+    info = json.loads(info_p.read_text()) if info_p.exists() else {}
+    scale = rows["scale"].fillna("study") if "scale" in rows else pd.Series("study", rows.index)
+    main, check = rows[scale == "study"], rows[scale == "check"]
+    if len(check):
+        same = main[main[study.columns["setting"]].isin(set(check[study.columns["setting"]]))]
+        check = pd.concat([same, check], ignore_index=True)
+    ev = Evidence(study, main.reset_index(drop=True), check.reset_index(drop=True), info)
+    if ev.complete:
+        ev.comparisons = st.evaluate_study(chapter, reps=reps)
+    return ev
+
+
+def status_line(ev: Evidence) -> str:
+    """One sentence: the study, tasks done of total, CPU-hours, the commits it ran at."""
+    i = ev.info
+    if not i or i.get("study_hash") != ev.study.hash:
+        return f"Study {ev.study.study}: not run yet (`thesis study {ev.study.chapter}`)."
+    commits = ", ".join(c[:7] for c in i.get("commits", [])) or "none"
+    state = "complete" if ev.complete else "in progress: verdicts wait for the full grid"
+    return (
+        f"Study {i['study']}: {i['tasks_done']}/{i['tasks_total']} tasks ({state}), "
+        f"{i.get('cpu_hours', 0):.1f} CPU-hours, run at commit(s) {commits}."
+    )
+
+
+def _mean_ci(values: np.ndarray, reps: int, seed: int = 0) -> tuple[float, float, float]:
+    from thesis_lib.stats import bootstrap_ci
+
+    v = np.asarray(values, dtype=float)
+    if len(v) < 2:
+        m = float(v.mean()) if len(v) else np.nan
+        return m, np.nan, np.nan
+    return bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps, seed=seed)
+
+
+def per_setting_table(
+    ev: Evidence,
+    metric: str | None = None,
+    secondary: str | None = None,
+    rows: pd.DataFrame | None = None,
+    reps: int = 2000,
+) -> pd.DataFrame:
+    """Per method x setting: the mean of ``metric`` over seeds, its 95% bootstrap interval,
+    the number of seeds and the secondary metric's mean.
+
+    Args:
+        ev: :func:`load_evidence` output.
+        metric: default the study's primary metric.
+        secondary: default the study's secondary metric (``None`` in the file: left out).
+        rows: other rows than ``ev.rows`` (e.g. ``ev.check``).
+    """
+    c = ev.study.columns
+    metric = metric or ev.study.metric
+    secondary = secondary if secondary is not None else ev.study.secondary
+    df = ev.rows if rows is None else rows
+    keys = [c["method"], c["setting"]] + (["scale"] if "scale" in df and rows is not None else [])
+    cols = keys + ["mean", "ci_low", "ci_high", "seeds"]
+    cols += [f"{secondary} (mean)"] if secondary else []
+    if metric not in df:
+        return pd.DataFrame(columns=cols)
+    df = df[df[metric].notna()]
+    out = []
+    for k, g in df.groupby(keys, sort=False):
+        mean, lo, hi = _mean_ci(g[metric].to_numpy(), reps)
+        r = dict(zip(keys, k if isinstance(k, tuple) else (k,)))
+        r |= {"mean": mean, "ci_low": lo, "ci_high": hi, "seeds": g[c["seed"]].nunique()}
+        if secondary and secondary in g:
+            r[f"{secondary} (mean)"] = float(g[secondary].mean())
+        out.append(r)
+    return pd.DataFrame(out, columns=cols)
+
+
+def plot_per_setting(
+    ev: Evidence,
+    metric: str | None = None,
+    methods: list[str] | None = None,
+    ncols: int = 3,
+) -> Any:
+    """Dot-and-interval plot: one panel per setting, each method's mean and 95% interval over
+    seeds (the secondary metric, when the study names one, as an open circle)."""
+    import matplotlib.pyplot as plt
+
+    metric = metric or ev.study.metric
+    table = per_setting_table(ev, metric)
+    c = ev.study.columns
+    if table.empty:
+        fig, ax = plt.subplots(figsize=(5, 1.5))
+        ax.text(0.5, 0.5, "no study rows yet", ha="center", va="center")
+        ax.set_axis_off()
+        return fig
+    settings = list(dict.fromkeys(table[c["setting"]]))
+    methods = methods or list(dict.fromkeys(table[c["method"]]))
+    n = len(settings)
+    ncols = min(ncols, n)
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(3.6 * ncols, 0.35 * len(methods) * nrows + 1.2), squeeze=False
+    )
+    sec = f"{ev.study.secondary} (mean)" if ev.study.secondary else None
+    for ax, s in zip(axes.flat, settings):
+        t = table[table[c["setting"]] == s].set_index(c["method"]).reindex(methods)
+        y = np.arange(len(methods))[::-1]
+        err = np.vstack([t["mean"] - t["ci_low"], t["ci_high"] - t["mean"]])
+        ax.errorbar(t["mean"], y, xerr=np.nan_to_num(err), fmt="o", color="C0", capsize=3)
+        if sec and sec in t:
+            ax.plot(t[sec], y, "o", mfc="none", color="C1", label=ev.study.secondary)
+        ax.set_yticks(
+            y, [f"{m} (n={int(k)})" if k == k else m for m, k in zip(methods, t["seeds"])]
+        )
+        ax.set_title(s, fontsize=9)
+        ax.set_xlabel(metric, fontsize=8)
+    for ax in list(axes.flat)[n:]:
+        ax.set_axis_off()
+    if sec:
+        axes.flat[0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    return fig
+
+
+def comparisons_table(ev: Evidence) -> pd.DataFrame:
+    """The pre-registered comparisons: claim, x vs y, metric, settings, effect with its 95%
+    interval, P(X > Y), the verdict, and whether it decides the claim; before the study is
+    complete, the comparisons as registered with the verdict ``pending``."""
+    cols = [
+        "claim",
+        "comparison",
+        "metric",
+        "kind",
+        "margin",
+        "x_score",
+        "y_score",
+        "effect",
+        "ci_low",
+        "ci_high",
+        "prob_improvement",
+        "seeds",
+        "settings",
+        "verdict",
+        "decides the claim",
+    ]
+    if not ev.complete or ev.comparisons.empty:
+        return pd.DataFrame(
+            [
+                {
+                    "claim": s["claim"],
+                    "comparison": s.get("label") or f"{s['x']} vs {s['y']}",
+                    "metric": s.get("metric", ev.study.metric),
+                    "kind": s.get("kind", "superior"),
+                    "margin": s.get("margin", 0.0),
+                    "verdict": "pending",
+                    "decides the claim": bool(s.get("counts", True)),
+                }
+                for s in ev.study.comparisons
+            ],
+            columns=cols,
+        )
+    r = ev.comparisons
+    return pd.DataFrame(
+        {
+            "claim": r["claim"],
+            "comparison": [lb or f"{x} vs {y}" for lb, x, y in zip(r["label"], r["x"], r["y"])],
+            "metric": r["metric"],
+            "kind": r["kind"],
+            "margin": r["margin"],
+            "x_score": r["x_score"],
+            "y_score": r["y_score"],
+            "effect": r["effect"],
+            "ci_low": r["ci_low"],
+            "ci_high": r["ci_high"],
+            "prob_improvement": r["prob_improvement"],
+            "seeds": r["seeds"],
+            "settings": r["settings"],
+            "verdict": r["verdict"],
+            "decides the claim": r["counts"] if "counts" in r else True,
+        },
+        columns=cols,
+    )
+
+
+def plot_comparisons(ev: Evidence, metric: str | None = None, ax: Any = None) -> Any:
+    """The effect (x - y) of each comparison on ``metric`` (default the study's) with its 95%
+    interval, coloured by verdict, the margin shaded; a note while the study is incomplete."""
+    import matplotlib.pyplot as plt
+
+    from thesis_lib.chapters.claims import VERDICT_COLOURS
+
+    metric = metric or ev.study.metric
+    t = comparisons_table(ev)
+    t = t[t["metric"] == metric].reset_index(drop=True)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 0.5 * max(len(t), 2) + 1))
+    if t["effect"].isna().all():
+        ax.text(0.5, 0.5, status_line(ev), ha="center", va="center", wrap=True, fontsize=8)
+        ax.set_axis_off()
+        return ax.figure
+    y = np.arange(len(t))[::-1]
+    for yi, r in zip(y, t.to_dict("records")):
+        colour = VERDICT_COLOURS.get(r["verdict"], "k")
+        ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=colour, lw=2)
+        fill = colour if r["decides the claim"] else "none"
+        ax.plot([r["effect"]], [yi], "o", mfc=fill, color=colour)
+    margins = sorted({float(m) for m in t["margin"] if m})
+    if len(margins) == 1:
+        ax.axvspan(-margins[0], margins[0], color="0.92", zorder=0, label="margin")
+    ax.axvline(0, color="k", lw=0.8)
+    ax.set_yticks(y, [f"{c}: {s}" for c, s in zip(t["claim"], t["comparison"])], fontsize=7)
+    ax.set_xlabel(f"effect x - y in {metric} (95% stratified interval); open: reported apart")
+    ax.figure.tight_layout()
+    return ax.figure
+
+
+def scale_check_table(ev: Evidence, metric: str | None = None) -> pd.DataFrame:
+    """The scale check: per method, the mean of ``metric`` at the study's scale and at the
+    check's, with each scale's rank (1 = best)."""
+    metric = metric or ev.study.metric
+    c = ev.study.columns
+    if ev.check.empty:
+        return pd.DataFrame(columns=["method", "study", "check", "rank (study)", "rank (check)"])
+    chk = ev.check
+    chk = chk.assign(scale=chk["scale"].fillna("study"))
+    means = chk.groupby([c["method"], "scale"])[metric].mean().unstack("scale")
+    seeds = chk.groupby([c["method"], "scale"])[c["seed"]].nunique().unstack("scale")
+    means = means.dropna(subset=[s for s in ("check",) if s in means])
+    out = pd.DataFrame({"method": means.index})
+    for s in ("study", "check"):
+        if s in means:
+            out[s] = means[s].to_numpy()
+            out[f"seeds ({s})"] = seeds[s].reindex(means.index).to_numpy()
+            out[f"rank ({s})"] = out[s].rank(ascending=False, method="min").to_numpy()
+    return out
+
+
+def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
+    """The comparisons registered on the primary metric, recomputed on the secondary one (the
+    thesis's best evaluation during training): does the verdict depend on the metric?
+    Empty until the study is complete or when the study names no secondary metric."""
+    from thesis_lib.stats.claims import evaluate_comparisons
+
+    sec = ev.study.secondary
+    if not ev.complete or not sec or sec not in ev.rows:
+        return pd.DataFrame()
+    specs = [
+        {**s, "metric": sec}
+        for s in ev.study.comparisons
+        if s.get("metric", ev.study.metric) == ev.study.metric
+    ]
+    c = ev.study.columns
+    return evaluate_comparisons(
+        ev.rows,
+        specs,
+        metric=sec,
+        method_col=c["method"],
+        setting_col=c["setting"],
+        seed_col=c["seed"],
+        reps=reps,
+    )
+
+
+def claim_readings(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
+    """Per claim of the study: our verdict, the verdict on the thesis's metric, whether the
+    scale check kept the ranking, and one sentence that says where we differ from the thesis
+    (which states every claim as holding) and which of data, scale or metric may explain it."""
+    from thesis_lib.stats.claims import CLAIMS, claim_verdicts
+
+    claims = list(dict.fromkeys(s["claim"] for s in ev.study.comparisons))
+    if not ev.complete or ev.comparisons.empty:
+        return pd.DataFrame(
+            {
+                "claim": claims,
+                "ours": "pending",
+                "on the thesis's metric": "pending",
+                "reading": status_line(ev),
+            }
+        )
+    ours = claim_verdicts(ev.comparisons).set_index("claim")
+    sec = secondary_comparisons(ev, reps)
+    theirs = claim_verdicts(sec).set_index("claim") if len(sec) else pd.DataFrame()
+    check = scale_check_table(ev)
+    same_rank = (
+        bool((check["rank (study)"] == check["rank (check)"]).all())
+        if {"rank (study)", "rank (check)"} <= set(check.columns) and len(check)
+        else None
+    )
+    rows = []
+    for cl in claims:
+        r = ours.loc[cl]
+        v2 = theirs["verdict"].get(cl, "n/a") if len(theirs) else "n/a"
+        text = (
+            f"{cl} ({CLAIMS[cl][1]}) The thesis: holds. Ours: **{r['verdict']}**, effect "
+            f"{r['effect']:.3g} [{r['ci_low']:.3g}, {r['ci_high']:.3g}], "
+            f"P(X>Y) {r['prob_improvement']:.2f}, {int(r['seeds'])} seeds x "
+            f"{int(r['settings'])} settings."
+        )
+        if r["verdict"] != "holds":
+            why = []
+            if v2 == "holds":
+                why.append("the metric (on the thesis's best-during-training metric it holds)")
+            if same_rank is False:
+                why.append("the scale (the scale check ranked the methods differently)")
+            why.append("the data (20k-transition sets from our experts, not D4RL's 1M)")
+            text += " It may differ because of " + "; ".join(why) + "."
+        elif v2 not in ("holds", "n/a"):
+            text += f" On the thesis's metric it is {v2}."
+        rows.append(
+            {
+                "claim": cl,
+                "ours": r["verdict"],
+                "on the thesis's metric": v2,
+                "scale check: same ranking": same_rank,
+                "reading": text,
+            }
+        )
+    return pd.DataFrame(rows)
