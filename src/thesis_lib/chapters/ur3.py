@@ -43,6 +43,9 @@ __all__ = [
     "run_demonstrations",
     "run_success_curves",
     "run_table_5_4",
+    "study_run",
+    "study_table_5_4",
+    "study_tasks",
     "summarize_table_5_4",
 ]
 
@@ -576,3 +579,84 @@ def plot_demo_subgoals(episode: Any, ax: Any = None) -> tuple[Any, list[int], li
     ax.set_xlabel("step"), ax.set_ylabel("reward")
     ax.set_title("one demonstration: sub-goal states (green) and goals reached (red)")
     return fig, np.unique(idx).tolist(), reached_at.tolist()
+
+
+# ------------------------------------------------------------------------------------ the study
+
+
+def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One C14 study task: :func:`reach_task` reduced to one row per run.
+
+    Returns ``method, setting ("<n> demos"), train_demos, seed, scale, goals_mean`` (goals
+    reached, mean over the 10 test starts; the primary metric), ``goals_std``, ``all_five``
+    (share of test starts that reached all five goals) and ``episodes``.
+
+    Used in: ``thesis study 07_ur3_deployment`` (C14).
+    """
+    import torch
+
+    torch.set_num_threads(1)  # small models: one core per run
+    rows = pd.DataFrame(reach_task({k: v for k, v in config.items() if k != "scale"}))
+    goals = rows["goals_reached"].to_numpy(dtype=float)
+    n = int(config["train_demos"])
+    return [
+        {
+            "method": config["method"],
+            "setting": f"{n} demos",
+            "train_demos": n,
+            "seed": int(config["train"]["seed"]),
+            "scale": config.get("scale", "study"),
+            "goals_mean": float(goals.mean()),
+            "goals_std": float(goals.std()),
+            "all_five": float(np.mean(goals >= 5)),
+            "episodes": len(goals),
+        }
+    ]
+
+
+def study_tasks(cfg: Config) -> list[Any]:
+    """The tasks of the chapter's pre-registered study (``params/07_ur3_deployment.study.yml``):
+    every demonstration count x method x seed of ``cfg``, one row per run (:func:`study_run`).
+
+    Used in: ``thesis study 07_ur3_deployment`` (C14).
+    """
+    from thesis_lib.sweep import Task
+
+    arch = asdict(cfg.arch())
+    return [
+        Task(
+            study_run,
+            {
+                "method": m,
+                "train_demos": n,
+                "data_seed": cfg.seed,
+                "max_eval_steps": cfg.max_eval_steps,
+                "arch": arch,
+                "train": asdict(cfg.train_spec(s)) | {"progress": False},
+            },
+        )
+        for n in cfg.train_demos
+        for s in cfg.seeds
+        for m in cfg.methods
+    ]
+
+
+def study_table_5_4(rows: pd.DataFrame) -> pd.DataFrame:
+    """The study's runs as Table 5.4 (mean and std of goals reached over every test start of
+    every seed), for :func:`compare_table_5_4`.
+
+    Used in: UR3 deployment chapter ("Evidence at study scale").
+    """
+    if rows.empty:
+        return pd.DataFrame(columns=["method", "train_demos", "goals_mean", "goals_std"])
+    g = rows.groupby(["method", "train_demos"], sort=False)
+    # pooled over test starts: the mean of the run means; the std from the runs' moments
+    mean = g["goals_mean"].mean()
+    second = g.apply(lambda x: float(np.mean(x["goals_std"] ** 2 + x["goals_mean"] ** 2)))
+    out = pd.DataFrame({
+        "goals_mean": mean,
+        "goals_std": np.sqrt(np.maximum(second - mean**2, 0.0)),
+        "all_five": g["all_five"].mean(),
+        "n_seeds": g["seed"].nunique(),
+    }).reset_index()  # fmt: skip
+    return out
