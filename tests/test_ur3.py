@@ -247,3 +247,27 @@ def test_mujoco_frames_show_the_arm_and_follow_the_pose():
     assert frames.shape == (2, 120, 160, 3) and frames.dtype == np.uint8
     assert frames[0].std() > 10, "a blank frame: cameras/lights not computed before rendering"
     assert np.abs(frames[0].astype(int) - frames[1].astype(int)).mean() > 0.5
+
+
+def test_study_tasks_cover_the_grid_and_table_5_4_pools_the_runs():
+    import pandas as pd
+
+    from thesis_lib.chapters import ur3 as ch
+
+    cfg = ch.Config(seeds=[0, 1], train_demos=[10, 80], iterations=5)
+    tasks = ch.study_tasks(cfg)
+    grid = {(t.config["method"], t.config["train_demos"], t.config["train"]["seed"]) for t in tasks}
+    assert len(tasks) == len(grid) == 2 * 2 * 2
+    assert len({t.key for t in tasks}) == len(tasks)
+    # two runs of 10 test starts: means 4 and 5, each with std 1 -> pooled mean 4.5, std
+    # sqrt(mean(1 + 16, 1 + 25) - 4.5**2) = sqrt(1.25)
+    runs = pd.DataFrame(
+        [
+            {"method": "HDT", "train_demos": 10, "seed": s, "goals_mean": m, "goals_std": 1.0,
+             "all_five": a}
+            for s, m, a in [(0, 4.0, 0.2), (1, 5.0, 0.6)]
+        ]
+    )  # fmt: skip
+    t = ch.study_table_5_4(runs).iloc[0]
+    assert t.goals_mean == pytest.approx(4.5) and t.goals_std == pytest.approx(1.25**0.5)
+    assert t.all_five == pytest.approx(0.4) and t.n_seeds == 2

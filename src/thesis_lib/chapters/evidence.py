@@ -335,10 +335,20 @@ def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
     )
 
 
-def claim_readings(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
+def claim_readings(
+    ev: Evidence,
+    data_note: str = "our data sets are made here, not the thesis's",
+    reps: int = 10_000,
+) -> pd.DataFrame:
     """Per claim of the study: our verdict, the verdict on the thesis's metric, whether the
     scale check kept the ranking, and one sentence that says where we differ from the thesis
-    (which states every claim as holding) and which of data, scale or metric may explain it."""
+    (which states every claim as holding) and which of data, scale or metric may explain it.
+
+    Args:
+        ev: :func:`load_evidence` output.
+        data_note: how the chapter's data differ from the thesis's (named as a reason).
+        reps: bootstrap replications of the secondary-metric comparisons.
+    """
     from thesis_lib.stats.claims import CLAIMS, claim_verdicts
 
     claims = list(dict.fromkeys(s["claim"] for s in ev.study.comparisons))
@@ -376,7 +386,7 @@ def claim_readings(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
                 why.append("the metric (on the thesis's best-during-training metric it holds)")
             if same_rank is False:
                 why.append("the scale (the scale check ranked the methods differently)")
-            why.append("the data (20k-transition sets from our experts, not D4RL's 1M)")
+            why.append(f"the data ({data_note})")
             text += " It may differ because of " + "; ".join(why) + "."
         elif v2 not in ("holds", "n/a"):
             text += f" On the thesis's metric it is {v2}."
