@@ -82,6 +82,18 @@ def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def link_chapters(ledger: pd.DataFrame, section: str = "evidence-at-study-scale") -> pd.DataFrame:
+    """The ledger with each chapter as an HTML link to its section "Evidence at study scale"
+    in the built book (pages are ``<chapter>.html``, sections anchored by their title).
+
+    >>> link_chapters(pd.DataFrame({"chapter": ["04_hdt"]})).chapter[0]
+    '<a href="04_hdt.html#evidence-at-study-scale">04_hdt</a>'
+    """
+    out = ledger.copy()
+    out["chapter"] = [f'<a href="{c}.html#{section}">{c}</a>' for c in out["chapter"]]
+    return out
+
+
 def verdict_counts(claims: pd.DataFrame) -> pd.Series:
     """How many claims hold, fail, are inconclusive or pending."""
     v = ledger_table(claims)["verdict"]
@@ -114,6 +126,7 @@ __all__ = [
     "Config",
     "VERDICT_COLOURS",
     "ledger_table",
+    "link_chapters",
     "load_claims",
     "plot_claims",
     "verdict_counts",
