@@ -209,7 +209,7 @@ def test_evidence_section_before_during_and_after_the_study(project):
     import matplotlib
 
     matplotlib.use("Agg")
-    from thesis_lib.chapters import evidence as evi
+    from thesis_lib.book import evidence as evi
 
     ev = evi.load_evidence("04_hdt", reps=200)
     assert "not run yet" in evi.status_line(ev) and ev.rows.empty
@@ -233,7 +233,7 @@ def test_evidence_section_before_during_and_after_the_study(project):
 
 
 def test_scale_check_table_ranks_both_scales(project):
-    from thesis_lib.chapters import evidence as evi
+    from thesis_lib.book import evidence as evi
 
     checked = {
         **STUDY,
@@ -248,7 +248,7 @@ def test_scale_check_table_ranks_both_scales(project):
 
 
 def test_claim_readings_say_where_we_differ_and_why(project):
-    from thesis_lib.chapters import evidence as evi
+    from thesis_lib.book import evidence as evi
 
     assert set(evi.claim_readings(evi.load_evidence("04_hdt", reps=200)).ours) == {"pending"}
     st.run_study("04_hdt", progress=False)

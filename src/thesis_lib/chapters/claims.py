@@ -13,14 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from thesis_lib.stats.claims import CLAIMS, EVIDENCE
-
-VERDICT_COLOURS = {
-    "holds": "#2e7d32",
-    "fails": "#c62828",
-    "inconclusive": "#f9a825",
-    "pending": "#9e9e9e",
-}
+from thesis_lib.stats.claims import CLAIMS, EVIDENCE, VERDICT_COLOURS
 
 
 @dataclass

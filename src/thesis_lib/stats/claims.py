@@ -78,6 +78,14 @@ EVIDENCE: dict[str, tuple[str, str]] = {
     "C14": ("Table 5.4: goals reached with 10-80 demonstrations", "07_ur3_deployment"),
 }
 
+#: Colours of the verdicts in the book's plots.
+VERDICT_COLOURS = {
+    "holds": "#2e7d32",
+    "fails": "#c62828",
+    "inconclusive": "#f9a825",
+    "pending": "#9e9e9e",
+}
+
 COMPARISON_KEYS = {
     "claim",
     "x",
@@ -193,4 +201,11 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-__all__ = ["CLAIMS", "EVIDENCE", "check_comparison", "claim_verdicts", "evaluate_comparisons"]
+__all__ = [
+    "CLAIMS",
+    "EVIDENCE",
+    "VERDICT_COLOURS",
+    "check_comparison",
+    "claim_verdicts",
+    "evaluate_comparisons",
+]

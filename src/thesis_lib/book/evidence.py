@@ -15,8 +15,10 @@ trains or evaluates a model, and the book build never reruns a study.
 * :func:`secondary_comparisons`, :func:`claim_readings`: the verdicts on the thesis's metric
   too, and per claim where our answer differs from the thesis's and what may explain it.
 
-Used in: HDT chapter and Decision Mamba chapter ("Evidence at study scale"), and every
-chapter that gets a study.
+A shared service of the chapters, like :func:`thesis_lib.book.compare_with_paper`.
+
+Used in: HDT, Decision Mamba and UR3 deployment chapters ("Evidence at study scale"), and
+every chapter that gets a study.
 """
 
 from __future__ import annotations
@@ -261,7 +263,7 @@ def plot_comparisons(ev: Evidence, metric: str | None = None, ax: Any = None) ->
     interval, coloured by verdict, the margin shaded; a note while the study is incomplete."""
     import matplotlib.pyplot as plt
 
-    from thesis_lib.chapters.claims import VERDICT_COLOURS
+    from thesis_lib.stats.claims import VERDICT_COLOURS
 
     metric = metric or ev.study.metric
     t = comparisons_table(ev)
