@@ -29,6 +29,7 @@ from typing import Any
 __all__ = [
     "D4RL_REFERENCES",
     "SPARSE_FAMILIES",
+    "data_difference",
     "dataset_key",
     "env_name",
     "is_minari_id",
@@ -245,3 +246,28 @@ def open_dataset(name: str, dataset_size: str = "smoke", n_transitions: int | No
             total += len(e)
         ds.episodes = kept
     return ds
+
+
+#: What differs from the thesis's data, per kind of name (the chapters' "what differs" column).
+_MADE_HERE = (
+    "data sets made here (MuJoCo v5 / PointMaze), the thesis used D4RL (PyBullet locomotion)"
+)
+_MINARI = (
+    "Minari's re-recordings of D4RL for the Minari ids (gymnasium-robotics environments: Adroit "
+    "v1 rewards, FrankaKitchen-v1, AntMaze), the thesis used D4RL's originals"
+)
+
+
+def data_difference(names: list[str]) -> str:
+    """The "what differs: data" text of a chapter's data-set list (made here, Minari ids, both).
+
+    Example:
+        >>> data_difference(["hopper/medium"]) == _MADE_HERE
+        True
+        >>> data_difference(["D4RL/door/human-v2"]).startswith("Minari's re-recordings")
+        True
+    """
+    kinds = {is_minari_id(n) for n in names}
+    return "; ".join(
+        ([_MADE_HERE] if False in kinds else []) + ([_MINARI] if True in kinds else [])
+    )
