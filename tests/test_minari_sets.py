@@ -140,6 +140,7 @@ def test_fixture_loads_with_its_own_environment(minari_root, dataset_id, obs_dim
     assert ds.episodes[0].observations.shape == (9, obs_dim)
     assert ds.episodes[0].actions.shape == (8, act_dim)
     assert ds.episodes[-1].truncations[-1]
+    assert (ds.ref_min_score, ds.ref_max_score) == ms.reference_returns(dataset_id)
     assert len(ms.open_dataset(dataset_id, n_transitions=16)) == 2
     env = ms.make_minari_env(dataset_id)
     try:

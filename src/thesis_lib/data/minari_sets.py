@@ -224,7 +224,9 @@ def open_dataset(name: str, dataset_size: str = "smoke", n_transitions: int | No
 
     ``task/tier``: :func:`thesis_lib.data.get_dataset` (made on first use, at ``dataset_size``
     or ``n_transitions``). A Minari id: :func:`thesis_lib.data.load`; ``dataset_size`` does
-    not apply, ``n_transitions`` keeps the first whole episodes up to that many transitions.
+    not apply, ``n_transitions`` keeps the first whole episodes up to that many transitions,
+    and the reference returns are :func:`reference_returns` (D4RL's for a ``D4RL/…`` id; the
+    data set's own metadata stays in ``metadata``).
 
     Raises:
         FileNotFoundError: a Minari id that is not downloaded; the message names the id, the
@@ -237,6 +239,9 @@ def open_dataset(name: str, dataset_size: str = "smoke", n_transitions: int | No
         task, tier = dataset_key(name)
         return get_dataset(task, tier, dataset_size, n_transitions=n_transitions)
     ds = load(name)
+    ref = reference_returns(name, ds.metadata)
+    if ref is not None:  # the data card's normalised scores as the evaluation's: D4RL's
+        ds.ref_min_score, ds.ref_max_score = ref
     if n_transitions is not None:
         kept, total = [], 0
         for e in ds.episodes:

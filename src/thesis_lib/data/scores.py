@@ -2,7 +2,8 @@
 
 The reference returns are D4RL's (``d4rl/infos.py``), listed in
 :data:`thesis_lib.data.tasks.TASKS` (our ``task/tier`` sets) and
-:data:`thesis_lib.data.minari_sets.D4RL_REFERENCES` (real Minari ``D4RL/…`` ids). HDT 5.2 and Decision Mamba 5.3 report scores this way.
+:data:`thesis_lib.data.minari_sets.D4RL_REFERENCES` (real Minari ``D4RL/…`` ids). HDT 5.2
+and Decision Mamba 5.3 report scores this way.
 """
 
 from __future__ import annotations
