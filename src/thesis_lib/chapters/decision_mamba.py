@@ -140,7 +140,9 @@ class Config:
     seed: int = 0
     """Seed of the chapter (figures); runs use ``seeds``."""
     datasets: list[str] = field(default_factory=lambda: ["hopper/medium", "maze2d-umaze/expert"])
-    """``task/tier`` pairs of Table 5.5 and Fig 5.4."""
+    """``task/tier`` pairs of Table 5.5 and Fig 5.4, or real Minari ids (``D4RL/kitchen/mixed-v2``,
+    ``D4RL/antmaze/umaze-v1``: downloads under ``$MINARI_DATASETS_PATH``; evaluated in their own
+    environment, scored by D4RL's references; :mod:`thesis_lib.data.minari_sets`)."""
     methods: list[str] = field(default_factory=lambda: list(DM_METHODS))
     """Subset of :data:`DM_METHODS`."""
     seeds: list[int] = field(default_factory=lambda: [0])
@@ -208,11 +210,14 @@ class Config:
     def __post_init__(self) -> None:
         for name in ("methods", "sweep_methods"):
             check_methods(getattr(self, name), DM_METHODS)
+        from thesis_lib.data.minari_sets import is_minari_id
+
         for name in ("datasets", "sweep_datasets", "timing_datasets"):
             for d in getattr(self, name):
-                if str(d).count("/") != 1:
+                if str(d).count("/") != 1 and not is_minari_id(d):
                     raise ValueError(
-                        f"Expect {name} as 'task/tier', e.g. 'hopper/medium'; got '{d}'."
+                        f"Expect {name} as 'task/tier', e.g. 'hopper/medium', or as a Minari id "
+                        f"'namespace/task/tier-vN', e.g. 'D4RL/kitchen/mixed-v2'; got '{d}'."
                     )
         for a in [self.arch, self.timing_arch, *self.sweep_archs]:
             parse_arch(a)
@@ -270,9 +275,11 @@ class Config:
 
 
 def split_dataset(name: str) -> tuple[str, str]:
-    """``"hopper/medium"`` -> ``("hopper", "medium")``."""
-    task, tier = name.split("/")
-    return task, tier
+    """``"hopper/medium"`` -> ``("hopper", "medium")``; a real Minari id keeps its task and tier
+    (``"D4RL/antmaze/umaze-diverse-v1"`` -> ``("antmaze", "umaze-diverse")``)."""
+    from thesis_lib.data.minari_sets import dataset_key
+
+    return dataset_key(name)
 
 
 def load_datasets(
@@ -280,15 +287,22 @@ def load_datasets(
 ) -> dict[tuple[str, str], Any]:
     """``{(task, tier): OfflineDataset}`` of ``names`` (those not already in ``data``).
 
+    A real Minari id (``D4RL/kitchen/mixed-v2``) is read from its download and keyed by its
+    task and tier (``("kitchen", "mixed")``).
+
     Used in: Decision Mamba chapter.
+
+    Raises:
+        FileNotFoundError: a Minari id not downloaded (the message names the id and where
+            Minari looks).
     """
-    from thesis_lib.data import get_dataset
+    from thesis_lib.data.minari_sets import open_dataset
 
     out = dict(data or {})
     for name in names:
         key = split_dataset(name)
         if key not in out:
-            out[key] = get_dataset(*key, cfg.dataset_size, n_transitions=cfg.n_transitions)
+            out[key] = open_dataset(name, cfg.dataset_size, cfg.n_transitions)
     return out
 
 
@@ -303,15 +317,16 @@ CURVE_COLUMNS = [
 def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One sweep task: train and evaluate ``config["method"]`` on ``config["dataset"]``.
 
-    ``config`` holds ``method, dataset ("task/tier"), dataset_size, n_transitions`` and the
-    ``arch``, ``train``, ``eval`` specs as dicts. Returns :data:`CURVE_COLUMNS` rows.
+    ``config`` holds ``method, dataset ("task/tier" or a Minari id), dataset_size,
+    n_transitions`` and the ``arch``, ``train``, ``eval`` specs as dicts. Returns
+    :data:`CURVE_COLUMNS` rows.
 
     Used in: Decision Mamba chapter (through :func:`run_table_5_5`, :func:`run_sweeps`).
     """
-    from thesis_lib.data import get_dataset
+    from thesis_lib.data.minari_sets import env_name, open_dataset
 
     task, tier = split_dataset(config["dataset"])
-    data = get_dataset(task, tier, config["dataset_size"], n_transitions=config["n_transitions"])
+    data = open_dataset(config["dataset"], config["dataset_size"], config["n_transitions"])
     ev = dict(config["eval"])
     ev["targets"] = tuple(ev["targets"])
     rows = run_offline(
@@ -320,7 +335,7 @@ def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
         ArchSpec(**config["arch"]),
         TrainSpec(**config["train"]),
         EvalSpec(**ev),
-        task=task,
+        task=env_name(config["dataset"]),
     )
     where = {"task": task, "tier": tier}
     return [{k: where[k] if k in where else r[k] for k in CURVE_COLUMNS} for r in rows]
@@ -501,6 +516,8 @@ def thesis_labels_5_5(task: str, tier: str) -> tuple[str, str]:
         ('Maze2D', 'umaze')
         >>> thesis_labels_5_5("walker2d", "medium-replay")
         ('Walker2D', 'medium-replay')
+        >>> thesis_labels_5_5("antmaze", "umaze-diverse")
+        ('Antmaze', 'umaze-diverse')
     """
     if task.startswith("maze2d-"):
         return "Maze2D", task.split("-", 1)[1]
@@ -510,6 +527,8 @@ def thesis_labels_5_5(task: str, tier: str) -> tuple[str, str]:
         )
     if task == "kitchen":
         return "Kitchen", tier
+    if task == "antmaze":  # a real Minari set, D4RL/antmaze/<tier>
+        return "Antmaze", tier
     return _TASKS_5_5.get(task, task), tier
 
 
@@ -652,11 +671,14 @@ def compare_win_counts_5_5(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def _timing_env(task: str) -> Any:
+    """One environment of ``task`` (a Minari id: its recorded evaluation environment)."""
     import gymnasium as gym
 
     from thesis_lib.data import make_env
+    from thesis_lib.data.minari_sets import is_minari_id, make_minari_env
 
-    return gym.vector.SyncVectorEnv([lambda: make_env(task)])
+    make = make_minari_env if is_minari_id(task) else make_env
+    return gym.vector.SyncVectorEnv([lambda: make(task)])
 
 
 def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
@@ -680,6 +702,7 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
         time_ms_mean, time_ms_std, n``.
     """
     from thesis_lib.data import SequenceDataset
+    from thesis_lib.data.minari_sets import env_name
 
     arch = cfg.arch_spec(cfg.timing_arch)
     data = load_datasets(cfg.timing_datasets, cfg, data)
@@ -695,7 +718,7 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
                 paper_compat=cfg.paper_compat,
                 seed=cfg.seed,
             )
-            venv = _timing_env(task)
+            venv = _timing_env(env_name(name))
             torch.manual_seed(cfg.seed)
             model: Any = build_model(
                 method, seq, arch, float(np.max(venv.single_action_space.high))

@@ -77,11 +77,12 @@ CURVE_COLUMNS = [
 
 
 def split_dataset(name: str) -> tuple[str, str]:
-    """``"hopper/medium"`` -> ``("hopper", "medium")``, with a clear error otherwise."""
-    if not isinstance(name, str) or name.count("/") != 1:
-        raise ValueError(f"Expect data sets as 'task/tier', e.g. 'hopper/medium'; got {name!r}.")
-    task, tier = name.split("/")
-    return task, tier
+    """``"hopper/medium"`` -> ``("hopper", "medium")``; a real Minari id keeps its task and tier
+    (``"D4RL/door/human-v2"`` -> ``("door", "human")``); a clear error otherwise
+    (:func:`thesis_lib.data.minari_sets.dataset_key`)."""
+    from thesis_lib.data.minari_sets import dataset_key
+
+    return dataset_key(name)
 
 
 @dataclass
@@ -106,7 +107,10 @@ class Config:
         )
     )
     """``task/tier`` pairs (``thesis_lib.data.TASKS``; a Maze2D task has other tiers than a
-    locomotion task, so this is a list of pairs, not a task x tier product)."""
+    locomotion task, so this is a list of pairs, not a task x tier product), or real Minari ids
+    (``D4RL/door/human-v2``, ``D4RL/kitchen/complete-v2``: downloads under
+    ``$MINARI_DATASETS_PATH``, evaluated in their own environment, scored by D4RL's
+    references; :mod:`thesis_lib.data.minari_sets`)."""
     methods: list[str] = field(default_factory=lambda: list(METHODS))
     """Subset of :data:`METHODS`."""
     seeds: list[int] = field(default_factory=lambda: [0])
@@ -189,7 +193,8 @@ class Config:
         for d in self.extra_seed_datasets:
             if d not in self.datasets:
                 raise ValueError(
-                    f"extra_seed_datasets entry '{d}' is not in datasets ({', '.join(self.datasets)})."
+                    f"extra_seed_datasets entry '{d}' is not in datasets ({', '.join(self.datasets)}); "
+                    "list only data sets of `datasets`, or none (extra_seed_datasets=[])."
                 )
         check_methods(self.methods, METHODS)
         check_methods(self.compat_methods, METHODS)
@@ -249,16 +254,28 @@ class Config:
 def load_datasets(cfg: Config, names: list[str] | None = None) -> dict[tuple[str, str], Any]:
     """``{(task, tier): OfflineDataset}`` of ``names`` (default ``cfg.datasets``), made on first use.
 
-    Used in: HDT chapter.
-    """
-    from thesis_lib.data import get_dataset
+    A real Minari id (``D4RL/door/human-v2``) is read from its download and keyed by its task
+    and tier (``("door", "human")``).
 
-    out = {}
+    Used in: HDT chapter.
+
+    Raises:
+        FileNotFoundError: a Minari id not downloaded (the message names the id and where
+            Minari looks).
+        ValueError: two names with the same ``(task, tier)``.
+    """
+    from thesis_lib.data.minari_sets import open_dataset
+
+    out: dict[tuple[str, str], Any] = {}
+    seen: dict[tuple[str, str], str] = {}
     for name in cfg.datasets if names is None else names:
-        task, tier = split_dataset(name)
-        out[(task, tier)] = get_dataset(
-            task, tier, cfg.dataset_size, n_transitions=cfg.n_transitions
-        )
+        key = split_dataset(name)
+        if key in seen and seen[key] != name:
+            raise ValueError(
+                f"Data sets {seen[key]!r} and {name!r} both read as {'/'.join(key)}; keep one."
+            )
+        seen[key] = name
+        out[key] = open_dataset(name, cfg.dataset_size, cfg.n_transitions)
     return out
 
 
@@ -376,15 +393,16 @@ def plot_subgoal_weights(episode: Any, ax: Any = None) -> Any:
 def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One sweep task: train and evaluate ``config["method"]`` on ``config["dataset"]``.
 
-    ``config`` holds ``method, dataset ("task/tier"), dataset_size, n_transitions`` and the
-    ``arch``, ``train``, ``eval`` specs as dicts. Returns :data:`CURVE_COLUMNS` rows.
+    ``config`` holds ``method, dataset ("task/tier" or a Minari id), dataset_size,
+    n_transitions`` and the ``arch``, ``train``, ``eval`` specs as dicts. Returns
+    :data:`CURVE_COLUMNS` rows (a Minari id's ``task, tier`` as :func:`split_dataset` reads them).
 
     Used in: HDT chapter (through :func:`run_curves`).
     """
-    from thesis_lib.data import get_dataset
+    from thesis_lib.data.minari_sets import env_name, open_dataset
 
     task, tier = split_dataset(config["dataset"])
-    data = get_dataset(task, tier, config["dataset_size"], n_transitions=config["n_transitions"])
+    data = open_dataset(config["dataset"], config["dataset_size"], config["n_transitions"])
     ev = dict(config["eval"])
     ev["targets"] = tuple(ev["targets"])
     rows = run_offline(
@@ -393,7 +411,7 @@ def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
         ArchSpec(**config["arch"]),
         TrainSpec(**config["train"]),
         EvalSpec(**ev),
-        task=task,
+        task=env_name(config["dataset"]),
     )
     return [
         {k: (task if k == "task" else tier if k == "tier" else r[k]) for k in CURVE_COLUMNS}
@@ -575,12 +593,24 @@ _TASK_NAMES = {
     "halfcheetah": "Half-Cheetah",
     "ant": "Ant",
     "walker2d": {"5.1": "Walker-2D", "5.2": "Walker 2D", "5.3": "Walker 2D"},
+    # Table 5.3's Adroit and Kitchen rows (real Minari D4RL/<task>/<tier> sets).
+    "pen": "Pen",
+    "door": "Door",
+    "hammer": "Hammer",
+    "relocate": "Relocate",
+    "kitchen": "Kitchen",
+    "antmaze": "Antmaze",
 }
 _TIER_NAMES = {"medium-replay": "replay"}
 
 
 def thesis_labels(task: str, tier: str, table: str) -> tuple[str, str]:
-    """``(task, dataset)`` as thesis Table ``table`` prints them, e.g. ``('Maze 2D', 'umaze')``."""
+    """``(task, dataset)`` as thesis Table ``table`` prints them, e.g. ``('Maze 2D', 'umaze')``.
+
+    Example:
+        >>> thesis_labels("door", "human", "5.3"), thesis_labels("walker2d", "medium-replay", "5.3")
+        (('Door', 'human'), ('Walker 2D', 'replay'))
+    """
     if task.startswith("maze2d-"):
         return "Maze 2D", task.split("-", 1)[1]
     name: Any = _TASK_NAMES.get(task, task)

@@ -4,6 +4,7 @@
 >>> ds = data.get_dataset("hopper", "medium")          # doctest: +SKIP
 >>> ds = data.load("thesis/hopper/medium-v0")          # doctest: +SKIP
 >>> ds = data.load("mujoco/hopper/medium-v0")          # a real Minari set  # doctest: +SKIP
+>>> ds = data.open_dataset("D4RL/door/human-v2")       # either kind of name  # doctest: +SKIP
 >>> seq = data.SequenceDataset(ds, K=20)               # doctest: +SKIP
 >>> batch = seq.sample(64)                             # doctest: +SKIP
 
@@ -31,6 +32,7 @@ from .deep_experts import (
 )
 from .experts import LinearPolicy, load_policy, load_policy_record, train_experts
 from .maze import WaypointExpert, bfs_distances
+from .minari_sets import data_difference, dataset_key, is_minari_id, open_dataset
 from .recipe import (
     DATASET_SIZES,
     action_noise_for,
@@ -79,13 +81,16 @@ __all__ = [
     "cards_table",
     "check_environments",
     "data_card",
+    "data_difference",
     "data_dir",
+    "dataset_key",
     "expert_quality",
     "format_card",
     "gen_dataset_id",
     "generate",
     "get_dataset",
     "get_task",
+    "is_minari_id",
     "list_datasets",
     "load",
     "load_policy",
@@ -95,6 +100,7 @@ __all__ = [
     "maze_success_rate",
     "minari_root",
     "normalized_score",
+    "open_dataset",
     "parse_dataset_id",
     "returns_to_go",
     "rollout",

@@ -1,7 +1,9 @@
 """D4RL-normalised scores: ``100 · (return − random) / (expert − random)``.
 
 The reference returns are D4RL's (``d4rl/infos.py``), listed in
-:data:`thesis_lib.data.tasks.TASKS`. HDT 5.2 and Decision Mamba 5.3 report scores this way.
+:data:`thesis_lib.data.tasks.TASKS` (our ``task/tier`` sets) and
+:data:`thesis_lib.data.minari_sets.D4RL_REFERENCES` (real Minari ``D4RL/…`` ids). HDT 5.2
+and Decision Mamba 5.3 report scores this way.
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ def normalized_score(
     0.0
 
     Args:
-        task: task name (``hopper``, ``maze2d-umaze`` …).
+        task: task name (``hopper``, ``maze2d-umaze`` …) or a Minari id
+            (``D4RL/door/human-v2``: :func:`thesis_lib.data.minari_sets.reference_returns`).
         returns: undiscounted episode return(s), any shape.
         missing: what to do when the task has no D4RL reference
             (``inverted-double-pendulum``): raise or return ``None``.
@@ -46,14 +49,20 @@ def normalized_score(
     Raises:
         ValueError: unknown task, or no reference and ``missing="raise"``.
     """
-    spec = get_task(task)
-    if spec.ref_min_score is None or spec.ref_max_score is None:
+    from .minari_sets import is_minari_id, reference_returns
+
+    if is_minari_id(task):  # a real Minari set: D4RL's references for its id
+        ref = reference_returns(task)
+        lo, hi = ref if ref is not None else (None, None)
+    else:
+        spec = get_task(task)
+        lo, hi = spec.ref_min_score, spec.ref_max_score
+    if lo is None or hi is None:
         if missing == "none":
             return None
         raise ValueError(
             f"Task '{task}' has no D4RL reference returns, so no normalised score; "
             "report raw returns."
         )
-    lo, hi = spec.ref_min_score, spec.ref_max_score
     out = 100.0 * (np.asarray(returns, dtype=np.float64) - lo) / (hi - lo)
     return float(out) if out.ndim == 0 else out

@@ -202,7 +202,9 @@ def _missing_message(dataset_id: str) -> str:
     else:
         msg += (
             " Set MINARI_DATASETS_PATH to the directory holding it (e.g. a copy of a real "
-            "Minari/D4RL download), or make ours with 'thesis data generate'."
+            f"Minari/D4RL download), or download it with 'minari download {dataset_id}' "
+            "(pip install 'minari[hf]'; it lands under $MINARI_DATASETS_PATH, else "
+            "~/.minari/datasets), or make ours with 'thesis data generate'."
         )
     return msg
 

@@ -88,14 +88,23 @@ def eval_step_cap(task: str, cap: int | None) -> int | None:
     reference, and a table of zeros says nothing. Locomotion returns accrue every step, so a cap
     only shortens them.
 
+    A Minari id (``D4RL/kitchen/mixed-v2``) follows
+    :func:`~thesis_lib.data.minari_sets.minari_step_cap`: AntMaze and Kitchen, sparse as Maze2D,
+    run whole episodes; Adroit gets ``cap``.
+
     Used in: HDT chapter, Decision Mamba chapter (smoke profiles).
 
     Example:
         >>> eval_step_cap("hopper", 100), eval_step_cap("maze2d-umaze", 100)
         (100, None)
+        >>> eval_step_cap("D4RL/door/human-v2", 100), eval_step_cap("D4RL/antmaze/umaze-v1", 100)
+        (100, None)
     """
+    from thesis_lib.data.minari_sets import is_minari_id, minari_step_cap
     from thesis_lib.data.tasks import get_task
 
+    if is_minari_id(task):  # a real Minari set: AntMaze and Kitchen are sparse too
+        return minari_step_cap(task, cap)
     return None if get_task(task).kind == "maze" else cap
 
 

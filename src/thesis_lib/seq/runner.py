@@ -122,13 +122,17 @@ class VectorEnvPool:
         self.envs: dict[int, Any] = {}
 
     def __call__(self, n: int) -> Any:
-        """A ``SyncVectorEnv`` of ``n`` copies of the task's environment."""
+        """A ``SyncVectorEnv`` of ``n`` copies of the task's environment (a Minari id: the
+        environment the data set records for evaluation,
+        :func:`~thesis_lib.data.minari_sets.make_minari_env`)."""
         import gymnasium as gym
 
         from thesis_lib.data import make_env
+        from thesis_lib.data.minari_sets import is_minari_id, make_minari_env
 
+        make = make_minari_env if is_minari_id(self.task) else make_env
         if n not in self.envs:
-            self.envs[n] = gym.vector.SyncVectorEnv([lambda: make_env(self.task)] * n)
+            self.envs[n] = gym.vector.SyncVectorEnv([lambda: make(self.task)] * n)
         return self.envs[n]
 
     def close(self) -> None:
@@ -161,7 +165,9 @@ def run_offline(
         train: :class:`TrainSpec` (its ``seed`` seeds the whole run).
         eval: :class:`EvalSpec`.
         task: The task whose environment evaluates (needed unless ``envs`` is given; also
-            names the D4RL score and the Maze2D step cap).
+            names the D4RL score and the Maze2D step cap), or a real Minari id
+            (``D4RL/door/human-v2``: the data set's own evaluation environment, D4RL's
+            references for that id; :mod:`thesis_lib.data.minari_sets`).
         envs: ``envs(n) -> gymnasium VectorEnv`` of ``n`` environments (default: a
             :class:`VectorEnvPool` of ``task``, closed at the end).
         episode_info: ``fn(env) -> dict`` read from each environment of the vector env after the
