@@ -192,3 +192,107 @@ def test_study_section_renders_before_the_study_ran(monkeypatch, tmp_path):
     evi.plot_per_setting(ev)
     evi.plot_comparisons(ev)
     assert set(evi.claim_readings(ev).ours) == {"pending"}
+
+
+def _fake_row(config: dict, rng: np.random.Generator) -> dict:
+    """The row :func:`study_run` would give for ``config``, without training: the filter cuts
+    crashes, more demonstrations cut more, state-action trajectories crash more."""
+    label, filt = config["label"], bool(config["strategy"])
+    crash = 0.9 if not filt else 0.2 + (0.1 if "state-action" in label else 0.0)
+    crash += {"n=10": 0.1, "n=20": 0.05}.get(label.rsplit(" ", 1)[-1], 0.0)
+    crash = float(np.clip(crash + rng.normal(0, 0.02), 0, 1))
+    n_ep = 100
+    k = int(round(crash * n_ep))
+    log = pd.DataFrame(
+        {
+            "return": rng.normal(300, 30, n_ep),
+            "crashed": [i < k for i in range(n_ep)],
+            "filtered": [filt and i >= k for i in range(n_ep)],
+            "timestep": np.linspace(300, 30_000, n_ep).astype(int),
+        }
+    )
+    numbers = ex.training_run_numbers(log, 30_000)
+    strategy = config["strategy"]
+    safe_s, unsafe_s = strategy.split("/") if strategy else (None, None)
+    row = {
+        "method": label,
+        "setting": ex.thesis_env_name(config["task"]),
+        "seed": config["seed"],
+        "scale": config.get("scale", "study"),
+        "top_up": config["top_up"] if filt else None,
+        "task": config["task"],
+        "algo": config["algo"],
+        "trajectory": config["trajectory"] if filt else "none",
+        "strategy": strategy or "none",
+        "safe_strategy": safe_s,
+        "unsafe_strategy": unsafe_s,
+        "n_demos": config["n_demos"],
+        "paper_compat": False,
+        "acc_reward": numbers["return_best"],
+        "crash_pct": 100 * numbers["crash_rate"],
+        "filtered_pct": 100 * numbers["filtered_rate"],
+        "mean_last_100": numbers["return_last"],
+        "n_episodes": n_ep,
+        "wall_time_s": 200.0 if filt else 180.0,
+        **numbers,
+        "eval_return": float(rng.normal(500, 50)),
+        "eval_crash_rate": 1.0,
+        "eval_score": float(rng.normal(15, 2)),
+        "best_score": float(rng.normal(20, 2)),
+        "steps": 30_000,
+        "train_cpu_s": 190.0 if filt else 170.0,
+        "log_speed": float(np.log(30_000 / (190.0 if filt else 170.0)) + rng.normal(0, 0.01)),
+    }
+    if filt:
+        safe_expert = 50 if config["top_up"] else 0
+        row |= {
+            "demos_file": f"{row['setting']}-x.npz",
+            "demos_safe": min(config["n_demos"], 50 if config["top_up"] else 5),
+            "demos_unsafe": config["n_demos"],
+            "demos_safe_expert": min(config["n_demos"], safe_expert),
+            "demos_unsafe_expert": 0,
+            "sac_rollouts_safe": 5,
+            "sac_rollouts_unsafe": 180,
+        }
+    return row
+
+
+def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch):
+    """Rows shaped as study_run makes them, for every task of the study file: every
+    pre-registered comparison computes, and the chapter's tables and curves read them."""
+    from thesis_lib.book import study as st
+    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study = st.load_study("03_defender")
+    rng = np.random.default_rng(0)
+    rows = pd.DataFrame([_fake_row(t.config, rng) for t in ex.study_tasks(st.study_config(study))])
+    res = evaluate_comparisons(rows, study.comparisons, metric=study.metric, reps=200)
+    assert len(res) == len(study.comparisons) and res.verdict.notna().all()
+    c7 = res[(res.claim == "C7") & (res.metric == "crash_free_rate")].iloc[0]
+    assert c7.effect == pytest.approx(0.7, abs=0.03) and c7.verdict == "holds"
+    assert set(claim_verdicts(res).claim) == {"C7", "C8", "C9"}
+    summary = ex.study_summary(rows)
+    sac = summary[(summary.algo == "SAC") & (summary.strategy == "none")]
+    assert len(sac) == 3 and (sac.time_pct == 100).all()
+    filt = summary[(summary.strategy != "none") & (summary.algo == "SAC")]
+    assert filt.time_pct.round(6).eq(round(100 * 200 / 180, 6)).all()
+    t434 = ex.compare_tables(summary, differs={"scale": "test"})
+    ran = t434[t434["what differs"] != "not run"]
+    assert {"SAC", "TD3"} <= set(ran.algorithm) and set(ran.table) == {"4.3", "4.4"}
+    t45 = ex.compare_table_4_5(
+        summary[
+            (summary.algo == "SAC")
+            & (summary.strategy == "MeanDemoW5/MeanDemoW10")
+            & (summary.trajectory == "state")
+        ]
+    )
+    assert sorted(t45.dropna(subset=["ours"]).n_demos_ours.astype(int).unique()) == [10, 20, 50]
+    topup = ex.study_topup_table(rows)
+    assert set(topup.setting) == {"Walker2d"} and len(topup) == 2
+    assert topup.set_index("method").loc["SAC+MeanDemoW5/MeanDemoW10 no top-up", "demos_safe"] == 5
+    sources = ex.study_demo_sources(rows)
+    assert set(sources.n_demos) == {10, 20, 50}
+    curves = ex.study_curves(rows, reps=50)
+    sac_crash = curves[(curves.method == "SAC") & (curves.measure == "crash_rate")]
+    assert (sac_crash.seeds == 5).all() and (sac_crash.ci_low <= sac_crash["mean"]).all()
