@@ -277,6 +277,7 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     assert len(sac) == 3 and (sac.time_pct == 100).all()
     filt = summary[(summary.strategy != "none") & (summary.algo == "SAC")]
     assert filt.time_pct.round(6).eq(round(100 * 200 / 180, 6)).all()
+    assert filt.cpu_pct.round(6).eq(round(100 * 190 / 170, 6)).all()
     t434 = ex.compare_tables(summary, differs={"scale": "test"})
     ran = t434[t434["what differs"] != "not run"]
     assert {"SAC", "TD3"} <= set(ran.algorithm) and set(ran.table) == {"4.3", "4.4"}

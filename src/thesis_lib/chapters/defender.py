@@ -1498,8 +1498,9 @@ def study_tasks(cfg: Config) -> list[Task]:
 
 
 def study_summary(rows: pd.DataFrame) -> pd.DataFrame:
-    """Study rows (one per run) as :func:`summarise` output, with the final evaluation beside,
-    so that :func:`compare_tables` and :func:`compare_table_4_5` set the thesis's tables beside
+    """Study rows (one per run) as :func:`summarise` output (``time_pct``: wall time in % of
+    the plain agent's on the same task and seed), with the final evaluation and the CPU time
+    (``cpu_s``, ``cpu_pct`` likewise) beside, so that :func:`compare_tables` and :func:`compare_table_4_5` set the thesis's tables beside
     them. Runs without the expert top-up are left out (they repeat a method's keys).
 
     Used in: DEFENDER chapter ("Evidence at study scale").
@@ -1509,11 +1510,15 @@ def study_summary(rows: pd.DataFrame) -> pd.DataFrame:
         return summarise(pd.DataFrame(columns=list(RUN_COLUMNS)))
     out = summarise(keep[list(RUN_COLUMNS)])
     keys = ["task", "algo", "trajectory", "strategy", "n_demos"]
+    plain = keep[keep.strategy == "none"].set_index(["task", "algo", "seed"])["train_cpu_s"]
+    idx = pd.MultiIndex.from_frame(keep[["task", "algo", "seed"]])
+    keep = keep.assign(cpu_pct=100 * keep["train_cpu_s"].to_numpy() / plain.reindex(idx).to_numpy())
     ev = keep.groupby(keys, sort=False).agg(
         eval_return_mean=("eval_return", "mean"),
         eval_return_std=("eval_return", "std"),
         eval_crash_rate=("eval_crash_rate", "mean"),
         cpu_s=("train_cpu_s", "mean"),
+        cpu_pct=("cpu_pct", "mean"),
     )
     return out.merge(ev.reset_index(), on=keys, how="left")
 
