@@ -177,7 +177,9 @@ def plot_per_setting(
     fig, axes = plt.subplots(
         nrows, ncols, figsize=(3.6 * ncols, 0.35 * len(methods) * nrows + 1.2), squeeze=False
     )
-    sec = f"{ev.study.secondary} (mean)" if ev.study.secondary else None
+    # the secondary metric is the primary's counterpart: drawn beside the primary only
+    primary = metric == ev.study.metric
+    sec = f"{ev.study.secondary} (mean)" if ev.study.secondary and primary else None
     for ax, s in zip(axes.flat, settings):
         t = table[table[c["setting"]] == s].set_index(c["method"]).reindex(methods)
         y = np.arange(len(methods))[::-1]
@@ -339,7 +341,7 @@ def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
 
 def claim_readings(
     ev: Evidence,
-    data_note: str = "our data sets are made here, not the thesis's",
+    data_note: str = "the data (our data sets are made here, not the thesis's)",
     reps: int = 10_000,
 ) -> pd.DataFrame:
     """Per claim of the study: our verdict, the verdict on the thesis's metric, whether the
@@ -348,7 +350,8 @@ def claim_readings(
 
     Args:
         ev: :func:`load_evidence` output.
-        data_note: how the chapter's data differ from the thesis's (named as a reason).
+        data_note: the chapter's own difference in data or setting, named as a reason
+            (e.g. ``"the data (simulated demonstrations, not the real arm's)"``).
         reps: bootstrap replications of the secondary-metric comparisons.
     """
     from thesis_lib.stats.claims import CLAIMS, claim_verdicts
@@ -388,7 +391,7 @@ def claim_readings(
                 why.append("the metric (on the thesis's best-during-training metric it holds)")
             if same_rank is False:
                 why.append("the scale (the scale check ranked the methods differently)")
-            why.append(f"the data ({data_note})")
+            why.append(data_note)
             text += " It may differ because of " + "; ".join(why) + "."
         elif v2 not in ("holds", "n/a"):
             text += f" On the thesis's metric it is {v2}."

@@ -18,6 +18,12 @@ chapter resumes, and a run that Tables 4.3-4.4 and 4.5 share is trained once. Th
 their demonstrations from content-addressed files under ``results/03_defender/demos``
 (:func:`demos_file`), so a task's key changes when its demonstrations do.
 
+The pre-registered study of claims C7-C9 (``params/03_defender.study.yml``, ``thesis study
+03_defender``) runs :func:`study_tasks`: one :func:`study_run` per training run, reduced to one
+row by :func:`training_run_numbers` and a final evaluation without the filter; the chapter's
+"Evidence at study scale" reads the rows back (:func:`study_summary`, :func:`plot_study_curves`,
+:func:`study_topup_table`).
+
 Used in: DEFENDER chapter (thesis 4.3).
 """
 
@@ -61,6 +67,10 @@ CHAPTER = "03_defender"
 
 __all__ = [
     "CHAPTER",
+    "CRASH_DEFINITION",
+    "STUDY_CURVE_BINS",
+    "STUDY_DATA_NOTE",
+    "THESIS_SAC_RETURN",
     "DEMO_SOURCES",
     "RUN_COLUMNS",
     "THESIS_STATE_ACTION_STRATEGIES",
@@ -81,6 +91,7 @@ __all__ = [
     "plot_ablation_heatmap",
     "plot_curves",
     "plot_curves_table_4_5",
+    "plot_study_curves",
     "rank_thesis_strategies",
     "run_ablation",
     "run_methods_table",
@@ -90,11 +101,21 @@ __all__ = [
     "runs_from_episodes",
     "save_demonstration_files",
     "scale_note",
+    "study_curves",
+    "study_demo_sources",
+    "study_demonstrations",
+    "study_label",
+    "study_run",
+    "study_summary",
+    "study_task",
+    "study_tasks",
+    "study_topup_table",
     "summarise",
     "thesis_env_name",
     "top_strategies",
     "train_run",
     "train_task",
+    "training_run_numbers",
 ]
 
 DEMO_SOURCES: tuple[str, ...] = ("sac", "expert", "auto")
@@ -172,6 +193,14 @@ class Config:
     measured in ``benchmarks/bench_defender.py``; 1 = Algorithm 2 to the letter)."""
     n_jobs: int = 1
     """Processes for the ablation replay (training runs stay sequential so % Time is fair)."""
+    algo_tasks: dict[str, list[str]] = field(default_factory=dict)
+    """Tasks of an algorithm that runs on fewer than all ``tasks`` (e.g. ``{"TD3": ["Hopper-v5"]}``);
+    empty: every algorithm on every task."""
+    eval_episodes: int = 10
+    """Study: evaluation episodes of each run's final policy, without the filter."""
+    no_topup_tasks: list[str] = field(default_factory=list)
+    """Study: tasks where SAC with the first state strategy also runs on the SAC roll-outs alone
+    (no expert top-up), to measure what the top-up changes."""
 
     def __post_init__(self) -> None:
         from thesis_lib.rl import ALGOS
@@ -204,6 +233,20 @@ class Config:
             raise ValueError(
                 f"Unknown demo_source {self.demo_source!r}. Valid: {', '.join(DEMO_SOURCES)}."
             )
+        if isinstance(self.eval_episodes, bool) or not isinstance(self.eval_episodes, int):
+            raise ValueError(f"Config.eval_episodes must be an int, got {self.eval_episodes!r}.")
+        if self.eval_episodes < 1:
+            raise ValueError(f"Config.eval_episodes must be >= 1, got {self.eval_episodes}.")
+        for name, listed in (
+            *((f"algo_tasks[{a!r}]", ts) for a, ts in self.algo_tasks.items()),
+            ("no_topup_tasks", self.no_topup_tasks),
+        ):
+            bad = [t for t in listed if t not in self.tasks]
+            if bad:
+                raise ValueError(f"{name} lists {bad[0]!r}, which is not in tasks {self.tasks}.")
+        bad = [a for a in self.algo_tasks if a not in self.algos]
+        if bad:
+            raise ValueError(f"algo_tasks names {bad[0]!r}, which is not in algos {self.algos}.")
         if self.paper_compat_tasks is not None:
             bad = [t for t in self.paper_compat_tasks if t not in self.tasks]
             if bad:
@@ -566,6 +609,21 @@ def train_run(
 
     Used in: DEFENDER chapter (thesis 4.3.3).
     """
+    row, ep, _ = _train(task, algo, seed, cfg, demos, strategy, trajectory, paper_compat)
+    return row, ep
+
+
+def _train(
+    task: str,
+    algo: str,
+    seed: int,
+    cfg: Config,
+    demos: DemoSet | None,
+    strategy: str | None,
+    trajectory: str,
+    paper_compat: bool,
+) -> tuple[dict[str, Any], pd.DataFrame, Any]:
+    """:func:`train_run`, also returning the :class:`~thesis_lib.rl.TrainResult` (its model)."""
     from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
 
     from thesis_lib.rl import config_from_params, train
@@ -630,7 +688,7 @@ def train_run(
     for k, v in reversed(keys.items()):
         ep.insert(0, k, v)
     ep["wall_time_s"] = res.wall_time_s
-    return row, ep
+    return row, ep, res
 
 
 def _run_numbers(ep: pd.DataFrame) -> dict[str, Any]:
@@ -727,7 +785,8 @@ def run_tables_4_3_4_4(
 ) -> TableRuns:
     """SAC and TD3 with and without DEFENDER on every task and seed (Tables 4.3 and 4.4).
 
-    Runs each algorithm plain, with each of ``state_strategies`` on state trajectories, with
+    Runs each algorithm (on its ``algo_tasks``, default every task) plain, with each of
+    ``state_strategies`` on state trajectories, with
     each of ``state_action_strategies`` on state-action trajectories, and (``paper_compat_check``)
     SAC with the first state strategy in the authors' setting.
 
@@ -737,6 +796,8 @@ def run_tables_4_3_4_4(
     for task in cfg.tasks:
         for seed in cfg.seeds:
             for algo in cfg.algos:
+                if task not in cfg.algo_tasks.get(algo, cfg.tasks):
+                    continue
                 specs.append({"task": task, "algo": algo, "seed": seed})
                 specs += [
                     {"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state"}
@@ -1093,3 +1154,520 @@ def run_paper_compat_effect(cfg: Config, summary: pd.DataFrame) -> pd.DataFrame:
 def plot_curves_table_4_5(episodes: pd.DataFrame):
     """Learning and crash-rate curves of the Table 4.5 runs, one line per number of demonstrations."""
     return plot_curves(episodes.assign(strategy=episodes.n_demos.map(lambda n: f"{n} demos")))
+
+
+# --------------------------------------------------------------------------- the study (C7-C9)
+#: The thesis's Table 4.3 plain-SAC Acc Reward per task: ``*_score`` columns are returns in
+#: percent of it (the tasks' returns differ by a factor 3, so raw returns would let
+#: InvertedDoublePendulum decide every aggregate).
+THESIS_SAC_RETURN: dict[str, float] = {
+    "Hopper-v5": 3474.0,
+    "InvertedDoublePendulum-v5": 9359.0,
+    "Walker2d-v5": 3326.0,
+}
+
+STUDY_CURVE_BINS = 10
+"""Training is cut into this many equal spans of environment steps; each study row carries the
+crash rate, filtered rate and mean return of the episodes that ended in each span."""
+
+EVAL_SEED = 100_000
+"""The final evaluation of a study run with training seed ``s`` resets its task with
+``EVAL_SEED + s``."""
+
+CRASH_DEFINITION = (
+    "A training episode **crashed** when the task terminated it before the horizon "
+    "(an unsafe state: Hopper or Walker2d fell, the pendulum tipped over) and the filter did "
+    "not end it first; an episode the filter ended is **filtered**, not crashed, and one that "
+    "reached the horizon is neither (thesis 4.3.3: an episode 'can end early if the agent "
+    "reaches an unsafe state, leading to a crash if the transition was not filtered'). The "
+    "crash rate is the share of a run's training episodes that crashed, the filtered rate the "
+    "share the filter ended."
+)
+"""The thesis's definition of a crash, as the chapter prints it."""
+
+
+def training_run_numbers(
+    episodes: pd.DataFrame, total_steps: int, bins: int = STUDY_CURVE_BINS
+) -> dict[str, Any]:
+    """Reduce one training run's episode log to the study's per-run measures.
+
+    A *crash* is the thesis's (4.3.3, :data:`CRASH_DEFINITION`): the task terminated the
+    episode before the horizon and the filter did not end it first (``crashed``, as
+    :class:`~thesis_lib.defender.DefenderWrapper` and :func:`train_run` label it); an episode the
+    filter ended is *filtered*.
+
+    Args:
+        episodes: one row per finished training episode with ``return``, ``crashed``,
+            ``filtered`` and ``timestep`` (the environment step at which it ended, 1-based).
+        total_steps: the run's environment steps (the curve's spans are ``total_steps / bins``).
+        bins: spans of the curve.
+
+    Returns:
+        ``episodes``, ``crashes``, ``filtered``; ``crash_rate`` and ``filtered_rate`` (shares of
+        the episodes, 0-1); ``crash_free_rate`` = 1 - ``crash_rate`` (higher is better, for the
+        comparisons); ``crashes_per_1k_steps``; ``return_best`` (the thesis's Acc Reward) and
+        ``return_last`` (mean return of the last span's episodes); and per span ``b``
+        ``crash_rate_b{b}``, ``filtered_rate_b{b}``, ``return_b{b}`` (NaN where no episode
+        ended in the span).
+
+    Raises:
+        ValueError: a column is missing, or ``total_steps`` / ``bins`` is not positive.
+
+    Used in: DEFENDER chapter study (``thesis study 03_defender``).
+    """
+    need = {"return", "crashed", "filtered", "timestep"}
+    if missing := sorted(need - set(episodes.columns)):
+        raise ValueError(f"the episode log lacks {missing}; it has {list(episodes.columns)}")
+    if total_steps < 1 or bins < 1:
+        raise ValueError(f"total_steps and bins must be positive, got {total_steps}, {bins}")
+    ep = episodes
+    n = len(ep)
+    crashed = ep["crashed"].astype(bool).to_numpy()
+    filtered = ep["filtered"].astype(bool).to_numpy()
+    if (crashed & filtered).any():
+        raise ValueError("an episode is both crashed and filtered; a filtered one never crashes")
+    ret = ep["return"].to_numpy(dtype=float)
+    span = np.minimum((ep["timestep"].to_numpy(dtype=float) - 1) * bins // total_steps, bins - 1)
+    out: dict[str, Any] = {
+        "episodes": n,
+        "crashes": int(crashed.sum()),
+        "filtered": int(filtered.sum()),
+        "crash_rate": float(crashed.mean()) if n else np.nan,
+        "filtered_rate": float(filtered.mean()) if n else np.nan,
+    }
+    out["crash_free_rate"] = 1.0 - out["crash_rate"]
+    out["crashes_per_1k_steps"] = 1000.0 * out["crashes"] / total_steps
+    out["return_best"] = float(ret.max()) if n else np.nan
+    last = ret[span == bins - 1]
+    out["return_last"] = float(last.mean()) if len(last) else np.nan
+    for b in range(bins):
+        m = span == b
+        k = int(m.sum())
+        out[f"crash_rate_b{b}"] = float(crashed[m].mean()) if k else np.nan
+        out[f"filtered_rate_b{b}"] = float(filtered[m].mean()) if k else np.nan
+        out[f"return_b{b}"] = float(ret[m].mean()) if k else np.nan
+    return out
+
+
+def _demo_lock(task: str) -> Any:
+    """An exclusive file lock per task, so that two study workers do not both make the same
+    task's demonstrations (the second waits, then reads them from the sweep store)."""
+    import contextlib
+    import fcntl
+
+    @contextlib.contextmanager
+    def lock() -> Any:
+        folder = results_dir(CHAPTER) / "demos"
+        folder.mkdir(parents=True, exist_ok=True)
+        with open(folder / f".{thesis_env_name(task)}.lock", "w") as fh:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(fh, fcntl.LOCK_UN)
+
+    return lock()
+
+
+def study_demonstrations(
+    task: str, recipe: dict[str, Any], n_demos: int, top_up: bool = True
+) -> tuple[DemoSet, dict[str, Any]]:
+    """The demonstrations of one study run: :func:`make_demonstrations` with ``recipe`` (the
+    :data:`DEMO_FIELDS` of a :class:`Config`), then ``n_demos`` diverse ones per group
+    (:func:`demos_subset`); ``top_up=False`` picks them from the SAC roll-outs alone, leaving out
+    what the shipped expert added.
+
+    Returns:
+        ``(demos, info)``; ``info`` holds ``demos_file`` (the :func:`demos_file` name),
+        ``demos_safe`` / ``demos_unsafe`` (kept), ``demos_safe_expert`` /
+        ``demos_unsafe_expert`` (of them, from the expert) and ``sac_rollouts_safe`` /
+        ``sac_rollouts_unsafe`` (the SAC run's roll-outs of each group).
+
+    Raises:
+        RuntimeError: ``top_up=False`` and the SAC run gave no roll-out of a group.
+
+    Used in: DEFENDER chapter study, through :func:`study_run`.
+    """
+    with _demo_lock(task):
+        run = make_demonstrations(Config(**recipe, tasks=[task]), progress=False)[task]
+    seen = {g: run.n_sac.get(g, len(getattr(run.pool, g))) for g in ("safe", "unsafe")}
+    if top_up:
+        demos = demos_subset(run, n_demos)
+    else:
+        if min(seen.values()) == 0:
+            raise RuntimeError(
+                f"{task}: the SAC run gave {seen['safe']} safe and {seen['unsafe']} unsafe "
+                "roll-outs; without the expert top-up DEFENDER has no group to compare with. "
+                "Take the task out of no_topup_tasks."
+            )
+        demos = DemoSet(
+            select_diverse(run.pool.safe[: seen["safe"]], n_demos),
+            select_diverse(run.pool.unsafe[: seen["unsafe"]], n_demos),
+            task,
+        )
+    src = run.sources(demos)
+    info = {
+        "demos_file": demos_file(demos),
+        "demos_safe": len(demos.safe),
+        "demos_unsafe": len(demos.unsafe),
+        "demos_safe_expert": src["safe"][1],
+        "demos_unsafe_expert": src["unsafe"][1],
+        "sac_rollouts_safe": seen["safe"],
+        "sac_rollouts_unsafe": seen["unsafe"],
+    }
+    return demos, info
+
+
+def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One study task: a training run (:func:`train_run`), reduced to one row.
+
+    ``config`` (:func:`study_task` builds it): ``label`` (the method's name in the study),
+    ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``, ``n_demos``,
+    ``top_up``, ``demos`` (the demonstration recipe, :data:`DEMO_FIELDS`; None without a
+    filter), ``train`` (:data:`TRAIN_FIELDS`), ``eval_episodes``, ``bins`` and, for a scale
+    check, ``scale``.
+
+    Returns:
+        One row: ``method`` (the label), ``setting`` (the thesis's task name), ``seed``,
+        ``scale``; the :data:`RUN_COLUMNS` of :func:`train_run` (``acc_reward``, ``crash_pct``,
+        ...: the chapter's tables read them); :func:`training_run_numbers`; the final policy's
+        evaluation **without the filter** over ``eval_episodes`` episodes (``eval_return``,
+        ``eval_return_std``, ``eval_crash_rate``, ``eval_length``); ``eval_score`` and
+        ``best_score`` (``eval_return`` and ``return_best`` in % of the thesis's plain-SAC
+        return on the task, :data:`THESIS_SAC_RETURN`); ``steps``, ``train_wall_s``,
+        ``train_cpu_s``, ``log_speed`` (ln of training steps per CPU-second: higher is
+        cheaper); and where the demonstrations came from (:func:`study_demonstrations`).
+
+    Used in: DEFENDER chapter study (``thesis study 03_defender``).
+    """
+    import time
+
+    import torch
+
+    from thesis_lib.rl import evaluate
+
+    torch.set_num_threads(1)  # small nets: one core per run; the study runs one run per core
+    task, seed = config["task"], int(config["seed"])
+    cfg = Config(**config["train"], tasks=[task])
+    demos: Any = None
+    info: dict[str, Any] = {}
+    if config["strategy"]:
+        demos, info = study_demonstrations(
+            task, config["demos"], int(config["n_demos"]), bool(config["top_up"])
+        )
+    c0 = time.process_time()
+    row, ep, res = _train(
+        task, config["algo"], seed, cfg, demos, config["strategy"], config["trajectory"], False
+    )
+    cpu = time.process_time() - c0
+    steps = int(res.model.num_timesteps)
+    ev = evaluate(
+        res.model,
+        _make_env(task, cfg.max_episode_steps),
+        n_episodes=int(config["eval_episodes"]),
+        seed=EVAL_SEED + seed,
+    )
+    ref = THESIS_SAC_RETURN.get(task, np.nan)
+    numbers = training_run_numbers(ep, steps, int(config["bins"]))
+    out: dict[str, Any] = {
+        "method": config["label"],
+        "setting": thesis_env_name(task),
+        "seed": seed,
+        "scale": config.get("scale", "study"),
+        "top_up": bool(config["top_up"]) if config["strategy"] else None,
+        **row,
+        **numbers,
+        "eval_return": float(ev["return"].mean()),
+        "eval_return_std": float(ev["return"].std(ddof=0)),
+        "eval_crash_rate": float(ev["crashed"].mean()),
+        "eval_length": float(ev["length"].mean()),
+        "eval_score": 100.0 * float(ev["return"].mean()) / ref,
+        "best_score": 100.0 * numbers["return_best"] / ref,
+        "steps": steps,
+        "train_wall_s": float(res.wall_time_s),
+        "train_cpu_s": float(cpu),
+        "log_speed": float(np.log(steps / max(cpu, 1e-9))),
+        **info,
+    }
+    return [out]
+
+
+def study_label(
+    algo: str,
+    strategy: str | None = None,
+    trajectory: str = "state",
+    n_demos: int | None = None,
+    top_up: bool = True,
+) -> str:
+    """A study method's name: ``"SAC"``, ``"SAC+MeanDemoW5/MeanDemoW10"``, with
+    ``" state-action"``, ``" n=10"`` (a count other than the study's ``n_demos``) or
+    ``" no top-up"`` appended.
+
+    >>> study_label("SAC", "MeanBothW5/MeanBothW5", "state_action")
+    'SAC+MeanBothW5/MeanBothW5 state-action'
+    >>> study_label("SAC", "MeanDemoW5/MeanDemoW10", n_demos=10)
+    'SAC+MeanDemoW5/MeanDemoW10 n=10'
+    """
+    if not strategy:
+        return algo
+    label = f"{algo}+{strategy}"
+    if trajectory == "state_action":
+        label += " state-action"
+    if n_demos is not None:
+        label += f" n={n_demos}"
+    if not top_up:
+        label += " no top-up"
+    return label
+
+
+def study_task(
+    cfg: Config,
+    task: str,
+    algo: str,
+    seed: int,
+    strategy: str | None = None,
+    trajectory: str = "state",
+    n_demos: int | None = None,
+    top_up: bool = True,
+) -> Task:
+    """The :class:`~thesis_lib.sweep.Task` of one study run (:func:`study_run`) of ``cfg``.
+
+    Its config holds everything the run depends on: the training fields, and for a filtered
+    run the demonstration recipe (the same for every run of a task: one SAC run, seed
+    ``cfg.seed``, topped up to ``max(n_demos, n_demos_list)`` per group) and the count.
+
+    Used in: DEFENDER chapter study.
+    """
+    n = max(cfg.n_demos, *cfg.n_demos_list)
+    recipe = {f: getattr(cfg, f) for f in DEMO_FIELDS} | {"n_demos": n, "n_demos_list": [n]}
+    count = cfg.n_demos if n_demos is None else n_demos
+    config: dict[str, Any] = {
+        "label": study_label(
+            algo, strategy, trajectory, None if count == cfg.n_demos else count, top_up
+        ),
+        "task": task,
+        "algo": algo,
+        "seed": int(seed),
+        "strategy": strategy,
+        "trajectory": trajectory if strategy else "state",
+        "n_demos": count if strategy else 0,
+        "top_up": bool(top_up) if strategy else True,
+        "demos": recipe if strategy else None,
+        "train": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+        "eval_episodes": cfg.eval_episodes,
+        "bins": STUDY_CURVE_BINS,
+    }
+    return Task(study_run, config)
+
+
+def study_tasks(cfg: Config) -> list[Task]:
+    """The tasks of the chapter's pre-registered study (``params/03_defender.study.yml``).
+
+    For each seed and task: the first of ``algos`` (SAC) plain, with each of
+    ``state_strategies`` (state trajectories) and ``state_action_strategies`` (state-action),
+    all with ``n_demos`` demonstrations per group, and with the first state strategy and each
+    other count of ``n_demos_list`` (Table 4.5); on ``no_topup_tasks`` also with the first
+    state strategy on the SAC roll-outs alone. The other algorithms (TD3) run plain and with
+    the first state strategy, on their ``algo_tasks``. Seeds are the outer loop, so a study
+    stopped part-way has whole seeds.
+
+    Used in: ``thesis study 03_defender``.
+    """
+    main, first = cfg.algos[0], cfg.state_strategies[0] if cfg.state_strategies else None
+    tasks = []
+    for seed in cfg.seeds:
+        for task in cfg.tasks:
+            for algo in cfg.algos:
+                if task not in cfg.algo_tasks.get(algo, cfg.tasks):
+                    continue
+                tasks.append(study_task(cfg, task, algo, seed))
+                if algo != main:
+                    if first:
+                        tasks.append(study_task(cfg, task, algo, seed, first))
+                    continue
+                for s in cfg.state_strategies:
+                    tasks.append(study_task(cfg, task, algo, seed, s))
+                for s in cfg.state_action_strategies:
+                    tasks.append(study_task(cfg, task, algo, seed, s, "state_action"))
+                if first:
+                    for n in cfg.n_demos_list:
+                        if n != cfg.n_demos:
+                            tasks.append(study_task(cfg, task, algo, seed, first, n_demos=n))
+                    if task in cfg.no_topup_tasks:
+                        tasks.append(study_task(cfg, task, algo, seed, first, top_up=False))
+    return tasks
+
+
+def study_summary(rows: pd.DataFrame) -> pd.DataFrame:
+    """Study rows (one per run) as :func:`summarise` output (``time_pct``: wall time in % of
+    the plain agent's on the same task and seed), with the final evaluation and the CPU time
+    (``cpu_s``, ``cpu_pct`` likewise) beside, so that :func:`compare_tables` and :func:`compare_table_4_5` set the thesis's tables beside
+    them. Runs without the expert top-up are left out (they repeat a method's keys).
+
+    Used in: DEFENDER chapter ("Evidence at study scale").
+    """
+    keep = rows[rows["top_up"].fillna(True).astype(bool)] if "top_up" in rows else rows
+    if keep.empty:
+        return summarise(pd.DataFrame(columns=list(RUN_COLUMNS)))
+    out = summarise(keep[list(RUN_COLUMNS)])
+    keys = ["task", "algo", "trajectory", "strategy", "n_demos"]
+    plain = keep[keep.strategy == "none"].set_index(["task", "algo", "seed"])["train_cpu_s"]
+    idx = pd.MultiIndex.from_frame(keep[["task", "algo", "seed"]])
+    keep = keep.assign(cpu_pct=100 * keep["train_cpu_s"].to_numpy() / plain.reindex(idx).to_numpy())
+    ev = keep.groupby(keys, sort=False).agg(
+        eval_return_mean=("eval_return", "mean"),
+        eval_return_std=("eval_return", "std"),
+        eval_crash_rate=("eval_crash_rate", "mean"),
+        cpu_s=("train_cpu_s", "mean"),
+        cpu_pct=("cpu_pct", "mean"),
+    )
+    return out.merge(ev.reset_index(), on=keys, how="left")
+
+
+def study_curves(rows: pd.DataFrame, reps: int = 1000) -> pd.DataFrame:
+    """The per-span curves of the study rows (:func:`training_run_numbers`) in long form: per
+    method, setting and span, the mean over seeds of the crash rate, filtered rate and return,
+    each with a 95% bootstrap interval over seeds.
+
+    Returns:
+        Columns ``method, setting, span, step`` (the span's end, environment steps),
+        ``measure`` (``crash_rate``, ``filtered_rate``, ``return``), ``mean``, ``ci_low``,
+        ``ci_high``, ``seeds``.
+
+    Used in: DEFENDER chapter ("Evidence at study scale").
+    """
+    from thesis_lib.stats import bootstrap_ci
+
+    cols = ["method", "setting", "span", "step", "measure", "mean", "ci_low", "ci_high", "seeds"]
+    spans = sorted(int(c.rsplit("_b", 1)[1]) for c in rows.columns if c.startswith("crash_rate_b"))
+    if rows.empty or not spans:
+        return pd.DataFrame(columns=cols)
+    out = []
+    for (method, setting), g in rows.groupby(["method", "setting"], sort=False):
+        steps = float(g["steps"].mean())
+        for b in spans:
+            for measure in ("crash_rate", "filtered_rate", "return"):
+                v = g[f"{measure}_b{b}"].dropna().to_numpy(dtype=float)
+                if len(v) >= 2:
+                    m, lo, hi = bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps)
+                else:
+                    m, lo, hi = (float(v.mean()) if len(v) else np.nan), np.nan, np.nan
+                out.append(
+                    {
+                        "method": method,
+                        "setting": setting,
+                        "span": b,
+                        "step": steps * (b + 1) / len(spans),
+                        "measure": measure,
+                        "mean": m,
+                        "ci_low": lo,
+                        "ci_high": hi,
+                        "seeds": len(v),
+                    }
+                )
+    return pd.DataFrame(out, columns=cols)
+
+
+def plot_study_curves(
+    rows: pd.DataFrame, methods: Sequence[str] | None = None, reps: int = 1000
+) -> Any:
+    """Crash rate, filtered rate and return over training, one column per setting: each
+    method's mean over seeds per span of training with its 95% interval (shaded).
+
+    Used in: DEFENDER chapter ("Evidence at study scale").
+    """
+    import matplotlib.pyplot as plt
+
+    curves = study_curves(rows, reps=reps)
+    if curves.empty:
+        fig, ax = plt.subplots(figsize=(5, 1.5))
+        ax.text(0.5, 0.5, "no study rows yet", ha="center", va="center")
+        ax.set_axis_off()
+        return fig
+    if methods is not None:
+        curves = curves[curves["method"].isin(methods)]
+    settings = list(dict.fromkeys(curves["setting"]))
+    measures = (
+        ("crash_rate", "crash rate"),
+        ("filtered_rate", "filtered rate"),
+        ("return", "return"),
+    )
+    fig, axes = plt.subplots(
+        len(measures), len(settings), figsize=(4.8 * len(settings), 8.5), squeeze=False
+    )
+    for j, setting in enumerate(settings):
+        for i, (measure, name) in enumerate(measures):
+            ax = axes[i, j]
+            sub = curves[(curves["setting"] == setting) & (curves["measure"] == measure)]
+            for k, (method, g) in enumerate(sub.groupby("method", sort=False)):
+                colour = "black" if "+" not in method else f"C{k % 10}"
+                ax.plot(g["step"], g["mean"], color=colour, label=method, lw=1.5)
+                ax.fill_between(g["step"], g["ci_low"], g["ci_high"], color=colour, alpha=0.15)
+            ax.set_ylabel(f"{name} (per span)")
+            if i == 0:
+                ax.set_title(setting)
+            if i == len(measures) - 1:
+                ax.set_xlabel("environment steps")
+    axes[0, 0].legend(fontsize=6)
+    fig.tight_layout()
+    return fig
+
+
+def study_topup_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """What the expert top-up changes: per setting, the first state strategy with the topped-up
+    demonstrations and on the SAC roll-outs alone, mean over seeds of the crash rate, filtered
+    rate, evaluation return and the demonstrations' sources.
+
+    Used in: DEFENDER chapter ("Evidence at study scale").
+    """
+    cols = [
+        "setting", "method", "seeds", "crash_rate", "filtered_rate", "eval_return",
+        "demos_safe", "demos_safe_expert", "demos_unsafe", "demos_unsafe_expert",
+    ]  # fmt: skip
+    if rows.empty or "top_up" not in rows or not (rows["top_up"] == False).any():  # noqa: E712
+        return pd.DataFrame(columns=cols)
+    off = rows[rows["top_up"] == False]  # noqa: E712
+    pairs = rows[
+        rows["setting"].isin(off["setting"])
+        & rows["strategy"].isin(off["strategy"])
+        & rows["n_demos"].isin(off["n_demos"])
+        & (rows["trajectory"] == "state")
+        & (rows["algo"].isin(off["algo"]))
+    ]
+    g = pairs.groupby(["setting", "method"], sort=False)
+    out = g.agg(
+        seeds=("seed", "nunique"),
+        crash_rate=("crash_rate", "mean"),
+        filtered_rate=("filtered_rate", "mean"),
+        eval_return=("eval_return", "mean"),
+        demos_safe=("demos_safe", "mean"),
+        demos_safe_expert=("demos_safe_expert", "mean"),
+        demos_unsafe=("demos_unsafe", "mean"),
+        demos_unsafe_expert=("demos_unsafe_expert", "mean"),
+    ).reset_index()
+    return out[cols]
+
+
+def study_demo_sources(rows: pd.DataFrame) -> pd.DataFrame:
+    """Per setting and demonstration count: how many of the kept demonstrations came from the
+    SAC run and how many from the shipped expert (the top-up), and how many roll-outs of each
+    group the SAC run gave. Empty before the study ran.
+
+    Used in: DEFENDER chapter ("Evidence at study scale").
+    """
+    cols = [
+        "setting", "n_demos", "top_up", "sac_rollouts_safe", "sac_rollouts_unsafe",
+        "demos_safe", "demos_safe_expert", "demos_unsafe", "demos_unsafe_expert",
+    ]  # fmt: skip
+    if rows.empty or "demos_file" not in rows:
+        return pd.DataFrame(columns=cols)
+    d = rows[rows["demos_file"].notna()]
+    return d[cols].drop_duplicates().sort_values(["setting", "n_demos"]).reset_index(drop=True)
+
+
+STUDY_DATA_NOTE = (
+    "the setting (SB3's SAC v2 and TD3 with 64-64 networks for 30,000 steps per run, not the "
+    "authors' SAC v1 for 5,000 episodes; demonstrations from a 30,000-step SAC run, a group "
+    "with too few roll-outs topped up from the shipped ARS expert)"
+)
+"""What may make the study's answer differ from the thesis's (the readings' last reason)."""

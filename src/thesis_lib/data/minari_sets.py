@@ -24,7 +24,7 @@ AntMaze).
 from __future__ import annotations
 
 import re
-from typing import Any
+from typing import Any, cast
 
 __all__ = [
     "D4RL_REFERENCES",
@@ -237,13 +237,14 @@ def open_dataset(name: str, dataset_size: str = "smoke", n_transitions: int | No
 
     if not is_minari_id(name):
         task, tier = dataset_key(name)
-        return get_dataset(task, tier, dataset_size, n_transitions=n_transitions)
+        return get_dataset(task, tier, cast(Any, dataset_size), n_transitions=n_transitions)
     ds = load(name)
     ref = reference_returns(name, ds.metadata)
     if ref is not None:  # the data card's normalised scores as the evaluation's: D4RL's
         ds.ref_min_score, ds.ref_max_score = ref
     if n_transitions is not None:
-        kept, total = [], 0
+        kept: list[Any] = []
+        total = 0
         for e in ds.episodes:
             if kept and total + len(e) > n_transitions:
                 break

@@ -1,0 +1,299 @@
+"""The DEFENDER study (claims C7-C9): its tasks, its per-run reducer and its parameter file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from thesis_lib.chapters import defender as ex
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _log(rows):
+    return pd.DataFrame(rows, columns=["return", "crashed", "filtered", "timestep"])
+
+
+def test_training_run_numbers_on_a_hand_made_log():
+    # 6 episodes over 100 steps: 2 crashed, 3 filtered, 1 reached the horizon
+    ep = _log(
+        [
+            (10.0, True, False, 20),  # span 0 (steps 1-50)
+            (-1.0, False, True, 35),  # span 0
+            (30.0, True, False, 50),  # span 0 (step 50 is the span's last)
+            (5.0, False, True, 70),  # span 1
+            (7.0, False, True, 90),  # span 1
+            (80.0, False, False, 100),  # span 1
+        ]
+    )
+    got = ex.training_run_numbers(ep, total_steps=100, bins=2)
+    assert (got["episodes"], got["crashes"], got["filtered"]) == (6, 2, 3)
+    assert got["crash_rate"] == pytest.approx(2 / 6)
+    assert got["filtered_rate"] == pytest.approx(3 / 6)
+    assert got["crash_free_rate"] == pytest.approx(4 / 6)
+    assert got["crashes_per_1k_steps"] == pytest.approx(20.0)
+    assert got["return_best"] == 80.0 and got["return_last"] == pytest.approx(92 / 3)
+    assert got["crash_rate_b0"] == pytest.approx(2 / 3) and got["crash_rate_b1"] == 0.0
+    assert got["filtered_rate_b0"] == pytest.approx(1 / 3)
+    assert got["filtered_rate_b1"] == pytest.approx(2 / 3)
+    assert got["return_b0"] == pytest.approx(13.0)
+    # a span where no episode ended is NaN, not 0
+    sparse = ex.training_run_numbers(ep.iloc[:2], total_steps=100, bins=4)
+    assert sparse["crash_rate_b0"] == 1.0 and sparse["filtered_rate_b1"] == 1.0  # steps 26-50
+    assert np.isnan(sparse["crash_rate_b2"]) and np.isnan(sparse["return_b3"])
+
+
+def test_training_run_numbers_errors():
+    with pytest.raises(ValueError, match=r"lacks \['filtered'\]"):
+        ex.training_run_numbers(pd.DataFrame(columns=["return", "crashed", "timestep"]), 10)
+    with pytest.raises(ValueError, match="both crashed and filtered"):
+        ex.training_run_numbers(_log([(0.0, True, True, 5)]), 10)
+    with pytest.raises(ValueError, match="must be positive"):
+        ex.training_run_numbers(_log([]), 0)
+
+
+TINY = dict(
+    tasks=["Hopper-v5", "InvertedDoublePendulum-v5"],
+    seeds=[0, 1],
+    algos=["SAC", "TD3"],
+    algo_tasks={"TD3": ["Hopper-v5"]},
+    state_strategies=["MeanDemoW5/MeanDemoW10", "MeanBothW5/MeanBothW5"],
+    state_action_strategies=["MeanBothW5/MeanBothW5"],
+    n_demos=3,
+    n_demos_list=[2, 3],
+    no_topup_tasks=["InvertedDoublePendulum-v5"],
+    max_episode_steps=20,
+    demo_timesteps=300,
+    train_timesteps=200,
+    net_arch=[16, 16],
+    batch_size=32,
+    eval_episodes=2,
+)
+
+
+def test_study_tasks_grid_keys_and_labels():
+    tasks = ex.study_tasks(ex.Config(**TINY))
+    # per seed: SAC on 2 tasks x (plain, 2 state, 1 state-action, n=2) + IDP no top-up + TD3 x 2
+    assert len(tasks) == 2 * (2 * 5 + 1 + 2)
+    assert len({t.key for t in tasks}) == len(tasks)
+    for t in tasks:
+        assert json.loads(json.dumps(t.config)) == t.config  # JSON-able
+    labels = {t.config["label"] for t in tasks}
+    assert labels == {
+        "SAC",
+        "TD3",
+        "SAC+MeanDemoW5/MeanDemoW10",
+        "SAC+MeanBothW5/MeanBothW5",
+        "SAC+MeanBothW5/MeanBothW5 state-action",
+        "SAC+MeanDemoW5/MeanDemoW10 n=2",
+        "SAC+MeanDemoW5/MeanDemoW10 no top-up",
+        "TD3+MeanDemoW5/MeanDemoW10",
+    }
+    td3 = [t.config for t in tasks if t.config["algo"] == "TD3"]
+    assert {c["task"] for c in td3} == {"Hopper-v5"}
+    plain = next(t.config for t in tasks if t.config["label"] == "SAC")
+    assert plain["demos"] is None and plain["n_demos"] == 0
+    filt = [t.config for t in tasks if t.config["strategy"]]
+    # one demonstration recipe per task: every filtered run of a task shares the SAC run
+    assert len({json.dumps(c["demos"], sort_keys=True) for c in filt}) == 1
+    assert all(c["demos"]["n_demos"] == 3 and c["demos"]["seed"] == 0 for c in filt)
+    assert [t.config["seed"] for t in tasks[:13]] == [0] * 13  # seeds are the outer loop
+
+
+def test_study_config_errors():
+    with pytest.raises(ValueError, match="algo_tasks\\['TD3'\\] lists 'Ant-v5'"):
+        ex.Config(algo_tasks={"TD3": ["Ant-v5"]})
+    with pytest.raises(ValueError, match="algo_tasks names 'DDPG'"):
+        ex.Config(algo_tasks={"DDPG": ["Hopper-v5"]})
+    with pytest.raises(ValueError, match="no_topup_tasks lists 'Ant-v5'"):
+        ex.Config(no_topup_tasks=["Ant-v5"])
+    with pytest.raises(ValueError, match="eval_episodes must be >= 1"):
+        ex.Config(eval_episodes=0)
+
+
+def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    cfg = ex.Config(**{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {}})
+    tasks = {t.config["label"]: t for t in ex.study_tasks(cfg) if t.config["seed"] == 0}
+    plain = ex.study_run(tasks["SAC"].config)[0]
+    filt = ex.study_run(tasks["SAC+MeanDemoW5/MeanDemoW10"].config)[0]
+    for row in (plain, filt):
+        assert (row["setting"], row["seed"], row["scale"]) == ("InvertedDoublePendulum", 0, "study")
+        assert row["crash_rate"] + row["crash_free_rate"] == pytest.approx(1.0)
+        assert row["crash_pct"] == pytest.approx(100 * row["crash_rate"])
+        assert row["steps"] == 200 and row["train_cpu_s"] > 0
+        assert {f"crash_rate_b{b}" for b in range(ex.STUDY_CURVE_BINS)} <= set(row)
+        assert np.isfinite(row["eval_return"]) and 0 <= row["eval_crash_rate"] <= 1
+        assert json.loads(json.dumps(row, default=float)) is not None
+    assert plain["method"] == "SAC" and plain["filtered_rate"] == 0.0
+    assert "demos_file" not in plain
+    assert filt["demos_safe"] == filt["demos_unsafe"] == 3
+    # 300 SAC steps on a 20-step pendulum: no roll-out balanced, so the safe group is the expert's
+    assert filt["sac_rollouts_safe"] == 0 and filt["demos_safe_expert"] == 3
+    with pytest.raises(RuntimeError, match="without the expert top-up"):
+        ex.study_run(tasks["SAC+MeanDemoW5/MeanDemoW10 no top-up"].config)
+    rows = pd.DataFrame([plain, filt])
+    summary = ex.study_summary(rows)
+    assert set(summary.strategy) == {"none", "MeanDemoW5/MeanDemoW10"}
+    assert summary.loc[summary.strategy == "none", "time_pct"].iloc[0] == pytest.approx(100.0)
+    curves = ex.study_curves(rows, reps=50)
+    assert set(curves.measure) == {"crash_rate", "filtered_rate", "return"}
+    assert curves.groupby("method").span.nunique().tolist() == [ex.STUDY_CURVE_BINS] * 2
+
+
+def test_study_file_parses_and_names_methods_study_tasks_makes(monkeypatch):
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study = st.load_study("03_defender")
+    cfg = st.study_config(study)
+    tasks = ex.study_tasks(cfg)
+    labels = {t.config["label"] for t in tasks}
+    settings = {ex.thesis_env_name(t) for t in cfg.tasks}
+    for c in study.comparisons:
+        assert c["x"] in labels and c["y"] in labels, c
+        assert set(c.get("settings") or settings) <= settings, c
+    assert {c["claim"] for c in study.comparisons} == {"C7", "C8", "C9"}
+    seeds = {t.config["seed"] for t in tasks}
+    assert len(seeds) >= 5
+    check = st.study_config(study, "check")
+    assert check.train_timesteps > cfg.train_timesteps
+    # the scale check's filtered runs use the study's demonstrations (same recipe, same SAC run)
+    recipe = {json.dumps(t.config["demos"], sort_keys=True) for t in tasks if t.config["demos"]}
+    check_recipe = {
+        json.dumps(t.config["demos"], sort_keys=True)
+        for t in ex.study_tasks(check)
+        if t.config["demos"]
+    }
+    assert check_recipe <= recipe
+
+
+def test_study_section_renders_before_the_study_ran(monkeypatch, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from thesis_lib.book import evidence as evi
+
+    (tmp_path / "_toc.yml").write_text("root: intro\n")
+    (tmp_path / "params").mkdir()
+    text = (REPO / "params" / "03_defender.study.yml").read_text()
+    (tmp_path / "params" / "03_defender.study.yml").write_text(text)
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    ev = evi.load_evidence("03_defender", reps=100)
+    assert "not run yet" in evi.status_line(ev) and ev.rows.empty
+    assert set(evi.comparisons_table(ev).verdict) == {"pending"}
+    assert ex.study_summary(ev.rows).empty and ex.study_curves(ev.rows).empty
+    assert ex.study_topup_table(ev.rows).empty and ex.study_demo_sources(ev.rows).empty
+    ex.plot_study_curves(ev.rows)
+    evi.plot_per_setting(ev)
+    evi.plot_comparisons(ev)
+    assert set(evi.claim_readings(ev).ours) == {"pending"}
+
+
+def _fake_row(config: dict, rng: np.random.Generator) -> dict:
+    """The row :func:`study_run` would give for ``config``, without training: the filter cuts
+    crashes, more demonstrations cut more, state-action trajectories crash more."""
+    label, filt = config["label"], bool(config["strategy"])
+    crash = 0.9 if not filt else 0.2 + (0.1 if "state-action" in label else 0.0)
+    crash += {"n=10": 0.1, "n=20": 0.05}.get(label.rsplit(" ", 1)[-1], 0.0)
+    crash = float(np.clip(crash + rng.normal(0, 0.02), 0, 1))
+    n_ep = 100
+    k = int(round(crash * n_ep))
+    log = pd.DataFrame(
+        {
+            "return": rng.normal(300, 30, n_ep),
+            "crashed": [i < k for i in range(n_ep)],
+            "filtered": [filt and i >= k for i in range(n_ep)],
+            "timestep": np.linspace(300, 30_000, n_ep).astype(int),
+        }
+    )
+    numbers = ex.training_run_numbers(log, 30_000)
+    strategy = config["strategy"]
+    safe_s, unsafe_s = strategy.split("/") if strategy else (None, None)
+    row = {
+        "method": label,
+        "setting": ex.thesis_env_name(config["task"]),
+        "seed": config["seed"],
+        "scale": config.get("scale", "study"),
+        "top_up": config["top_up"] if filt else None,
+        "task": config["task"],
+        "algo": config["algo"],
+        "trajectory": config["trajectory"] if filt else "none",
+        "strategy": strategy or "none",
+        "safe_strategy": safe_s,
+        "unsafe_strategy": unsafe_s,
+        "n_demos": config["n_demos"],
+        "paper_compat": False,
+        "acc_reward": numbers["return_best"],
+        "crash_pct": 100 * numbers["crash_rate"],
+        "filtered_pct": 100 * numbers["filtered_rate"],
+        "mean_last_100": numbers["return_last"],
+        "n_episodes": n_ep,
+        "wall_time_s": 200.0 if filt else 180.0,
+        **numbers,
+        "eval_return": float(rng.normal(500, 50)),
+        "eval_crash_rate": 1.0,
+        "eval_score": float(rng.normal(15, 2)),
+        "best_score": float(rng.normal(20, 2)),
+        "steps": 30_000,
+        "train_cpu_s": 190.0 if filt else 170.0,
+        "log_speed": float(np.log(30_000 / (190.0 if filt else 170.0)) + rng.normal(0, 0.01)),
+    }
+    if filt:
+        safe_expert = 50 if config["top_up"] else 0
+        row |= {
+            "demos_file": f"{row['setting']}-x.npz",
+            "demos_safe": min(config["n_demos"], 50 if config["top_up"] else 5),
+            "demos_unsafe": config["n_demos"],
+            "demos_safe_expert": min(config["n_demos"], safe_expert),
+            "demos_unsafe_expert": 0,
+            "sac_rollouts_safe": 5,
+            "sac_rollouts_unsafe": 180,
+        }
+    return row
+
+
+def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch):
+    """Rows shaped as study_run makes them, for every task of the study file: every
+    pre-registered comparison computes, and the chapter's tables and curves read them."""
+    from thesis_lib.book import study as st
+    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study = st.load_study("03_defender")
+    rng = np.random.default_rng(0)
+    rows = pd.DataFrame([_fake_row(t.config, rng) for t in ex.study_tasks(st.study_config(study))])
+    res = evaluate_comparisons(rows, study.comparisons, metric=study.metric, reps=200)
+    assert len(res) == len(study.comparisons) and res.verdict.notna().all()
+    c7 = res[(res.claim == "C7") & (res.metric == "crash_free_rate")].iloc[0]
+    assert c7.effect == pytest.approx(0.7, abs=0.03) and c7.verdict == "holds"
+    assert set(claim_verdicts(res).claim) == {"C7", "C8", "C9"}
+    summary = ex.study_summary(rows)
+    sac = summary[(summary.algo == "SAC") & (summary.strategy == "none")]
+    assert len(sac) == 3 and (sac.time_pct == 100).all()
+    filt = summary[(summary.strategy != "none") & (summary.algo == "SAC")]
+    assert filt.time_pct.round(6).eq(round(100 * 200 / 180, 6)).all()
+    assert filt.cpu_pct.round(6).eq(round(100 * 190 / 170, 6)).all()
+    t434 = ex.compare_tables(summary, differs={"scale": "test"})
+    ran = t434[t434["what differs"] != "not run"]
+    assert {"SAC", "TD3"} <= set(ran.algorithm) and set(ran.table) == {"4.3", "4.4"}
+    t45 = ex.compare_table_4_5(
+        summary[
+            (summary.algo == "SAC")
+            & (summary.strategy == "MeanDemoW5/MeanDemoW10")
+            & (summary.trajectory == "state")
+        ]
+    )
+    assert sorted(t45.dropna(subset=["ours"]).n_demos_ours.astype(int).unique()) == [10, 20, 50]
+    topup = ex.study_topup_table(rows)
+    assert set(topup.setting) == {"Walker2d"} and len(topup) == 2
+    assert topup.set_index("method").loc["SAC+MeanDemoW5/MeanDemoW10 no top-up", "demos_safe"] == 5
+    sources = ex.study_demo_sources(rows)
+    assert set(sources.n_demos) == {10, 20, 50}
+    curves = ex.study_curves(rows, reps=50)
+    sac_crash = curves[(curves.method == "SAC") & (curves.measure == "crash_rate")]
+    assert (sac_crash.seeds == 5).all() and (sac_crash.ci_low <= sac_crash["mean"]).all()
