@@ -230,3 +230,19 @@ def test_decision_mamba_table_5_5_rows_from_minari_ids(minari_root):
     got = {(r.task, r.dataset, r.method, r.desired_return): r.paper for _, r in ran.iterrows()}
     assert got[("Antmaze", "umaze", "DT", "max")] == 0.92
     assert got[("Antmaze", "umaze", "DM_without_R", "none")] == 0.95
+
+
+def test_the_default_extra_seed_and_compat_sets_follow_datasets():
+    from thesis_lib.chapters import hdt
+
+    # `thesis run 04_hdt -p datasets '["D4RL/door/human-v2"]'` alone: the defaults step aside
+    cfg = hdt.Config(datasets=["D4RL/door/human-v2"])
+    assert cfg.extra_seed_datasets == [] and cfg.compat_dataset is None
+    cfg = hdt.Config(datasets=["maze2d-umaze/expert", "hopper/expert"])
+    assert cfg.extra_seed_datasets == ["maze2d-umaze/expert"] and cfg.compat_dataset is None
+    assert hdt.Config().compat_dataset == "hopper/medium"  # the smoke defaults are unchanged
+    # what a user names must be in `datasets`
+    with pytest.raises(ValueError, match="extra_seed_datasets entry 'hopper/medium'"):
+        hdt.Config(datasets=["hopper/expert"], extra_seed_datasets=["hopper/medium"])
+    with pytest.raises(ValueError, match="compat_dataset 'walker2d/medium' is not in datasets"):
+        hdt.Config(datasets=["hopper/medium"], compat_dataset="walker2d/medium")

@@ -85,6 +85,10 @@ def split_dataset(name: str) -> tuple[str, str]:
     return dataset_key(name)
 
 
+_EXTRA_SEED_DEFAULT = ("hopper/medium", "maze2d-umaze/expert")
+_COMPAT_DEFAULT = "hopper/medium"
+
+
 @dataclass
 class Config:
     """Every setting of the HDT chapter (thesis 5.2.5); the notebook's parameters.
@@ -117,13 +121,13 @@ class Config:
     """Seeds run on every data set (model init, batches, dropout, evaluation episodes)."""
     extra_seeds: list[int] = field(default_factory=lambda: [1])
     """More seeds, run only on ``extra_seed_datasets`` (the smoke scale: a second seed on a subset)."""
-    extra_seed_datasets: list[str] = field(
-        default_factory=lambda: ["hopper/medium", "maze2d-umaze/expert"]
-    )
-    """The ``task/tier`` pairs that also run ``extra_seeds``."""
-    compat_dataset: str | None = "hopper/medium"
+    extra_seed_datasets: list[str] = field(default_factory=lambda: list(_EXTRA_SEED_DEFAULT))
+    """The ``task/tier`` pairs that also run ``extra_seeds`` (each must be in ``datasets``;
+    the default keeps those of its two that are)."""
+    compat_dataset: str | None = _COMPAT_DEFAULT
     """``task/tier`` where ``compat_methods`` also run with ``paper_compat=True`` (the authors'
-    behaviours) to measure the difference; ``None``: skip."""
+    behaviours) to measure the difference; ``None``: skip (the default, hopper/medium, is
+    skipped when ``datasets`` leaves it out)."""
     compat_methods: list[str] = field(default_factory=lambda: ["DT", "HDT"])
     """Methods of the ``paper_compat`` measurement."""
     iterations: int = 100
@@ -184,6 +188,17 @@ class Config:
             setattr(self, name, list(value))
         if not self.datasets:
             raise ValueError("Expect at least one data set in `datasets`, e.g. ['hopper/medium'].")
+        # the defaults follow `datasets` (e.g. -p datasets '["D4RL/door/human-v2"]' alone);
+        # a list or data set the user names must be in `datasets`
+        if self.extra_seed_datasets == list(_EXTRA_SEED_DEFAULT):
+            self.extra_seed_datasets = [d for d in _EXTRA_SEED_DEFAULT if d in self.datasets]
+        if self.compat_dataset == _COMPAT_DEFAULT and _COMPAT_DEFAULT not in self.datasets:
+            self.compat_dataset = None
+        if self.compat_dataset and self.compat_dataset not in self.datasets:
+            raise ValueError(
+                f"compat_dataset '{self.compat_dataset}' is not in datasets "
+                f"({', '.join(self.datasets)}); name one of them, or none (compat_dataset=None)."
+            )
         for d in (
             self.datasets
             + self.extra_seed_datasets
