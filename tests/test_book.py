@@ -205,3 +205,22 @@ def test_api_reference_lists_every_package():
     missing = sorted(set(packages) - set(listed))
     assert not missing, f"add to the api-packages list in book/api.md: {', '.join(missing)}"
     assert len(listed) == len(set(listed))
+
+
+def test_a_table_and_a_figure_may_not_share_a_name(tmp_path, monkeypatch):
+    # both would be glued as <chapter>/<name>, which the book's strict build rejects
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from thesis_lib.book import ChapterResults
+
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    res = ChapterResults("demo")
+    res.table("scores", pd.DataFrame({"x": [1]}))
+    res.table("scores", pd.DataFrame({"x": [2]}))  # rewriting one's own table is fine
+    fig, _ = plt.subplots()
+    with pytest.raises(ValueError, match="'scores' is already a table of demo"):
+        res.figure("scores", fig)
+    res.figure("scores_plot", fig)

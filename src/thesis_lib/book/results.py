@@ -146,12 +146,25 @@ class ChapterResults:
         self.seed = seed
         self.dir = results_dir(chapter)
         self.artifacts: list[str] = []
+        self._names: dict[str, str] = {}  # glue key -> kind: the book allows one of each key
         self._t0 = time.perf_counter()
+
+    def _claim(self, name: str, kind: str) -> None:
+        """Reserve ``name`` for one artifact: a table and a figure of one name would be glued
+        under one key, which the book's strict build rejects (and a rerun of the same cell
+        rewrites its own artifact, which is fine)."""
+        other = self._names.setdefault(name, kind)
+        if other != kind:
+            raise ValueError(
+                f"'{name}' is already a {other} of {self.chapter}; give the {kind} another name "
+                f"(e.g. '{name}_{'plot' if kind == 'figure' else 'table'}')"
+            )
 
     def table(self, name: str, df: pd.DataFrame, *, index: bool = False, glue: bool = True) -> Path:
         """Write ``df`` to ``<name>.csv`` and glue it as ``<chapter>/<name>``."""
         if not isinstance(df, pd.DataFrame):
             raise TypeError(f"table '{name}' must be a pandas DataFrame, got {type(df).__name__}")
+        self._claim(name, "table")
         path = self.dir / f"{name}.csv"
         df.to_csv(path, index=index)
         self._record(path.name)
@@ -161,6 +174,7 @@ class ChapterResults:
 
     def figure(self, name: str, fig: Any, *, dpi: int = 120, glue: bool = True) -> Path:
         """Save a matplotlib figure to ``<name>.png`` and glue it as ``<chapter>/<name>``."""
+        self._claim(name, "figure")
         path = self.dir / f"{name}.png"
         fig.savefig(path, dpi=dpi, bbox_inches="tight")
         self._record(path.name)
