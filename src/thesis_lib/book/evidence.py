@@ -78,6 +78,9 @@ def load_evidence(chapter: str, reps: int = 10_000) -> Evidence:
 
     study = st.load_study(chapter)
     rows = st.study_rows(study)
+    if len(rows):  # the grid's order (settings, seeds, methods as registered), not the files'
+        order = {t.key: i for i, t in enumerate(st.study_tasks(study))}
+        rows = rows.sort_values("task_key", key=lambda k: k.map(order), kind="stable")
     info_p = st.studies_dir(chapter) / "run.json"
     info = json.loads(info_p.read_text()) if info_p.exists() else {}
     scale = rows["scale"].fillna("study") if "scale" in rows else pd.Series("study", rows.index)
@@ -156,9 +159,11 @@ def plot_per_setting(
     metric: str | None = None,
     methods: list[str] | None = None,
     ncols: int = 3,
+    secondary: bool = True,
 ) -> Any:
     """Dot-and-interval plot: one panel per setting, each method's mean and 95% interval over
-    seeds (the secondary metric, when the study names one, as an open circle)."""
+    seeds (the secondary metric, when the study names one, as an open circle on the same axis;
+    ``secondary=False`` where its units differ from the primary's)."""
     import matplotlib.pyplot as plt
 
     metric = metric or ev.study.metric
@@ -179,7 +184,7 @@ def plot_per_setting(
     )
     # the secondary metric is the primary's counterpart: drawn beside the primary only
     primary = metric == ev.study.metric
-    sec = f"{ev.study.secondary} (mean)" if ev.study.secondary and primary else None
+    sec = f"{ev.study.secondary} (mean)" if ev.study.secondary and primary and secondary else None
     for ax, s in zip(axes.flat, settings):
         t = table[table[c["setting"]] == s].set_index(c["method"]).reindex(methods)
         y = np.arange(len(methods))[::-1]
@@ -343,6 +348,7 @@ def claim_readings(
     ev: Evidence,
     data_note: str = "the data (our data sets are made here, not the thesis's)",
     reps: int = 10_000,
+    secondary: bool = True,
 ) -> pd.DataFrame:
     """Per claim of the study: our verdict, the verdict on the thesis's metric, whether the
     scale check kept the ranking, and one sentence that says where we differ from the thesis
@@ -353,6 +359,9 @@ def claim_readings(
         data_note: the chapter's own difference in data or setting, named as a reason
             (e.g. ``"the data (simulated demonstrations, not the real arm's)"``).
         reps: bootstrap replications of the secondary-metric comparisons.
+        secondary: judge the comparisons on the study's secondary metric too, with the same
+            margins; set ``False`` where the secondary metric has other units than the
+            primary (UR3: the share of test starts reaching all five goals).
     """
     from thesis_lib.stats.claims import CLAIMS, claim_verdicts
 
@@ -367,7 +376,7 @@ def claim_readings(
             }
         )
     ours = claim_verdicts(ev.comparisons).set_index("claim")
-    sec = secondary_comparisons(ev, reps)
+    sec = secondary_comparisons(ev, reps) if secondary else pd.DataFrame()
     theirs = claim_verdicts(sec).set_index("claim") if len(sec) else pd.DataFrame()
     check = scale_check_table(ev)
     same_rank = (
