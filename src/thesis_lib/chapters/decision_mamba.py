@@ -1006,6 +1006,18 @@ def format_table_5_5(
     return wide[[c for c in cols if c in wide.columns]]
 
 
+#: The Config fields a C6 timing task carries (its config, so its key).
+_TIMING_FIELDS = (
+    "timing_arch",
+    "timing_batch_size",
+    "timing_train_iters",
+    "timing_infer_steps",
+    "timing_infer_episodes",
+    "dataset_size",
+    "n_transitions",
+)
+
+
 def study_tasks(cfg: Config) -> list[Any]:
     """The tasks of the chapter's pre-registered study (``params/05_decision_mamba.study.yml``).
 
@@ -1024,18 +1036,7 @@ def study_tasks(cfg: Config) -> list[Any]:
     tasks = [
         study_task(cfg, m, d, s, arch) for d in cfg.datasets for s in cfg.seeds for m in cfg.methods
     ]
-    timing = {
-        k: getattr(cfg, k)
-        for k in (
-            "timing_arch",
-            "timing_batch_size",
-            "timing_train_iters",
-            "timing_infer_steps",
-            "timing_infer_episodes",
-            "dataset_size",
-            "n_transitions",
-        )
-    }
+    timing = {k: getattr(cfg, k) for k in _TIMING_FIELDS}
     tasks += [
         Task(timing_task, {"method": m, "dataset": d, "seed": s, **timing})
         for d in cfg.timing_datasets
@@ -1062,18 +1063,7 @@ def timing_task(config: dict[str, Any]) -> list[dict[str, Any]]:
         methods=[config["method"]],
         seed=int(config["seed"]),
         timing_datasets=[config["dataset"]],
-        **{
-            k: config[k]
-            for k in (
-                "timing_arch",
-                "timing_batch_size",
-                "timing_train_iters",
-                "timing_infer_steps",
-                "timing_infer_episodes",
-                "dataset_size",
-                "n_transitions",
-            )
-        },
+        **{k: config[k] for k in _TIMING_FIELDS},
     )
     t = run_table_5_6(cfg)
     ms = {
