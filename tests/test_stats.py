@@ -106,3 +106,22 @@ def test_incomplete_grid_and_bad_scores_are_errors():
         stats.compare(rows, "BC", "DT", "score")
     with pytest.raises(ValueError, match="NaN"):
         stats.probability_of_improvement(np.array([[np.nan]]), np.array([[1.0]]))
+
+
+def test_performance_profile_counts_runs_above_each_threshold():
+    share, lo, hi = stats.performance_profile(
+        np.array([[1.0, 10.0], [2.0, 20.0]]), [0.0, 1.5, 15.0, 30.0], reps=500
+    )
+    # 4 scores: above 0: all; above 1.5: 2, 10, 20; above 15: 20; above 30: none
+    assert share.tolist() == [1.0, 0.75, 0.25, 0.0]
+    assert lo[0] == hi[0] == 1.0 and lo[-1] == hi[-1] == 0.0
+    assert np.all(lo <= share) and np.all(share <= hi)
+
+
+def test_aggregate_interval_matches_bootstrap_ci_and_rejects_unknown_aggregates():
+    m = np.array([[1.0, 5.0], [2.0, 6.0], [3.0, 9.0]])
+    assert stats.aggregate_interval(m, "mean", reps=300) == stats.bootstrap_ci(
+        stats.mean, m, reps=300
+    )
+    with pytest.raises(ValueError, match="aggregate must be"):
+        stats.aggregate_interval(m, "max")

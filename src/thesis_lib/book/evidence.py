@@ -9,6 +9,9 @@ trains or evaluates a model, and the book build never reruns a study.
 * :func:`status_line`: what has run, at which commit, at what cost;
 * :func:`per_setting_table`, :func:`plot_per_setting`: each method's mean per setting with a
   95% bootstrap interval over seeds (the dot-and-interval plot), the secondary metric beside;
+* :func:`aggregate_table`, :func:`plot_performance_profiles`: each method's aggregate (IQM
+  and mean) over every setting with stratified intervals, and rliable's run-score
+  distributions;
 * :func:`comparisons_table`, :func:`plot_comparisons`: the claims' comparisons (effect, 95%
   stratified interval, P(X > Y), verdict), or why they are pending;
 * :func:`scale_check_table`: the scale check's level and ranking at both scales;
@@ -32,11 +35,13 @@ import pandas as pd
 
 __all__ = [
     "Evidence",
+    "aggregate_table",
     "claim_readings",
     "comparisons_table",
     "load_evidence",
     "per_setting_table",
     "plot_comparisons",
+    "plot_performance_profiles",
     "plot_per_setting",
     "scale_check_table",
     "secondary_comparisons",
@@ -203,6 +208,91 @@ def plot_per_setting(
         axes.flat[0].legend(fontsize=7, loc="best")
     fig.tight_layout()
     return fig
+
+
+def _complete_methods(ev: Evidence, metric: str, settings: list[str] | None) -> dict[str, Any]:
+    """Per method, its ``(seeds, settings)`` matrix over ``settings`` (default: every setting
+    the method ran), once the study is complete (``{}`` before: like the verdicts, the
+    aggregates wait for the full grid)."""
+    from thesis_lib.stats import score_matrix
+
+    c = ev.study.columns
+    if not ev.complete or metric not in ev.rows or c["method"] not in ev.rows:
+        return {}
+    df = ev.rows[ev.rows[metric].notna()]
+    out = {}
+    for m, g in df.groupby(c["method"], sort=False):
+        own = settings or list(dict.fromkeys(g[c["setting"]]))
+        try:
+            out[str(m)] = score_matrix(
+                df, str(m), metric, own, c["method"], c["setting"], c["seed"]
+            )[0]
+        except ValueError:  # an incomplete grid (study in progress) or a missing setting
+            continue
+    return out
+
+
+def aggregate_table(
+    ev: Evidence,
+    metric: str | None = None,
+    settings: list[str] | None = None,
+    reps: int = 2000,
+) -> pd.DataFrame:
+    """Per method, over ``settings`` (default: all the method ran): the IQM and the mean of
+    every (seed, setting) score, each with its 95% interval from a bootstrap stratified over
+    settings (rliable's aggregate estimates). Empty until the study is complete."""
+    from thesis_lib.stats import aggregate_interval
+
+    metric = metric or ev.study.metric
+    cols = ["method", "settings", "runs", "iqm", "iqm_low", "iqm_high"]
+    cols += ["mean", "mean_low", "mean_high"]
+    out = []
+    for m, mat in _complete_methods(ev, metric, settings).items():
+        r: dict[str, Any] = {"method": m, "settings": mat.shape[1], "runs": mat.size}
+        for agg in ("iqm", "mean"):
+            p, lo, hi = aggregate_interval(mat, agg, reps=reps)
+            r |= {agg: p, f"{agg}_low": lo, f"{agg}_high": hi}
+        out.append(r)
+    return pd.DataFrame(out, columns=cols)
+
+
+def plot_performance_profiles(
+    ev: Evidence,
+    metric: str | None = None,
+    settings: list[str] | None = None,
+    methods: list[str] | None = None,
+    n_taus: int = 101,
+    reps: int = 1000,
+    ax: Any = None,
+) -> Any:
+    """rliable's run-score distributions: per method, the share of (seed, setting) runs that
+    score above ``tau``, against ``tau``, with a 95% stratified bootstrap band. A curve that
+    lies above another everywhere dominates it stochastically."""
+    import matplotlib.pyplot as plt
+
+    from thesis_lib.stats import performance_profile
+
+    metric = metric or ev.study.metric
+    mats = _complete_methods(ev, metric, settings)
+    if methods:
+        mats = {m: mats[m] for m in methods if m in mats}
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 3.5))
+    if not mats:
+        ax.text(0.5, 0.5, status_line(ev), ha="center", va="center", wrap=True, fontsize=8)
+        ax.set_axis_off()
+        return ax.figure
+    allv = np.concatenate([m.ravel() for m in mats.values()])
+    taus = np.linspace(allv.min(), allv.max(), n_taus)
+    for i, (m, mat) in enumerate(mats.items()):
+        share, lo, hi = performance_profile(mat, taus, reps=reps)
+        ax.plot(taus, share, color=f"C{i}", label=f"{m} ({mat.shape[1]} settings)")
+        ax.fill_between(taus, lo, hi, color=f"C{i}", alpha=0.2, lw=0)
+    ax.set_xlabel(f"{metric} threshold tau")
+    ax.set_ylabel("share of runs with score > tau")
+    ax.legend(fontsize=7)
+    ax.figure.tight_layout()
+    return ax.figure
 
 
 def comparisons_table(ev: Evidence) -> pd.DataFrame:

@@ -107,6 +107,51 @@ def bootstrap_ci(
     return point, float(lo), float(hi)
 
 
+def performance_profile(
+    scores: np.ndarray | Sequence[float],
+    taus: np.ndarray | Sequence[float],
+    reps: int = 2000,
+    alpha: float = 0.05,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """rliable's run-score distribution (its "performance profile"): for each threshold
+    ``tau``, the share of all (run, setting) scores above ``tau``, with a stratified
+    bootstrap percentile interval.
+
+    Returns ``(share, low, high)``, each of ``len(taus)``.
+
+    >>> share, lo, hi = performance_profile([[1.0], [2.0], [3.0], [4.0]], [0.0, 2.5, 5.0])
+    >>> share.tolist()
+    [1.0, 0.5, 0.0]
+    """
+    m = _matrix(scores)
+    t = np.asarray(taus, dtype=float).ravel()
+
+    def profile(a: np.ndarray) -> np.ndarray:  # (..., runs, settings) -> (..., taus)
+        return (a[..., None] > t).mean(axis=(-3, -2))
+
+    boots = profile(_resample(m, np.random.default_rng(seed), reps))
+    lo, hi = np.percentile(boots, [100 * alpha / 2, 100 * (1 - alpha / 2)], axis=0)
+    return profile(m), lo, hi
+
+
+def aggregate_interval(
+    scores: np.ndarray | Sequence[float],
+    aggregate: str = "iqm",
+    reps: int = 2000,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """``(point, low, high)``: one method's aggregate score over all (run, setting) scores
+    with its 95% stratified bootstrap interval (rliable's ``get_interval_estimates``).
+
+    >>> aggregate_interval([[1.0], [2.0], [3.0], [4.0]], "mean", reps=100)[0]
+    2.5
+    """
+    if aggregate not in AGGREGATES:
+        raise ValueError(f"aggregate must be one of {sorted(AGGREGATES)}, got {aggregate!r}")
+    return bootstrap_ci(AGGREGATES[aggregate], _matrix(scores), reps=reps, seed=seed)
+
+
 def verdict(ci_low: float, ci_high: float, claim: Claim = "superior", margin: float = 0.0) -> str:
     """The verdict of CLAIMS.md for an effect ``X - Y`` with interval ``[ci_low, ci_high]``.
 
@@ -267,10 +312,12 @@ __all__ = [
     "AGGREGATES",
     "VERDICTS",
     "Comparison",
+    "aggregate_interval",
     "bootstrap_ci",
     "compare",
     "iqm",
     "mean",
+    "performance_profile",
     "probability_of_improvement",
     "score_matrix",
     "verdict",
