@@ -36,6 +36,7 @@ def test_study_file_parses_and_builds_its_grid(monkeypatch):
     # the stage and RL tasks need the TCN-style encoders: those train first
     first = by_fn["study_alignment_task"][: 3 * n]
     assert {c["encoder"] for c in first} == {"tcn"}
+    assert [c["method"] for c in first[:3]] == ["clfd", "tcn", "cmc"]
     # every comparison names methods and settings the task functions label their rows with
     labels = {("CLfD", "PickPlace Resnet18"), ("CLfD", "PickPlace TCN")}
     labels |= {(m, s) for m in ("TCN", "CMC") for _, s in labels}

@@ -9,6 +9,10 @@ Fig 4.4) runs through :func:`thesis_lib.sweep.run_tasks`: one task per trained e
 under ``results/02_clfd/models``, so an interrupted chapter resumes and an encoder needed by
 several tables is trained once.
 
+The chapter's pre-registered study (``params/02_clfd.study.yml``, claims C10-C12) is built by
+:func:`study_tasks` from the same functions: :func:`study_alignment_task` (Table 4.1),
+:func:`study_stage_task` (Table 4.2) and :func:`study_rl_task` (Fig 4.4), one row per run.
+
 Used in: chapter 02_clfd.
 """
 
@@ -512,6 +516,8 @@ def stage_accuracy(
     test whether what was learnt on one view transfers to another).
 
     Returns ``accuracy_pct``, ``train_accuracy_pct``, ``n_train``, ``n_test``.
+
+    Used in: CLfD chapter (Table 4.2) and its study (C11).
     """
     xtr, ytr = _features(model, data["train"], train_cameras)
     xte, yte = _features(model, data["test"], test_cameras)
@@ -554,6 +560,8 @@ def rl_episodes(cfg: Config, model: CLfD) -> pd.DataFrame:
 
     The guiding demonstration is a fresh one (not in the data set of ``cfg.seed``), as in the
     thesis.
+
+    Used in: CLfD chapter (Fig 4.4) and its study (C12).
     """
     from thesis_lib.clfd.rl import train_embedding_agent
 
@@ -716,8 +724,12 @@ def describe_numbers(t41: pd.DataFrame, compat: pd.DataFrame, t42: pd.DataFrame)
 
 
 # -- the pre-registered study (params/02_clfd.study.yml: claims C10-C12) -------------------------
-#: Config fields the RL runs depend on besides :data:`TRAIN_FIELDS`.
-RL_FIELDS = ("rl_encoder", "rl_episodes", "rl_steps", "rl_camera", "rl_her", "mlp_epochs")
+#: Config fields a study's stage classification depends on besides :data:`TRAIN_FIELDS`.
+STAGE_FIELDS = ("rl_encoder", "mlp_epochs")
+#: Config fields a study's RL run depends on besides :data:`TRAIN_FIELDS`.
+RL_FIELDS = (
+    "rl_encoder", "rl_episodes", "rl_steps", "rl_camera", "rl_her", "rl_success_m", "rl_checkpoints",
+)  # fmt: skip
 #: How the study labels the untrained encoder (the controls of C11 and C12).
 UNTRAINED = "untrained"
 #: Stage classification protocols of the study (C11): name -> (MLP trained on, tested on).
@@ -749,26 +761,28 @@ def study_tasks(cfg: Config) -> list[Task]:
 
     Encoders are trained once, through the chapter's encoder store (:func:`trained_encoder`),
     and shared by the three claims: the alignment tasks of ``cfg.rl_encoder``'s backbone come
-    first, so that with two workers the stage and RL tasks find their encoders trained.
+    first (CLfD first for each seed), so that with two workers the stage and RL tasks find
+    their encoders trained.
 
     Used in: ``thesis study 02_clfd`` (C10-C12).
     """
     seeded = [replace(cfg, seed=s) for s in cfg.seeds]
     backbones = sorted(cfg.encoders, key=lambda e: e != cfg.rl_encoder)
+    methods = sorted(cfg.methods, key=lambda m: m != "clfd")  # the stage tasks' encoder first
     tasks = [
         _study_task(study_alignment_task, c, TRAIN_FIELDS, encoder=enc, method=m)
         for enc in backbones
         for c in seeded
-        for m in cfg.methods
+        for m in methods
     ]
     kinds = ["clfd"] + ([UNTRAINED] if cfg.study_controls else [])
     tasks += [
-        _study_task(study_stage_task, c, TRAIN_FIELDS + RL_FIELDS, features=k)
+        _study_task(study_stage_task, c, TRAIN_FIELDS + STAGE_FIELDS, features=k)
         for c in seeded
         for k in kinds
     ]
     rl = list(cfg.rl_methods) + ([UNTRAINED] if cfg.study_controls and cfg.rl_methods else [])
-    fields = TRAIN_FIELDS + RL_FIELDS + ("rl_success_m", "rl_checkpoints")
+    fields = TRAIN_FIELDS + RL_FIELDS
     tasks += [_study_task(study_rl_task, c, fields, method=m) for c in seeded for m in rl]
     return tasks
 
@@ -793,7 +807,9 @@ def study_alignment_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     (the primary metric, higher is better: x - y is how many points lower x's error is),
     ``val_best_pct`` (the lowest validation error, how the thesis reports) and its negation
     ``neg_val_alignment_error`` (the secondary metric), ``test_seen_unseen_pct`` (a seen camera
-    against an unseen one) and ``final_loss``.
+    against an unseen one) and ``final_loss``. The encoder is trained (or read back) through the
+    chapter's encoder store (:func:`trained_encoder`), where the stage and RL tasks of the same
+    seed find it.
 
     Used in: ``thesis study 02_clfd`` (C10).
     """
@@ -1010,7 +1026,10 @@ def study_rl_curves(rows: pd.DataFrame) -> pd.DataFrame:
 
 def plot_study_rl_curves(curves: pd.DataFrame):
     """Fig 4.4 at study scale: success rate against training episodes per encoder, the mean
-    over seeds with its 95% interval shaded."""
+    over seeds with its 95% interval shaded (:func:`study_rl_curves`).
+
+    Used in: CLfD chapter ("Evidence at study scale").
+    """
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.5, 3.6))
