@@ -221,7 +221,7 @@ def test_study_section_renders_before_the_study_ran(monkeypatch, tmp_path):
     t41, t42 = ex.study_tables_vs_thesis(ev.rows, {"scale": "test"})
     assert (t41["what differs"] == "not run").all() and len(t41) == 12
     assert (t42["what differs"] == "not run").all() and len(t42) == 3
-    for metric in (None, "stage_accuracy", "success_final"):
+    for metric in (None, "stage_accuracy", "success_final", "success_mean"):
         evi.plot_per_setting(ev, metric)
         evi.plot_comparisons(ev, metric)
     assert set(evi.claim_readings(ev).ours) == {"pending"}
