@@ -9,12 +9,16 @@ Fig 4.4) runs through :func:`thesis_lib.sweep.run_tasks`: one task per trained e
 under ``results/02_clfd/models``, so an interrupted chapter resumes and an encoder needed by
 several tables is trained once.
 
+The chapter's pre-registered study (``params/02_clfd.study.yml``, claims C10-C12) is built by
+:func:`study_tasks` from the same functions: :func:`study_alignment_task` (Table 4.1),
+:func:`study_stage_task` (Table 4.2) and :func:`study_rl_task` (Fig 4.4), one row per run.
+
 Used in: chapter 02_clfd.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -105,6 +109,15 @@ class Config:
     """Torch device for the encoders ("cpu", "cuda" or "auto")."""
     progress: bool = False
     """Show progress bars."""
+    seeds: list[int] = field(default_factory=lambda: [0])
+    """Seeds of the pre-registered study (``thesis study 02_clfd``); each renders its own data set
+    and guiding demonstration and trains its own encoders and agents (the chapter runs ``seed``)."""
+    rl_success_m: float = 0.03
+    """Study: an RL episode succeeds when it ends with the grasp point this close to the box centre (m)."""
+    rl_checkpoints: int = 10
+    """Study: the RL success curve cuts the training episodes into this many equal windows."""
+    study_controls: bool = True
+    """Study: also run an untrained encoder (same backbone) through stage classification and RL."""
 
     def __post_init__(self) -> None:
         for e in [*self.encoders, *self.compat_encoders, self.rl_encoder]:
@@ -124,6 +137,13 @@ class Config:
             raise ValueError(
                 "A camera cannot be both seen and unseen: "
                 f"{sorted(set(self.seen_cameras) & set(self.unseen_cameras))}."
+            )
+        if not self.seeds or len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"seeds must be distinct and not empty, got {self.seeds}.")
+        if self.rl_success_m <= 0 or self.rl_checkpoints < 1:
+            raise ValueError(
+                f"Need rl_success_m > 0 and rl_checkpoints >= 1; got {self.rl_success_m}, "
+                f"{self.rl_checkpoints}."
             )
         if self.n_demos < 3 or self.epochs < 1 or self.image_size < 16:
             raise ValueError(
@@ -264,17 +284,35 @@ def train_encoders(cfg: Config, tasks: list[Task], desc: str) -> pd.DataFrame:
     return rows.merge(keys, on="task_key", how="left")
 
 
-def trained_encoder(cfg: Config, encoder: str, method: str, paper_compat: bool = False) -> CLfD:
+def trained_encoder(
+    cfg: Config,
+    encoder: str,
+    method: str,
+    paper_compat: bool = False,
+    executor: str | None = None,
+) -> CLfD:
     """The encoder of one task, trained (or read back) through the sweep store."""
+    return _trained_encoder_rows(cfg, encoder, method, paper_compat, executor)[0]
+
+
+def _trained_encoder_rows(
+    cfg: Config,
+    encoder: str,
+    method: str,
+    paper_compat: bool = False,
+    executor: str | None = None,
+) -> tuple[CLfD, pd.DataFrame]:
+    """:func:`trained_encoder` and the rows of its task (:func:`train_encoder_task`)."""
     task = encoder_task(cfg, encoder, method, paper_compat)
     path = model_path(dict(task.config))
     store = results_dir(CHAPTER) / "tasks"
-    rows = run_tasks([task], store=store, desc="encoder", progress=False)
+    kw = {"desc": "encoder", "progress": False, "executor": executor}
+    rows = run_tasks([task], store=store, **kw)
     if not path.is_file():  # a stored result whose weights were deleted: train again
-        rows = run_tasks([task], store=store, desc="encoder", force=True, progress=False)
+        rows = run_tasks([task], store=store, force=True, **kw)
     model = build_model(cfg, encoder, method, paper_compat).load(path)
     model.history = rows[["epoch", "loss", "val_alignment_error"]].reset_index(drop=True)
-    return model
+    return model, rows
 
 
 def chapter_encoder(cfg: Config) -> CLfD:
@@ -459,21 +497,38 @@ def run_table_4_2(cfg: Config) -> pd.DataFrame:
     for name, cams in sets.items():
         if not cams:
             continue
-        xtr, ytr = _features(model, data["train"], cams)
-        xte, yte = _features(model, data["test"], cams)
-        itr, ite = balanced_indices(ytr, rng), balanced_indices(yte, rng, per_class=100)
-        mlp = train_stage_classifier(xtr[itr], ytr[itr], epochs=cfg.mlp_epochs, seed=cfg.seed)
-        rows.append(
-            {
-                "viewpoints": name,
-                "accuracy_pct": classifier_accuracy(mlp, xte[ite], yte[ite]),
-                "train_accuracy_pct": classifier_accuracy(mlp, xtr[itr], ytr[itr]),
-                "n_train": len(itr),
-                "n_test": len(ite),
-                "cameras": ", ".join(cams),
-            }
-        )
+        acc = stage_accuracy(cfg, model, data, cams, cams, rng)
+        rows.append({"viewpoints": name, **acc, "cameras": ", ".join(cams)})
     return pd.DataFrame(rows)
+
+
+def stage_accuracy(
+    cfg: Config,
+    model: CLfD,
+    data: dict[str, MultiViewVideos],
+    train_cameras: list[str],
+    test_cameras: list[str],
+    rng: np.random.Generator,
+) -> dict[str, float]:
+    """One stage classification (Table 4.2): the MLP trained on balanced frames of the training
+    demonstrations from ``train_cameras``, tested on 100 frames per class of the test
+    demonstrations from ``test_cameras`` (the thesis: the same cameras for both; other cameras
+    test whether what was learnt on one view transfers to another).
+
+    Returns ``accuracy_pct``, ``train_accuracy_pct``, ``n_train``, ``n_test``.
+
+    Used in: CLfD chapter (Table 4.2) and its study (C11).
+    """
+    xtr, ytr = _features(model, data["train"], train_cameras)
+    xte, yte = _features(model, data["test"], test_cameras)
+    itr, ite = balanced_indices(ytr, rng), balanced_indices(yte, rng, per_class=100)
+    mlp = train_stage_classifier(xtr[itr], ytr[itr], epochs=cfg.mlp_epochs, seed=cfg.seed)
+    return {
+        "accuracy_pct": classifier_accuracy(mlp, xte[ite], yte[ite]),
+        "train_accuracy_pct": classifier_accuracy(mlp, xtr[itr], ytr[itr]),
+        "n_train": len(itr),
+        "n_test": len(ite),
+    }
 
 
 def compare_table_4_2(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
@@ -488,29 +543,41 @@ def run_fig_4_4(cfg: Config) -> pd.DataFrame:
 
     The guiding demonstration is a fresh one (not in the data set), as in the thesis.
     """
-    from thesis_lib.clfd.rl import train_embedding_agent
-
-    demo_seed = cfg.seed * 100_000 + 99_999  # outside the data set's seeds
     out = []
     for m in cfg.rl_methods:
         in_table = cfg.rl_encoder in cfg.encoders and m in cfg.methods
         model = trained_encoder(
             cfg, cfg.rl_encoder, m, in_table and cfg.paper_compat and m == "clfd"
         )
-        ep = train_embedding_agent(
-            model,
-            demo_seed,
-            episodes=cfg.rl_episodes,
-            stage="pick",
-            camera=cfg.rl_camera,
-            image_size=cfg.image_size,
-            max_episode_steps=cfg.rl_steps,
-            her=cfg.rl_her,
-            seed=cfg.seed,
-            progress=cfg.progress,
-        )
-        out.append(ep.assign(encoder=METHOD_LABELS[m]))
+        out.append(rl_episodes(cfg, model).assign(encoder=METHOD_LABELS[m]))
     return pd.concat(out, ignore_index=True)
+
+
+def rl_episodes(cfg: Config, model: CLfD) -> pd.DataFrame:
+    """DDPG (+HER) on the pick stage with ``model``'s features and Eq 4.2 reward, as
+    ``cfg`` says (Fig 4.4); one row per training episode
+    (:func:`thesis_lib.clfd.rl.train_embedding_agent`).
+
+    The guiding demonstration is a fresh one (not in the data set of ``cfg.seed``), as in the
+    thesis.
+
+    Used in: CLfD chapter (Fig 4.4) and its study (C12).
+    """
+    from thesis_lib.clfd.rl import train_embedding_agent
+
+    demo_seed = cfg.seed * 100_000 + 99_999  # outside the data set's seeds
+    return train_embedding_agent(
+        model,
+        demo_seed,
+        episodes=cfg.rl_episodes,
+        stage="pick",
+        camera=cfg.rl_camera,
+        image_size=cfg.image_size,
+        max_episode_steps=cfg.rl_steps,
+        her=cfg.rl_her,
+        seed=cfg.seed,
+        progress=cfg.progress,
+    )
 
 
 # -- figures ---------------------------------------------------------------------------------------
@@ -654,3 +721,331 @@ def describe_numbers(t41: pd.DataFrame, compat: pd.DataFrame, t42: pd.DataFrame)
     acc = t42.set_index("viewpoints")["accuracy_pct"].round(1).to_dict()
     lines.append(f"stage accuracy (%): {acc}")
     return lines
+
+
+# -- the pre-registered study (params/02_clfd.study.yml: claims C10-C12) -------------------------
+#: Config fields a study's stage classification depends on besides :data:`TRAIN_FIELDS`.
+STAGE_FIELDS = ("rl_encoder", "mlp_epochs")
+#: Config fields a study's RL run depends on besides :data:`TRAIN_FIELDS`.
+RL_FIELDS = (
+    "rl_encoder", "rl_episodes", "rl_steps", "rl_camera", "rl_her", "rl_success_m", "rl_checkpoints",
+)  # fmt: skip
+#: How the study labels the untrained encoder (the controls of C11 and C12).
+UNTRAINED = "untrained"
+#: Stage classification protocols of the study (C11): name -> (MLP trained on, tested on).
+STAGE_PROTOCOLS = ("Seen", "Unseen", "Seen + Unseen", "Seen->Unseen")
+#: C12's final success rate is measured over this last share of the training episodes.
+RL_FINAL_SHARE = 0.2
+
+
+def _study_config(config: dict[str, Any]) -> Config:
+    import torch
+
+    torch.set_num_threads(1)  # small models: one core per task
+    return Config(**config["cfg"])
+
+
+def _study_task(fn: Any, cfg: Config, fields: tuple[str, ...], **config: Any) -> Task:
+    return Task(fn, {**config, "cfg": {f: getattr(cfg, f) for f in fields}})
+
+
+def study_tasks(cfg: Config) -> list[Task]:
+    """The tasks of the chapter's pre-registered study (``params/02_clfd.study.yml``), for every
+    seed of ``cfg.seeds``:
+
+    * C10 (:func:`study_alignment_task`): every encoder x method of Table 4.1;
+    * C11 (:func:`study_stage_task`): stage classification from the CLfD encoder on
+      ``cfg.rl_encoder``'s backbone (and from an untrained one, with ``study_controls``);
+    * C12 (:func:`study_rl_task`): DDPG+HER on the pick stage with each of ``cfg.rl_methods``'
+      encoders (and the untrained one).
+
+    Encoders are trained once, through the chapter's encoder store (:func:`trained_encoder`),
+    and shared by the three claims: the alignment tasks of ``cfg.rl_encoder``'s backbone come
+    first (CLfD first for each seed), so that with two workers the stage and RL tasks find
+    their encoders trained.
+
+    Used in: ``thesis study 02_clfd`` (C10-C12).
+    """
+    seeded = [replace(cfg, seed=s) for s in cfg.seeds]
+    backbones = sorted(cfg.encoders, key=lambda e: e != cfg.rl_encoder)
+    methods = sorted(cfg.methods, key=lambda m: m != "clfd")  # the stage tasks' encoder first
+    tasks = [
+        _study_task(study_alignment_task, c, TRAIN_FIELDS, encoder=enc, method=m)
+        for enc in backbones
+        for c in seeded
+        for m in methods
+    ]
+    kinds = ["clfd"] + ([UNTRAINED] if cfg.study_controls else [])
+    tasks += [
+        _study_task(study_stage_task, c, TRAIN_FIELDS + STAGE_FIELDS, features=k)
+        for c in seeded
+        for k in kinds
+    ]
+    rl = list(cfg.rl_methods) + ([UNTRAINED] if cfg.study_controls and cfg.rl_methods else [])
+    fields = TRAIN_FIELDS + RL_FIELDS
+    tasks += [_study_task(study_rl_task, c, fields, method=m) for c in seeded for m in rl]
+    return tasks
+
+
+def _study_row(config: dict[str, Any], cfg: Config, claim: str, **row: Any) -> dict[str, Any]:
+    return {
+        "claim": claim,
+        **row,
+        "seed": cfg.seed,
+        "scale": config.get("scale", "study"),
+        "n_demos": cfg.n_demos,
+        "epochs": cfg.epochs,
+    }
+
+
+def study_alignment_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One C10 study task: one encoder x method trained on one seed's data set (Table 4.1).
+
+    Returns one row: ``method`` (CLfD, TCN, CMC), ``setting`` ("PickPlace <encoder>", as Table 4.1),
+    ``seed``, ``scale``, ``alignment_error_pct`` (test split, pairs of seen cameras, at the best
+    validation checkpoint; lower is better), ``neg_alignment_error`` = -alignment_error_pct
+    (the primary metric, higher is better: x - y is how many points lower x's error is),
+    ``val_best_pct`` (the lowest validation error, how the thesis reports) and its negation
+    ``neg_val_alignment_error`` (the secondary metric), ``test_seen_unseen_pct`` (a seen camera
+    against an unseen one) and ``final_loss``. The encoder is trained (or read back) through the
+    chapter's encoder store (:func:`trained_encoder`), where the stage and RL tasks of the same
+    seed find it.
+
+    Used in: ``thesis study 02_clfd`` (C10).
+    """
+    cfg = _study_config(config)
+    enc, m = config["encoder"], config["method"]
+    _, rows = _trained_encoder_rows(cfg, enc, m, executor="inprocess")
+    first = rows.iloc[0]
+    return [
+        _study_row(
+            config,
+            cfg,
+            "C10",
+            method=METHOD_LABELS[m],
+            setting=f"PickPlace {ENCODER_LABELS[enc]}",
+            encoder=ENCODER_LABELS[enc],
+            alignment_error_pct=float(first["alignment_error_pct"]),
+            neg_alignment_error=-float(first["alignment_error_pct"]),
+            val_best_pct=float(first["val_best_pct"]),
+            neg_val_alignment_error=-float(first["val_best_pct"]),
+            test_seen_unseen_pct=float(first["test_seen_unseen_pct"]),
+            final_loss=float(rows["loss"].iloc[-1]),
+        )
+    ]
+
+
+def _study_encoder(cfg: Config, kind: str) -> CLfD:
+    """The study's encoder on ``cfg.rl_encoder``'s backbone trained with method ``kind``, or
+    an untrained one (``kind == UNTRAINED``, seeded by ``cfg.seed``)."""
+    if kind == UNTRAINED:
+        return build_model(cfg, cfg.rl_encoder, "clfd")
+    return trained_encoder(cfg, cfg.rl_encoder, kind, executor="inprocess")
+
+
+def study_stage_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One C11 study task: stage classification (Table 4.2) from one seed's CLfD encoder on
+    the ``rl_encoder`` backbone (``features: clfd``) or from an untrained one (the control).
+
+    Returns one row per MLP (:data:`STAGE_PROTOCOLS`): ``method`` = the viewpoints ("Seen",
+    "Unseen", "Seen + Unseen" as the thesis: the MLP trained and tested on those cameras;
+    "Seen->Unseen": trained on the seen cameras, tested on the unseen ones, the stricter test
+    of viewpoint invariance), ``setting`` ("stage (<features> <backbone> encoder)"), ``seed``,
+    ``scale``, ``stage_accuracy`` (% of 200 balanced test frames, higher is better),
+    ``train_accuracy``.
+
+    Used in: ``thesis study 02_clfd`` (C11).
+    """
+    cfg = _study_config(config)
+    kind = config["features"]
+    model, data = _study_encoder(cfg, kind), load_data(cfg)
+    rng = np.random.default_rng(cfg.seed)
+    seen, unseen = cfg.seen_cameras, cfg.unseen_cameras
+    cams = {
+        "Seen": (seen, seen),
+        "Unseen": (unseen, unseen),
+        "Seen + Unseen": (seen + unseen, seen + unseen),
+        "Seen->Unseen": (seen, unseen),
+    }
+    label = "CLfD" if kind == "clfd" else UNTRAINED
+    rows = []
+    for name in STAGE_PROTOCOLS:
+        acc = stage_accuracy(cfg, model, data, *cams[name], rng)
+        rows.append(
+            _study_row(
+                config,
+                cfg,
+                "C11",
+                method=name,
+                setting=f"stage ({label} {ENCODER_LABELS[cfg.rl_encoder]} encoder)",
+                encoder=ENCODER_LABELS[cfg.rl_encoder],
+                features=label,
+                stage_accuracy=acc["accuracy_pct"],
+                train_accuracy=acc["train_accuracy_pct"],
+                n_test=acc["n_test"],
+            )
+        )
+    return rows
+
+
+def rl_success_curve(
+    episodes: pd.DataFrame, checkpoints: int, success_m: float
+) -> dict[str, float]:
+    """The share of successful training episodes in ``checkpoints`` equal windows of the run.
+
+    An episode succeeds when it ends with the grasp point within ``success_m`` of the box
+    centre (``final_grip_box_distance``; the pick stage's goal is the grasp). Returns
+    ``success_ep<k>``: the share among the episodes of the window that ends at episode k.
+
+    >>> ep = pd.DataFrame({"final_grip_box_distance": [0.2, 0.1, 0.02, 0.01]})
+    >>> rl_success_curve(ep, 2, 0.03)
+    {'success_ep2': 0.0, 'success_ep4': 1.0}
+    """
+    n = len(episodes)
+    if n < checkpoints:
+        raise ValueError(f"{n} episodes cannot fill {checkpoints} checkpoints.")
+    ok = episodes["final_grip_box_distance"].to_numpy(dtype=float) < success_m
+    ends = np.linspace(0, n, checkpoints + 1).round().astype(int)
+    return {f"success_ep{b}": float(ok[a:b].mean()) for a, b in zip(ends[:-1], ends[1:])}
+
+
+def study_rl_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One C12 study task: DDPG+HER on the pick stage with the features and Eq 4.2 reward of
+    one seed's encoder (``method``: its training method on the ``rl_encoder`` backbone, or
+    ``untrained``), guided by that seed's fresh demonstration (Fig 4.4).
+
+    Returns one row: ``method`` (CLfD, TCN, CMC, untrained), ``setting`` ("RL pick (<backbone>
+    encoder)"), ``seed``, ``scale``, ``success_final`` (the share of the last
+    :data:`RL_FINAL_SHARE` of the training episodes that end with the grasp point within
+    ``rl_success_m`` of the box centre; higher is better), ``success_mean`` (the share over all
+    episodes: the area under the learning curve), ``success_best`` (the best window of the
+    curve), ``success_ep<k>`` (the curve, :func:`rl_success_curve`), and over the same last episodes ``final_distance_m`` (mean final
+    gripper-box distance), ``lifted_final`` (share that lifted the box), ``return_final`` (mean
+    Eq 4.2 return) and ``expert_return`` (the guiding demonstration's).
+
+    Used in: ``thesis study 02_clfd`` (C12).
+    """
+    cfg = _study_config(config)
+    m = config["method"]
+    ep = rl_episodes(cfg, _study_encoder(cfg, m))
+    curve = rl_success_curve(ep, cfg.rl_checkpoints, cfg.rl_success_m)
+    last = ep.iloc[-max(1, int(np.ceil(RL_FINAL_SHARE * len(ep)))) :]
+    return [
+        _study_row(
+            config,
+            cfg,
+            "C12",
+            method=METHOD_LABELS.get(m, m),
+            setting=f"RL pick ({ENCODER_LABELS[cfg.rl_encoder]} encoder)",
+            encoder=ENCODER_LABELS[cfg.rl_encoder],
+            episodes=len(ep),
+            success_final=float(
+                (last["final_grip_box_distance"].to_numpy(dtype=float) < cfg.rl_success_m).mean()
+            ),
+            success_mean=float((ep["final_grip_box_distance"] < cfg.rl_success_m).mean()),
+            success_best=max(curve.values()),
+            **curve,
+            final_distance_m=float(last["final_grip_box_distance"].mean()),
+            lifted_final=float(last["box_lifted"].astype(float).mean()),
+            return_final=float(last["return"].mean()),
+            expert_return=float(ep["expert_return"].iloc[0]),
+        )
+    ]
+
+
+def _mean_ci(values: Any, reps: int = 2000) -> tuple[float, float, float]:
+    from thesis_lib.stats import bootstrap_ci
+
+    v = np.asarray(values, dtype=float)
+    if len(v) < 2:
+        return (float(v.mean()) if len(v) else np.nan), np.nan, np.nan
+    return bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps, seed=0)
+
+
+def study_tables_vs_thesis(
+    rows: pd.DataFrame, differs: dict[str, str]
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The study's rows as Tables 4.1 and 4.2, beside the thesis's numbers.
+
+    Table 4.1: per encoder x method, the mean test alignment error over seeds (``ours``) with
+    its 95% bootstrap interval, the number of seeds and the mean of the lowest validation
+    error (the thesis's way); the Pouring rows say ``not run``. Table 4.2: per viewpoint set,
+    the mean stage accuracy of the CLfD encoder's MLPs, the same way (the ``Seen->Unseen``
+    transfer and the untrained encoder have no thesis value).
+
+    Used in: CLfD chapter ("Evidence at study scale").
+    """
+    cols41 = ["dataset", "encoder", "method", "alignment_error_pct", "ci_low", "ci_high"]
+    t41 = pd.DataFrame(columns=[*cols41, "seeds", "val_best_pct"])
+    t42 = pd.DataFrame(columns=["viewpoints", "accuracy_pct", "ci_low", "ci_high", "seeds"])
+    if "claim" in rows:
+        out = []
+        for (enc, m), g in rows[rows["claim"] == "C10"].groupby(["encoder", "method"], sort=False):
+            mean, lo, hi = _mean_ci(g["alignment_error_pct"])
+            out.append(
+                ["PickPlace", enc, m, mean, lo, hi, g["seed"].nunique(), g["val_best_pct"].mean()]
+            )
+        t41 = pd.DataFrame(out, columns=t41.columns) if out else t41
+        c11 = rows[rows["claim"] == "C11"]
+        c11 = c11[c11["features"] == "CLfD"] if "features" in c11 else c11.iloc[:0]
+        out = []
+        for v, g in c11.groupby("method", sort=False):
+            mean, lo, hi = _mean_ci(g["stage_accuracy"])
+            out.append([v, mean, lo, hi, g["seed"].nunique()])
+        t42 = pd.DataFrame(out, columns=t42.columns) if out else t42
+    extra41 = ["dataset", "encoder", "method", "ci_low", "ci_high", "seeds", "val_best_pct"]
+    cmp41 = compare_table_4_1(t41.assign(method=t41["method"].astype(str)), differs)
+    cmp41 = cmp41.merge(t41[extra41], on=["dataset", "encoder", "method"], how="left")
+    cmp42 = compare_table_4_2(t42, differs).merge(
+        t42[["viewpoints", "ci_low", "ci_high", "seeds"]], on="viewpoints", how="left"
+    )
+    return cmp41, cmp42
+
+
+def study_rl_curves(rows: pd.DataFrame) -> pd.DataFrame:
+    """The C12 success curves: per method and checkpoint episode, the mean share of successful
+    training episodes over seeds with its 95% bootstrap interval.
+
+    Used in: CLfD chapter ("Evidence at study scale").
+    """
+    cols = ["method", "episode", "success", "ci_low", "ci_high", "seeds"]
+    if "claim" not in rows:
+        return pd.DataFrame(columns=cols)
+    c12 = rows[rows["claim"] == "C12"]
+    curve = sorted(
+        (int(c.removeprefix("success_ep")), c) for c in c12.columns if c.startswith("success_ep")
+    )
+    out = []
+    for m, g in c12.groupby("method", sort=False):
+        for episode, col in curve:
+            v = g[col].dropna()
+            if len(v):
+                out.append([m, episode, *_mean_ci(v), g.loc[v.index, "seed"].nunique()])
+    return pd.DataFrame(out, columns=cols)
+
+
+def plot_study_rl_curves(curves: pd.DataFrame):
+    """Fig 4.4 at study scale: success rate against training episodes per encoder, the mean
+    over seeds with its 95% interval shaded (:func:`study_rl_curves`).
+
+    Used in: CLfD chapter ("Evidence at study scale").
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 3.6))
+    if curves.empty:
+        ax.text(0.5, 0.5, "no study rows yet", ha="center", va="center")
+        ax.set_axis_off()
+        return fig
+    for m, g in curves.groupby("method", sort=False):
+        (line,) = ax.plot(g["episode"], g["success"], marker="o", label=f"{m} (n={g.seeds.max()})")
+        ax.fill_between(g["episode"], g["ci_low"], g["ci_high"], color=line.get_color(), alpha=0.2)
+    ax.set(
+        xlabel="training episode (end of window)",
+        ylabel="share of episodes ending at the box",
+        title="pick stage, DDPG+HER (study)",
+        ylim=(-0.03, 1.03),
+    )
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig

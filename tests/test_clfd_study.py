@@ -1,0 +1,238 @@
+"""The CLfD chapter's pre-registered study (claims C10-C12): its file, grid, tasks and section."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from thesis_lib.chapters import clfd as ex
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_study_file_parses_and_builds_its_grid(monkeypatch):
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study = st.load_study("02_clfd")
+    assert study.study == "clfd-c10c12-v1" and study.metric == "neg_alignment_error"
+    cfg = st.study_config(study)
+    assert cfg.n_demos == 150 and len(cfg.seeds) >= 5
+    tasks = ex.study_tasks(cfg)
+    by_fn: dict[str, list] = {}
+    for t in tasks:
+        by_fn.setdefault(t.fn.__name__, []).append(t.config)
+    n = len(cfg.seeds)
+    assert len(by_fn["study_alignment_task"]) == 2 * 3 * n  # encoders x methods x seeds
+    assert len(by_fn["study_stage_task"]) == 2 * n  # CLfD and untrained features
+    assert len(by_fn["study_rl_task"]) == 4 * n  # CLfD, CMC, TCN, untrained
+    assert len(tasks) == 12 * n and len({t.key for t in tasks}) == len(tasks)
+    for fn, configs in by_fn.items():
+        assert {c["cfg"]["seed"] for c in configs} == set(cfg.seeds), fn
+    # the stage and RL tasks need the TCN-style encoders: those train first
+    first = by_fn["study_alignment_task"][: 3 * n]
+    assert {c["encoder"] for c in first} == {"tcn"}
+    assert [c["method"] for c in first[:3]] == ["clfd", "tcn", "cmc"]
+    # every comparison names methods and settings the task functions label their rows with
+    labels = {("CLfD", "PickPlace Resnet18"), ("CLfD", "PickPlace TCN")}
+    labels |= {(m, s) for m in ("TCN", "CMC") for _, s in labels}
+    labels |= {
+        (p, f"stage ({f} TCN encoder)") for p in ex.STAGE_PROTOCOLS for f in ("CLfD", "untrained")
+    }
+    labels |= {(m, "RL pick (TCN encoder)") for m in ("CLfD", "TCN", "CMC", "untrained")}
+    methods, settings = {m for m, _ in labels}, {s for _, s in labels}
+    for c in study.comparisons:
+        assert c["x"] in methods and c["y"] in methods, c
+        assert set(c.get("settings") or []) <= settings, c
+    assert {c["claim"] for c in study.comparisons} == {"C10", "C11", "C12"}
+    check = st.study_config(study, "check")
+    assert check.epochs == 2 * cfg.epochs and check.encoders == ["tcn"]
+    check_tasks = ex.study_tasks(check)
+    assert {t.fn.__name__ for t in check_tasks} == {"study_alignment_task", "study_stage_task"}
+    assert len(st.study_tasks(study)) == len(tasks) + len(check_tasks)
+
+
+def test_config_rejects_bad_study_fields():
+    with pytest.raises(ValueError, match="seeds"):
+        ex.Config(seeds=[0, 0])
+    with pytest.raises(ValueError, match="rl_checkpoints"):
+        ex.Config(rl_checkpoints=0)
+
+
+def test_rl_success_curve_on_a_hand_made_run():
+    ep = pd.DataFrame({"final_grip_box_distance": [0.5, 0.2, 0.02, 0.1, 0.01, 0.029]})
+    assert ex.rl_success_curve(ep, 3, 0.03) == {
+        "success_ep2": 0.0,
+        "success_ep4": 0.5,
+        "success_ep6": 1.0,
+    }
+    with pytest.raises(ValueError, match="checkpoints"):
+        ex.rl_success_curve(ep, 7, 0.03)
+
+
+TINY = dict(
+    n_demos=3,
+    image_size=16,
+    encoders=["tcn"],
+    methods=["clfd", "tcn"],
+    epochs=1,
+    eval_every=1,
+    tcn_width=4,
+    mlp_epochs=5,
+    rl_methods=["clfd"],
+    rl_episodes=4,
+    rl_steps=3,
+    rl_checkpoints=2,
+    rl_success_m=10.0,  # every episode ends within 10 m of the box: success 1 by hand
+    seeds=[3],
+)
+
+
+def test_study_tasks_give_one_row_per_run_with_finite_numbers(tmp_path, monkeypatch):
+    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
+    tasks = ex.study_tasks(ex.Config(**TINY))
+    assert len(tasks) == 2 + 2 + 2  # alignment x2, stage x2 (CLfD, untrained), RL x2
+    rows = [r for t in tasks for r in t.fn(dict(t.config))]
+    df = pd.DataFrame(rows)
+    assert not df.duplicated(["method", "setting", "seed"]).any()
+    assert set(df.seed) == {3} and set(df.scale) == {"study"}
+    c10 = df[df.claim == "C10"]
+    assert list(c10.method) == ["CLfD", "TCN"] and set(c10.setting) == {"PickPlace TCN"}
+    assert c10.alignment_error_pct.between(0, 100).all()
+    # the higher-is-better forms are the errors negated
+    assert (c10.neg_alignment_error == -c10.alignment_error_pct).all()
+    assert (c10.neg_val_alignment_error == -c10.val_best_pct).all()
+    c11 = df[df.claim == "C11"]
+    assert list(c11.method) == list(ex.STAGE_PROTOCOLS) * 2
+    assert set(c11.features) == {"CLfD", "untrained"}
+    assert c11.stage_accuracy.between(0, 100).all()
+    c12 = df[df.claim == "C12"].set_index("method")
+    assert list(c12.index) == ["CLfD", "untrained"]
+    assert (c12.episodes == 4).all() and (c12.success_final == 1.0).all()
+    assert {"success_ep2", "success_ep4"} <= set(c12.columns)
+    numeric = df.select_dtypes("number")
+    for col in ["alignment_error_pct", "stage_accuracy", "success_final", "final_distance_m"]:
+        assert all(math.isfinite(v) for v in numeric[col].dropna()), col
+    # the encoders were trained once and shared: two encoder tasks in the chapter's store
+    store = tmp_path / "results" / "02_clfd" / "tasks"
+    assert len(list(store.glob("*.json"))) == 2
+
+
+def _fake_rows(tasks: list, rng: np.random.Generator) -> pd.DataFrame:
+    """Rows shaped as the study's task functions make them, without training: CLfD aligns
+    better than TCN and CMC, stage accuracy is the same on every camera set, and only the CLfD
+    agent learns."""
+    rows = []
+    for t in tasks:
+        c, seed = t.config, t.config["cfg"]["seed"]
+        base = {"seed": seed, "scale": c.get("scale", "study")}
+        if t.fn is ex.study_alignment_task:
+            ae = {"clfd": 8.0, "cmc": 12.0, "tcn": 15.0}[c["method"]] + rng.normal(0, 0.5)
+            enc = ex.ENCODER_LABELS[c["encoder"]]
+            rows.append(
+                base
+                | {
+                    "claim": "C10",
+                    "method": ex.METHOD_LABELS[c["method"]],
+                    "setting": f"PickPlace {enc}",
+                    "encoder": enc,
+                    "alignment_error_pct": ae,
+                    "neg_alignment_error": -ae,
+                    "val_best_pct": ae - 1,
+                    "neg_val_alignment_error": 1 - ae,
+                }
+            )
+        elif t.fn is ex.study_stage_task:
+            label = "CLfD" if c["features"] == "clfd" else "untrained"
+            for p in ex.STAGE_PROTOCOLS:
+                rows.append(
+                    base
+                    | {
+                        "claim": "C11",
+                        "method": p,
+                        "setting": f"stage ({label} TCN encoder)",
+                        "features": label,
+                        "stage_accuracy": 95.0 + rng.normal(0, 0.5),
+                    }
+                )
+        else:
+            ok = 0.8 if c["method"] == "clfd" else 0.05
+            curve = {f"success_ep{k}": ok * k / 800 for k in range(80, 801, 80)}
+            rows.append(
+                base
+                | {
+                    "claim": "C12",
+                    "method": ex.METHOD_LABELS.get(c["method"], c["method"]),
+                    "setting": "RL pick (TCN encoder)",
+                    "success_final": ok + rng.normal(0, 0.02),
+                    "success_mean": ok / 2 + rng.normal(0, 0.02),
+                    **curve,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch):
+    from thesis_lib.book import study as st
+    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study = st.load_study("02_clfd")
+    rows = _fake_rows(ex.study_tasks(st.study_config(study)), np.random.default_rng(0))
+    res = evaluate_comparisons(rows, study.comparisons, metric=study.metric, reps=200)
+    assert len(res) == len(study.comparisons) and res.verdict.notna().all()
+    head = res.iloc[0]  # CLfD vs TCN over both encoders: 7 points less error
+    assert head.effect == pytest.approx(7.0, abs=0.5) and head.verdict == "holds"
+    verdicts = claim_verdicts(res).set_index("claim").verdict
+    assert verdicts.to_dict() == {"C10": "holds", "C11": "holds", "C12": "holds"}
+    t41, t42 = ex.study_tables_vs_thesis(rows, {"scale": "test"})
+    ran = t41[t41["what differs"] != "not run"]
+    assert len(ran) == 6 and (ran.seeds == 5).all() and (ran.ci_low <= ran.ours).all()
+    assert set(t41.loc[t41["what differs"] == "not run", "dataset"]) == {"Pouring"}
+    assert t42.dropna(subset=["paper"]).ours.between(90, 100).all()
+    curves = ex.study_rl_curves(rows)
+    assert set(curves.method) == {"CLfD", "TCN", "CMC", "untrained"}
+    clfd = curves[curves.method == "CLfD"]
+    assert list(clfd.episode) == list(range(80, 801, 80)) and (clfd.seeds == 5).all()
+    assert clfd.success.iloc[-1] == pytest.approx(0.8)
+
+
+def test_study_section_renders_before_the_study_ran(monkeypatch, tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from thesis_lib.book import evidence as evi
+
+    (tmp_path / "_toc.yml").write_text("root: intro\n")
+    (tmp_path / "params").mkdir()
+    text = (REPO / "params" / "02_clfd.study.yml").read_text()
+    (tmp_path / "params" / "02_clfd.study.yml").write_text(text)
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    ev = evi.load_evidence("02_clfd", reps=100)
+    assert "not run yet" in evi.status_line(ev) and ev.rows.empty
+    assert set(evi.comparisons_table(ev).verdict) == {"pending"}
+    assert ex.study_rl_curves(ev.rows).empty
+    ex.plot_study_rl_curves(ex.study_rl_curves(ev.rows))
+    t41, t42 = ex.study_tables_vs_thesis(ev.rows, {"scale": "test"})
+    assert (t41["what differs"] == "not run").all() and len(t41) == 12
+    assert (t42["what differs"] == "not run").all() and len(t42) == 3
+    for metric in (None, "stage_accuracy", "success_final", "success_mean"):
+        evi.plot_per_setting(ev, metric)
+        evi.plot_comparisons(ev, metric)
+    assert set(evi.claim_readings(ev).ours) == {"pending"}
+
+
+def test_claims_page_links_c10_to_c12_to_this_chapters_study_section():
+    from thesis_lib.chapters.claims import ledger_table, link_chapters
+
+    ledger = ledger_table(pd.DataFrame({"claim": ["C10"], "verdict": ["pending"]}))
+    linked = link_chapters(ledger).set_index("claim").chapter
+    for c in ("C10", "C11", "C12"):
+        assert linked[c] == '<a href="02_clfd.html#evidence-at-study-scale">02_clfd</a>'
+    nb = (REPO / "notebooks" / "02_clfd.ipynb").read_text()
+    assert "## Evidence at study scale" in nb
