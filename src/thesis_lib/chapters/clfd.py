@@ -306,7 +306,7 @@ def _trained_encoder_rows(
     task = encoder_task(cfg, encoder, method, paper_compat)
     path = model_path(dict(task.config))
     store = results_dir(CHAPTER) / "tasks"
-    kw = {"desc": "encoder", "progress": False, "executor": executor}
+    kw: dict[str, Any] = {"desc": "encoder", "progress": False, "executor": executor}
     rows = run_tasks([task], store=store, **kw)
     if not path.is_file():  # a stored result whose weights were deleted: train again
         rows = run_tasks([task], store=store, force=True, **kw)
