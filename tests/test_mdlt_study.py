@@ -190,3 +190,21 @@ def test_thesis_mdlt_dance_without_checkpoint(tmp_path):
     q = map_dance(a)
     assert ((q >= POSITION_LIMITS[:, 0]) & (q <= POSITION_LIMITS[:, 1])).all()
     assert a.std(0).max() > 0.02  # it moves
+
+
+def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
+    from thesis_lib.cli import main
+    from thesis_lib.mdlt.train import load_checkpoint
+
+    out = tmp_path / "ckpt.pt"
+    rc = main(
+        ["mdlt", "train", "--out", str(out), "--recipe", "defaults", "--data-size", "smoke",
+         "--iterations", "3", "--d-model", "16", "--n-layers", "1", "-q"]
+    )  # fmt: skip
+    assert rc == 0 and out.is_file()
+    model, scaler, meta = load_checkpoint(out)
+    assert meta["variant"] == "mamba" and meta["pieces"] == 60 and meta["iterations"] == 3
+    assert model.config.d_model == 16 and scaler.min_.shape == (438,)
+    assert next(model.parameters()).dtype.is_floating_point  # float16 on disk, float32 loaded
+    with pytest.raises(SystemExit):
+        main(["mdlt", "train", "--out", str(out), "--variant", "gru"])
