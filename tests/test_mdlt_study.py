@@ -208,3 +208,25 @@ def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
     assert next(model.parameters()).dtype.is_floating_point  # float16 on disk, float32 loaded
     with pytest.raises(SystemExit):
         main(["mdlt", "train", "--out", str(out), "--variant", "gru"])
+
+
+@pytest.mark.skipif(
+    not (REPO / "src/thesis_lib/mdlt/assets/mdlt_packaged.pt").is_file(),
+    reason="no packaged checkpoint in this checkout",
+)
+def test_recorded_music_check_at_the_files_own_rate(tmp_path):
+    import soundfile as sf
+
+    from thesis_lib.mdlt.synth import synth_music
+
+    piece = synth_music("mHO", 120.0, 10.0, seed=3)
+    wav = tmp_path / "song.flac"
+    sf.write(wav, piece.audio, 22050)
+    r = ex.recorded_music_check(wav, shuffles=2)
+    assert r["sample_rate"] == 22050 and r["checkpoint"] == "mdlt_packaged.pt"
+    assert r["inside_ur3_limits"] and r["max_abs_angle"] <= np.pi
+    assert r["frames"] == pytest.approx(60 * piece.duration, abs=3) and r["beats"] > 5
+    for k in ("beat_align", "beat_align_shuffled", "std_0"):
+        assert np.isfinite(r[k]), k
+    table = ex.recorded_music_table()
+    assert len(table) >= 1 and "file" in table
