@@ -488,7 +488,13 @@ def phantom_fixture(tmp_path_factory):
 
 
 def test_load_phantomdance(phantom_fixture):
-    seqs = R.load_phantomdance(phantom_fixture, progress=False)
+    # the thesis's 60 fps by default (6.3.2); the authors' code's 30 under paper_compat
+    seqs60 = R.load_phantomdance(phantom_fixture, progress=False)
+    assert seqs60[0].fps == 60 and abs(len(seqs60[0]) - 120) <= 2
+    assert np.all(np.diff(seqs60[0].pose_index) >= 0)  # each 30-fps pose serves ~2 frames
+    assert np.bincount(seqs60[0].pose_index).max() <= 3
+    seqs = R.load_phantomdance(phantom_fixture, fps=30, progress=False)
+    assert R.load_phantomdance(phantom_fixture, paper_compat=True, progress=False)[0].fps == 30
     assert [s.name for s in seqs] == ["001", "002"]
     s = seqs[0]
     assert s.fps == 30 and s.features.shape[1] == 438 and abs(len(s) - 60) <= 1
@@ -497,7 +503,7 @@ def test_load_phantomdance(phantom_fixture):
         s.angles[:, 2], -np.linspace(0, np.pi / 2, 60)[s.pose_index], atol=1e-5
     )
     np.testing.assert_array_equal(s.pose_index, np.arange(len(s)))  # same rate: frame i = pose i
-    assert len(R.load_dance_dataset(phantom_fixture, skip=["002"], progress=False)) == 1
+    assert len(R.load_dance_dataset(phantom_fixture, skip=["002"], fps=30, progress=False)) == 1
 
 
 def test_phantom_world_rotations_and_unity_frame(tmp_path):
@@ -661,7 +667,7 @@ def test_default_dataset_caches_and_validates(tmp_path, monkeypatch):
     assert calls == [5, 5] and json.loads(marker.read_text()) == spec
     with pytest.raises(FileExistsError, match="another data set"):
         SY.default_dataset("phantomdance", "smoke", seed=6, root=root)
-    with pytest.raises(ValueError, match="Valid layouts"):
+    with pytest.raises(ValueError, match="aist/study"):
         SY.default_dataset("aistpp")
 
 

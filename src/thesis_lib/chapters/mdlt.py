@@ -66,6 +66,8 @@ VARIANT_LABELS = {
 BEAT_COLUMN = 53
 """Index of the beat one-hot in the raw 438-d features (MFCC 20 + delta 20 + chroma 12 + onset 1)."""
 ALL_GENRES = "All Genres"
+THESIS_FOLDS = 6
+"""Folds of a Table 6.2 row (AIST++ has 6 pieces per genre: leave one out)."""
 
 _TABLE_6_1 = """Method\tChromagram\tMFCC\tMFCC Delta\tMel Spectrogram\tOnset Strength\tTempogram\tOthers
 AI Choreographer [232]\tx\tx\t\t\t\t\tx
@@ -112,8 +114,10 @@ class Config:
     """An AIST++ folder in the real layout; ``None``: the project's default data set."""
     phantomdance_root: str | None = None
     """A PhantomDance folder; ``None``: the project's default data set in that layout."""
-    data_size: Literal["smoke", "full"] = "smoke"
-    """Size of the default data sets (ignored with a root)."""
+    data_size: Literal["smoke", "full", "study"] = "smoke"
+    """Size of the default data sets (ignored with a root); ``study``: the C13 study's AIST++-layout
+    set (12 pieces of 60 s with a song form per genre, :data:`thesis_lib.mdlt.synth.SIZES`; its
+    PhantomDance-layout set is the smoke one)."""
     data_seed: int = 0
     """Seed of the default data sets."""
     genres: list[str] | None = field(default_factory=lambda: ["mHO"])
@@ -167,7 +171,12 @@ class Config:
     initialisation (the thesis's; output near the zero pose at first)."""
     paper_compat: bool = False
     """The authors' code: scaler fitted on all songs (validation too), MDLT-M trained on single
-    frames without poses. The reported value stays the final model's."""
+    frames without poses, PhantomDance features at 30 fps (unless ``pd_fps`` says). The
+    reported value stays the final model's."""
+    pd_fps: int | None = None
+    """Feature (and angle) frames per second of the PhantomDance-layout data: ``None``: 60, as
+    the thesis says (6.3.2), or 30 with ``paper_compat`` (the authors' code); 30 or 60 to
+    choose."""
     seed: int = 0
     """Seed of model init, sampling and dropout."""
     device: str = "cpu"
@@ -191,12 +200,16 @@ class Config:
     """Updates of the probe's training."""
     probe_grad_clip: float = 1.0
     """Gradient clipping of the probe's training."""
+    study_seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
+    """Seeds of the C13 study (``params/06_mdlt.study.yml``; :func:`study_tasks`)."""
+    study_probe: bool = True
+    """The C13 study also runs the probe (:func:`probe_config`) on "All Genres", reported apart."""
     profile: str = "smoke"
     """Name of the parameter profile (recorded only)."""
 
     def __post_init__(self) -> None:
-        if self.data_size not in ("smoke", "full"):
-            raise ValueError(f"Unknown data_size {self.data_size!r}. Valid: smoke, full.")
+        if self.data_size not in ("smoke", "full", "study"):
+            raise ValueError(f"Unknown data_size {self.data_size!r}. Valid: smoke, full, study.")
         unknown = [v for v in self.variants if v not in ("transformer", "mamba", "mamba_audio")]
         if unknown or not self.variants:
             raise ValueError(
@@ -217,6 +230,14 @@ class Config:
         if not 0 <= self.compat_folds <= 6:
             raise ValueError(f"Expect 0 <= compat_folds <= 6, actually: {self.compat_folds!r}.")
         check_feature_groups(self.probe_mute, "in probe_mute")
+        if self.pd_fps is not None and self.pd_fps not in (30, 60):
+            raise ValueError(f"Expect pd_fps None, 30 or 60, actually: {self.pd_fps!r}.")
+
+    def phantom_fps(self) -> int:
+        """Frames per second of the PhantomDance-layout data under these parameters."""
+        if self.pd_fps is not None:
+            return int(self.pd_fps)
+        return 30 if self.paper_compat else 60
 
     def model_config(self, variant: str, max_timestep: int = 8192) -> MDLTConfig:
         """The :class:`MDLTConfig` of ``variant`` under these parameters."""
@@ -276,21 +297,33 @@ def load_sequences(
     root: str | None = None,
     size: str = "full",
     seed: int = 0,
+    fps: int | None = None,
 ) -> list:
     """Music-dance pairs of ``layout``: read ``root``, or make the default data set first.
+
+    ``fps``: feature frames per second of the PhantomDance layout (``None``: the reader's 60);
+    AIST++ is always at 60. The ``study`` size exists for AIST++ only: PhantomDance gets its
+    smoke set.
 
     Used in: MDLT chapter (thesis 6.3).
     """
     from thesis_lib.mdlt import readers
     from thesis_lib.mdlt.synth import default_dataset
 
+    if layout == "phantomdance" and size == "study":
+        size = "smoke"
     where = default_dataset(layout=layout, size=size, seed=seed) if root is None else root
-    return readers.load_aist(where) if layout == "aist" else readers.load_phantomdance(where)
+    if layout == "aist":
+        return readers.load_aist(where)
+    return readers.load_phantomdance(where, fps=fps)
 
 
 def aist_folds(sequences: Sequence, genre: str | None, n_folds: int = 6) -> list[tuple[list, list]]:
     """Thesis 6.5.1 splits: per genre, fold ``i`` validates on the genre's ``i``-th music (by id);
     ``genre=None`` ("All Genres"): fold ``i`` validates on the ``i``-th music of every genre.
+
+    With more than :data:`THESIS_FOLDS` (6) pieces per genre (the ``study`` data size), the
+    folds stay six: fold ``i`` validates on every piece ``j`` of the genre with ``j % 6 == i``.
 
     Used in: MDLT chapter (thesis 6.5.1).
     """
@@ -311,12 +344,102 @@ def aist_folds(sequences: Sequence, genre: str | None, n_folds: int = 6) -> list
         raise ValueError(
             f"Leave-one-music-out needs >= 2 pieces per genre; some genre has {n_min}."
         )
+    groups = min(n_min, THESIS_FOLDS)
     folds = []
-    for i in range(min(n_folds, n_min)):
-        val = [v[i] for v in by_genre.values()]
-        train = [s for v in by_genre.values() for j, s in enumerate(v) if j != i]
+    for i in range(min(n_folds, groups)):
+        val = [s for v in by_genre.values() for j, s in enumerate(v) if j % groups == i]
+        train = [s for v in by_genre.values() for j, s in enumerate(v) if j % groups != i]
         folds.append((train, val))
     return folds
+
+
+def piece_fingerprint(
+    sequences: Sequence, group: str = "tempogram", frames_per_piece: int = 200, seed: int = 0
+) -> dict[str, float]:
+    """How much a feature group names the piece it comes from: the memorisation risk of C13.
+
+    The features are min-max scaled over all ``sequences`` (as :class:`FeatureScaler` does) and
+    restricted to ``group`` (:data:`~thesis_lib.mdlt.audio.FEATURE_SLICES`). Then:
+
+    * ``between_share``: the share of the group's total variance (summed over its dimensions)
+      that lies between the pieces' means; 1 = constant within a piece, 0 = the same mean in
+      every piece;
+    * ``id_accuracy``: for ``frames_per_piece`` random frames of each piece, how often the
+      nearest piece mean (Euclidean) is the frame's own piece; ``chance`` = 1 / pieces.
+
+    A group with a high share and accuracy lets a model recognise each training piece and
+    memorise its dance instead of learning what the music asks for.
+
+    Used in: MDLT chapter (the data; the C13 study's data size).
+
+    Example:
+        >>> from types import SimpleNamespace as NS
+        >>> x = np.zeros((4, 438), np.float32)
+        >>> a, b = NS(features=x), NS(features=x + np.eye(1, 438, 100, dtype=np.float32))
+        >>> piece_fingerprint([a, b])["between_share"]
+        1.0
+    """
+    from thesis_lib.mdlt.audio import FEATURE_SLICES
+
+    if group not in FEATURE_SLICES:
+        raise ValueError(f"Unknown feature group {group!r}. Valid: {', '.join(FEATURE_SLICES)}.")
+    if len(sequences) < 2:
+        raise ValueError(f"Expect >= 2 pieces, got {len(sequences)}.")
+    sl = FEATURE_SLICES[group]
+    feats = [np.asarray(s.features, np.float64)[:, sl] for s in sequences]
+    lo = np.min([f.min(0) for f in feats], axis=0)
+    hi = np.max([f.max(0) for f in feats], axis=0)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    feats = [(f - lo) / span for f in feats]
+    n = np.array([len(f) for f in feats], dtype=np.float64)
+    means = np.stack([f.mean(0) for f in feats])
+    grand = (means * n[:, None]).sum(0) / n.sum()
+    between = float((n * ((means - grand) ** 2).sum(1)).sum())
+    total = float(sum(((f - grand) ** 2).sum() for f in feats))
+    rng = np.random.default_rng(seed)
+    hits, tried = 0, 0
+    for i, f in enumerate(feats):
+        idx = rng.choice(len(f), size=min(frames_per_piece, len(f)), replace=False)
+        d = ((f[idx, None, :] - means[None]) ** 2).sum(-1)  # (frames, pieces)
+        hits += int((d.argmin(1) == i).sum())
+        tried += len(idx)
+    return {
+        "group": group,
+        "pieces": len(feats),
+        "seconds_per_piece": float(
+            np.mean([len(s.features) / getattr(s, "fps", 60) for s in sequences])
+        ),
+        "between_share": between / total if total > 0 else float("nan"),
+        "id_accuracy": hits / tried,
+        "chance": 1.0 / len(feats),
+    }
+
+
+def fingerprint_table(
+    cfg: Config, sizes: Sequence[str] = ("smoke", "study"), make: bool = False
+) -> pd.DataFrame:
+    """:func:`piece_fingerprint` of the tempogram (and, for contrast, the MFCC deltas) on the
+    default AIST++-layout set at each of ``sizes`` (``cfg.data_seed``); with ``cfg.aist_root``,
+    that folder instead. One row per size x group.
+
+    ``make``: make a default set that does not exist yet (the study size costs about 5
+    CPU-minutes); ``False``: report it as not made (``thesis study 06_mdlt`` makes it) unless it
+    is the run's own ``data_size``.
+
+    Used in: MDLT chapter (the data) and its study section.
+    """
+    from thesis_lib.mdlt.synth import default_root
+
+    out: list[dict[str, Any]] = []
+    for size in [cfg.data_size] if cfg.aist_root else sizes:
+        made = (default_root("aist", size, cfg.data_seed) / ".complete.json").is_file()
+        if not (cfg.aist_root or made or make or size == cfg.data_size):
+            out.append({"data size": size, "group": "not made yet (thesis study 06_mdlt makes it)"})
+            continue
+        seqs = _cached_sequences("aist", cfg.aist_root, size, cfg.data_seed)
+        for group in ("tempogram", "mfcc_delta"):
+            out.append({"data size": size, **piece_fingerprint(seqs, group)})
+    return pd.DataFrame(out)
 
 
 def phantomdance_folds(
@@ -403,7 +526,7 @@ def train_model(
     tcfg.seed = seed
     meta = {
         "variant": variant,
-        "fps": 60,
+        "fps": int(getattr(train[0], "fps", 60)),
         "train_songs": [str(s.name) for s in train],
         "val_songs": [str(s.name) for s in val],
     }
@@ -444,8 +567,14 @@ def fold_model(
     scaler: Any,
     seed_offset: int,
     checkpoint_path: str | None = None,
+    windowed: bool = False,
 ) -> tuple[pd.DataFrame, list[np.ndarray], pd.DataFrame]:
     """Train one variant on one split and translate the validation songs.
+
+    ``windowed``: for MDLT-M, also translate each song restarting from a zero state every
+    ``K_mamba`` frames, as the training windows start (:meth:`MDLTMamba.generate`'s
+    ``reset_every``), and add its AJE as ``aje_windowed``: lower than ``aje`` means the
+    whole-song recurrence (the thesis's inference) costs accuracy.
 
     Returns:
         ``(rows, predictions, history)``: one row per validation song (``method, song, aje,
@@ -464,16 +593,17 @@ def fold_model(
     )
     train_s = time.perf_counter() - t0
     # a list of songs in, a list of (T, 4) angle arrays out
-    preds = cast(
-        list[np.ndarray],
-        model.generate([scaler.transform(s.features).astype(np.float32) for s in val]),
-    )
+    val_feats = [scaler.transform(s.features).astype(np.float32) for s in val]
+    preds = cast(list[np.ndarray], model.generate(val_feats))
     best = (
         history["eval_return"].min()
         if "eval_return" in history and history["eval_return"].notna().any()
         else np.nan
     )
     rows = _score(variant, preds, val, {"aje_best": float(best), "train_s": train_s})
+    if windowed and isinstance(model, MDLTMamba):
+        reset = cast(list[np.ndarray], model.generate(val_feats, reset_every=model.config.K))
+        rows["aje_windowed"] = [aje(p, np.asarray(s.angles)) for p, s in zip(reset, val)]
     return rows, preds, history
 
 
@@ -544,12 +674,16 @@ TRAIN_FIELDS = (
 
 
 @functools.lru_cache(maxsize=4)
-def _cached_sequences(layout: str, root: str | None, size: str, seed: int) -> tuple:
-    return tuple(load_sequences(layout, root, size, seed))  # type: ignore[arg-type]
+def _cached_sequences(
+    layout: str, root: str | None, size: str, seed: int, fps: int | None = None
+) -> tuple:
+    return tuple(load_sequences(layout, root, size, seed, fps))  # type: ignore[arg-type]
 
 
 def _split(data: dict[str, Any], genre: str | None, fold: int) -> tuple[list, list]:
-    seqs = _cached_sequences(data["layout"], data["root"], data["size"], data["seed"])
+    seqs = _cached_sequences(
+        data["layout"], data["root"], data["size"], data["seed"], data.get("fps")
+    )
     if data["layout"] == "phantomdance":
         return phantomdance_folds(seqs, 10, run=fold + 1)[fold]
     return aist_folds(seqs, genre, fold + 1)[fold]
@@ -611,8 +745,11 @@ def fold_tasks(
 ) -> list[Task]:
     """The tasks of one fold: each of ``cfg.variants``, then the baselines."""
     root = cfg.aist_root if layout == "aist" else cfg.phantomdance_root
+    data = {"layout": layout, "root": root, "size": cfg.data_size, "seed": cfg.data_seed}
+    if layout == "phantomdance":
+        data["fps"] = cfg.phantom_fps()
     base = {
-        "data": {"layout": layout, "root": root, "size": cfg.data_size, "seed": cfg.data_seed},
+        "data": data,
         "experiment": experiment,
         "genre": genre,
         "fold": fold,
@@ -687,7 +824,7 @@ def run_table_6_3(cfg: Config) -> TableRun:
     Used in: MDLT chapter (thesis 6.5.3).
     """
     sequences = _cached_sequences(
-        "phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed
+        "phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed, cfg.phantom_fps()
     )
     n = len(phantomdance_folds(sequences, 10, cfg.pd_folds))
     splits: list[tuple[str, str | None, int]] = [("PhantomDance", None, i) for i in range(n)]
@@ -757,7 +894,9 @@ def load_datasets(cfg: Config) -> tuple[list, list]:
     """The AIST++-layout and PhantomDance-layout music-dance pairs of ``cfg`` (read once per
     process; the default data sets are made on first use)."""
     aist = _cached_sequences("aist", cfg.aist_root, cfg.data_size, cfg.data_seed)
-    phantom = _cached_sequences("phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed)
+    phantom = _cached_sequences(
+        "phantomdance", cfg.phantomdance_root, cfg.data_size, cfg.data_seed, cfg.phantom_fps()
+    )
     return list(aist), list(phantom)
 
 
@@ -988,3 +1127,505 @@ def example_checkpoint(cfg: Config, variant: str) -> Path:
         t for t in fold_tasks(cfg, "aist", ALL_GENRES, None, 0) if t.config["method"] == variant
     )
     return checkpoint_path(dict(task.config), cfg.checkpoint_dir)
+
+
+# ----------------------------------------------------------------------------------------------
+# the pre-registered study (claim C13, params/06_mdlt.study.yml)
+
+PER_GENRE, ALL_SCOPE = "per genre", "all genres"
+"""The two scopes of Table 6.2: a model per genre, or one model for all genres."""
+_METHOD_INDEX = {"transformer": 0, "mamba": 1, "mamba_audio": 2}
+PROBE_LABEL = "MDLT-M probe"
+"""The probe (:func:`probe_config`: audio-only MDLT-M, tempogram muted, batch 64) in the study."""
+
+
+def study_label(label: str, scope: str) -> str:
+    """A method's name in the study's rows: ``label`` per genre, ``"label (all genres)"`` else.
+
+    >>> study_label("MDLT-M", "all genres"), study_label("mean pose", "per genre")
+    ('MDLT-M (all genres)', 'mean pose')
+    """
+    return label if scope == PER_GENRE else f"{label} ({ALL_SCOPE})"
+
+
+def neg_aje(aje_rad: float) -> float:
+    """The study's higher-is-better metric: minus the AJE (rad); 0 is a perfect translation.
+
+    >>> neg_aje(0.25)
+    -0.25
+    """
+    return -float(aje_rad)
+
+
+def gain_vs_mean_pose(aje_rad: float, aje_mean_pose: float) -> float:
+    """``1 - AJE / AJE(mean training pose)`` on the same songs: 0 = no better than standing in
+    the mean pose, 1 = perfect, < 0 = worse (higher is better).
+
+    >>> gain_vs_mean_pose(0.3, 0.5)
+    0.4
+    """
+    return float(1.0 - aje_rad / aje_mean_pose) if aje_mean_pose > 0 else float("nan")
+
+
+def _study_songs(
+    method: str, train: Sequence, val: Sequence, cfg: Config, seed_offset: int
+) -> list[dict[str, Any]]:
+    """Per validation song of one fold: its genre and the scores of ``method`` (a variant, or
+    ``"mean_pose"`` / ``"genre_mean"``), with the mean pose's AJE on the same song."""
+    true = [np.asarray(s.angles, np.float32) for s in val]
+    lengths = [len(a) for a in true]
+    mean_pose = mean_pose_baseline([np.asarray(s.angles) for s in train], lengths)
+    extra: list[dict[str, float]] = [{} for _ in val]
+    if method in ("mean_pose", "genre_mean"):
+        rows, base = fold_baselines(train, val, cfg.seed)
+        preds = base[method]
+        train_s = 0.0
+    else:
+        scaler = _fit_scaler(train, val, cfg.paper_compat, cfg.mute_features)
+        rows, preds, _ = fold_model(method, train, val, cfg, scaler, seed_offset, windowed=True)
+        train_s = float(rows["train_s"].iloc[0])
+        if "aje_windowed" in rows:  # MDLT-M: the train/inference mismatch (fold_model)
+            extra = [{"aje_windowed": float(w)} for w in rows["aje_windowed"]]
+    beats = [np.asarray(s.features)[:, BEAT_COLUMN] for s in val]
+    scored = evaluate_songs(preds, true, [str(s.name) for s in val], beats)
+    return [
+        {
+            "genre": genre_label(s.genre),
+            "aje": float(r.aje),
+            "fid": float(r.fid),
+            "beat_align": float(r.beat_align),
+            "aje_mean_pose": aje(mp, t),
+            "frames": len(t),
+            "train_s": train_s,
+            **e,
+        }
+        for s, r, mp, t, e in zip(val, scored.itertuples(), mean_pose, true, extra)
+    ]
+
+
+def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One C13 study task: one method, one scope (and genre), one seed, over every fold.
+
+    Config keys: ``data`` (as :func:`fold_task`'s), ``scope`` (:data:`PER_GENRE` or
+    :data:`ALL_SCOPE`), ``genre`` (the genre of a per-genre task; ``None`` for all genres),
+    ``method`` (a variant, ``"probe"``, or ``"baselines"``: the mean pose and, for all
+    genres, the genre-mean pose), ``folds`` (fold indices), ``seed``, ``cfg`` (the
+    :data:`TRAIN_FIELDS` of the chapter's :class:`Config`; ``seed`` is overridden) and
+    ``scale`` (``study`` or ``check``).
+
+    Each fold trains the method on the fold's training pieces (held-out music: the fold's
+    validation pieces are never trained on) and translates every validation piece from its
+    first frame to its last; the per-song scores are averaged per genre of the song over all
+    folds (every song weighs the same).
+
+    Returns:
+        One row per method and genre (a per-genre task: one; all genres: one per genre):
+        ``method`` (:func:`study_label`), ``setting`` (the genre), ``seed``, ``scope``,
+        ``scale``, ``folds``, ``songs``, ``aje`` (rad, lower is better), ``neg_aje``
+        (:func:`neg_aje`, the primary, higher-is-better metric), ``aje_mean_pose`` (the mean
+        training pose on the same songs), ``gain_vs_mean_pose`` (:func:`gain_vs_mean_pose`,
+        secondary, higher is better), ``fid``, ``beat_align``, ``train_s``, and for MDLT-M
+        ``aje_windowed`` and ``mismatch_cost`` (``aje - aje_windowed``: what the whole-song
+        recurrence costs against restarting every ``K_mamba`` frames; > 0 = it costs).
+
+    Used in: ``thesis study 06_mdlt`` (C13).
+    """
+    torch.set_num_threads(1)  # small models: one core per run
+    seed = int(config["seed"])
+    cfg = Config(**{**config["cfg"], "seed": seed})
+    method, scope = config["method"], config["scope"]
+    if method == "probe":  # the task's cfg is already probe_config's
+        variants, labels = ["mamba_audio"], [PROBE_LABEL]
+    elif method == "baselines":
+        variants = ["mean_pose"] + (["genre_mean"] if scope == ALL_SCOPE else [])
+        labels = [VARIANT_LABELS["mean_pose"], "genre mean"][: len(variants)]
+    else:
+        variants, labels = [method], [VARIANT_LABELS[method]]
+    genre = config["genre"] if scope == PER_GENRE else None
+    out: list[dict[str, Any]] = []
+    for variant, label in zip(variants, labels):
+        songs: list[dict[str, Any]] = []
+        for fold in config["folds"]:
+            train, val = _split(config["data"], genre, int(fold))
+            offset = 1000 * int(fold) + _METHOD_INDEX.get(variant, 0)
+            songs += _study_songs(variant, train, val, cfg, offset)
+        df = pd.DataFrame(songs)
+        for g, grp in df.groupby("genre", sort=True):
+            a, mp = float(grp["aje"].mean()), float(grp["aje_mean_pose"].mean())
+            row = {
+                "method": study_label(label, scope),
+                "setting": str(g),
+                "seed": seed,
+                "scope": scope,
+                "scale": config.get("scale", "study"),
+                "folds": len(config["folds"]),
+                "songs": len(grp),
+                "aje": a,
+                "neg_aje": neg_aje(a),
+                "aje_mean_pose": mp,
+                "gain_vs_mean_pose": gain_vs_mean_pose(a, mp),
+                "fid": float(grp["fid"].mean()),
+                "beat_align": float(grp["beat_align"].mean()),
+                "train_s": float(grp["train_s"].drop_duplicates().sum()),
+            }
+            if "aje_windowed" in grp and grp["aje_windowed"].notna().all():
+                w = float(grp["aje_windowed"].mean())
+                row.update(aje_windowed=w, mismatch_cost=a - w)
+            out.append(row)
+    return out
+
+
+def study_tasks(cfg: Config) -> list[Task]:
+    """The tasks of the chapter's pre-registered study (``params/06_mdlt.study.yml``, C13):
+    per genre (each of ``cfg.genres``, all when ``None``) and, with ``cfg.all_genres``, all
+    genres; each of ``cfg.variants`` and the baselines (and, with ``cfg.study_probe``, the
+    probe on all genres), each of ``cfg.study_seeds``, every one of the first ``cfg.n_folds``
+    folds inside one task (:func:`study_run`).
+
+    Used in: ``thesis study 06_mdlt`` (C13).
+    """
+    data = {"layout": "aist", "root": cfg.aist_root, "size": cfg.data_size, "seed": cfg.data_seed}
+    if cfg.genres is None:
+        present = sorted({genre_label(s.genre) for s in _cached_sequences("aist", *data_args(cfg))})
+    else:
+        present = [genre_label(g) for g in cfg.genres]
+    train = {f: getattr(cfg, f) for f in TRAIN_FIELDS}
+    probe = {f: getattr(probe_config(cfg), f) for f in TRAIN_FIELDS}
+    folds = list(range(cfg.n_folds))
+    scopes: list[tuple[str, str | None]] = [(PER_GENRE, g) for g in present]
+    if cfg.all_genres:
+        scopes.append((ALL_SCOPE, None))
+    tasks = []
+    for seed in cfg.study_seeds:
+        for scope, genre in scopes:
+            methods = ["baselines", *cfg.variants]
+            if cfg.study_probe and scope == ALL_SCOPE:
+                methods.append("probe")
+            for m in methods:
+                tasks.append(
+                    Task(
+                        study_run,
+                        {
+                            "data": data,
+                            "scope": scope,
+                            "genre": genre,
+                            "method": m,
+                            "folds": folds,
+                            "seed": int(seed),
+                            "cfg": probe if m == "probe" else train,
+                        },
+                    )
+                )
+    return tasks
+
+
+def data_args(cfg: Config) -> tuple[str | None, str, int]:
+    """``(root, size, seed)`` of the AIST++-layout data of ``cfg`` (for :func:`load_sequences`)."""
+    return cfg.aist_root, cfg.data_size, cfg.data_seed
+
+
+def study_table_6_2(rows: pd.DataFrame) -> pd.DataFrame:
+    """The study's rows as Table 6.2 (mean and std of AJE over folds): per genre and "All
+    Genres" for MDLT-T and MDLT-M, beside the thesis (:func:`thesis_lib.book.compare_with_paper`).
+
+    Ours: per (genre row, method), the mean over seeds of each run's AJE (itself a mean over
+    the six folds' held-out songs); ``aje_rad_std`` is the std over seeds (the thesis's is over
+    folds). The "All Genres" row averages the all-genres model over every genre's songs.
+
+    Used in: MDLT chapter ("Evidence at study scale").
+    """
+    cols = ["genre", "variant", "aje_rad_mean", "aje_rad_std", "n_seeds"]
+    if rows.empty:
+        ours = pd.DataFrame(columns=cols)
+    else:
+        r = rows[rows["scale"].fillna("study") == "study"]
+        r = r[
+            r["method"].str.replace(f" ({ALL_SCOPE})", "", regex=False).isin(["MDLT-T", "MDLT-M"])
+        ]
+        r = r.assign(
+            variant=r["method"].str.replace(f" ({ALL_SCOPE})", "", regex=False),
+            genre=np.where(r["scope"] == ALL_SCOPE, ALL_GENRES, r["setting"]),
+        )
+        per_seed = r.groupby(["genre", "variant", "seed"], sort=False)["aje"].mean().reset_index()
+        g = per_seed.groupby(["genre", "variant"], sort=False)
+        ours = pd.DataFrame(
+            {
+                "aje_rad_mean": g["aje"].mean(),
+                "aje_rad_std": g["aje"].std(ddof=0),
+                "n_seeds": g["seed"].nunique(),
+            }
+        ).reset_index()
+    differs = {
+        "data": "project's synthesised AIST++-layout set (study size: 12 pieces of 60 s per genre)",
+        "scale": "the study's (params/06_mdlt.study.yml); std over seeds, not folds",
+    }
+    return compare_with_paper(
+        "6.2", ours, on=["genre", "variant"], value="aje_rad_mean", differs=differs
+    )
+
+
+def study_table_6_3() -> pd.DataFrame:
+    """Table 6.3 (PhantomDance) of the thesis beside the study: not run (the study is AIST++
+    only; the chapter's Table 6.3 runs the PhantomDance layout at smoke scale).
+
+    Used in: MDLT chapter ("Evidence at study scale").
+    """
+    empty = pd.DataFrame(columns=["variant", "aje_mean"])
+    return compare_with_paper(
+        "6.3", empty, on=["variant"], value="aje_mean", differs={"data": "not in the C13 study"}
+    )
+
+
+def study_mismatch(rows: pd.DataFrame) -> pd.DataFrame:
+    """MDLT-M's train/inference mismatch at study scale: per scope, the mean AJE of the
+    thesis's whole-song recurrence and of restarting every ``K_mamba`` frames, and their
+    difference (``mismatch_cost`` > 0: the recurrence costs), over seeds and genres.
+
+    Used in: MDLT chapter ("Evidence at study scale").
+    """
+    cols = ["method", "runs", "aje", "aje_windowed", "mismatch_cost", "cost_low", "cost_high"]
+    if rows.empty or "mismatch_cost" not in rows:
+        return pd.DataFrame(columns=cols)
+    r = rows[rows["mismatch_cost"].notna() & (rows["scale"].fillna("study") == "study")]
+    out = []
+    for m, g in r.groupby("method", sort=False):
+        c = g["mismatch_cost"].to_numpy(float)
+        lo, hi = np.percentile(
+            [np.random.default_rng(k).choice(c, len(c)).mean() for k in range(2000)], [2.5, 97.5]
+        )
+        out.append(
+            {
+                "method": m,
+                "runs": len(g),
+                "aje": g["aje"].mean(),
+                "aje_windowed": g["aje_windowed"].mean(),
+                "mismatch_cost": c.mean(),
+                "cost_low": lo,
+                "cost_high": hi,
+            }
+        )
+    return pd.DataFrame(out, columns=cols)
+
+
+# ----------------------------------------------------------------------------------------------
+# a translator for new music: `thesis mdlt train`, the packaged checkpoint, recorded music
+
+
+def train_translator(
+    cfg: Config, variant: str, out: str | Path, half: bool = True
+) -> tuple[Path, pd.DataFrame]:
+    """Train one translator on every piece of the AIST++-layout data of ``cfg`` (all genres,
+    nothing held out) with ``cfg``'s recipe, and write a model-only checkpoint (with its
+    feature scaler) that :func:`thesis_lib.mdlt.dance` reads.
+
+    ``thesis mdlt train`` calls it with the study's recipe (``params/06_mdlt.study.yml``);
+    the packaged checkpoint (:func:`thesis_lib.mdlt.translate.packaged_checkpoint`) was made
+    with it (see the README).
+
+    Returns:
+        ``(checkpoint path, training history)``.
+
+    Used in: ``thesis mdlt train``; MDLT chapter.
+    """
+    from thesis_lib.mdlt.train import save_checkpoint
+
+    if variant not in _METHOD_INDEX:
+        raise ValueError(f"Unknown variant {variant!r}. Valid: {', '.join(_METHOD_INDEX)}.")
+    seqs = list(_cached_sequences("aist", *data_args(cfg)))
+    model, history, scaler = train_model(variant, seqs, [], dataclasses.replace(cfg, eval_every=0))
+    meta = {
+        "variant": variant,
+        "fps": int(getattr(seqs[0], "fps", 60)),
+        "data": f"aist {cfg.aist_root or cfg.data_size} seed {cfg.data_seed}",
+        "pieces": len(seqs),
+        "iterations": cfg.iterations,
+        "recipe": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+    }
+    path = save_checkpoint(out, model, scaler, meta, half=half)
+    return path, history
+
+
+def beat_check(
+    angles: np.ndarray,
+    features: np.ndarray,
+    translate: Any,
+    shuffles: int = 5,
+    seed: int = 0,
+    block_s: float = 0.5,
+    fps: int = 60,
+) -> dict[str, float]:
+    """Does a translation move with the beat? Bailando's beat-align score of ``angles`` against
+    the music's beats (the beat one-hot of the raw ``features``), beside a shuffled-audio
+    control: the same translator (``translate: scaled-or-raw features -> angles``) run on the
+    features cut into blocks of ``block_s`` seconds in a random order (the music's sounds kept,
+    its beat structure broken), scored against the same beats; ``shuffles`` times.
+
+    Returns ``beat_align``, ``beat_align_shuffled`` (mean of the controls),
+    ``shuffled_max`` and ``beats`` (music beats found).
+
+    Used in: MDLT chapter (recorded music; the packaged checkpoint's test).
+    """
+    from thesis_lib.mdlt.metrics import beat_alignment
+
+    beats = np.asarray(features)[:, BEAT_COLUMN]
+    score = beat_alignment(angles, beats)
+    rng = np.random.default_rng(seed)
+    n, b = len(features), max(1, int(round(block_s * fps)))
+    blocks = [np.arange(i, min(i + b, n)) for i in range(0, n, b)]
+    controls = []
+    for _ in range(shuffles):
+        order = np.concatenate([blocks[i] for i in rng.permutation(len(blocks))])
+        controls.append(beat_alignment(translate(np.asarray(features)[order]), beats))
+    return {
+        "beat_align": float(score),
+        "beat_align_shuffled": float(np.nanmean(controls)) if controls else float("nan"),
+        "shuffled_max": float(np.nanmax(controls)) if controls else float("nan"),
+        "beats": int((beats > 0.5).sum()),
+    }
+
+
+def recorded_music_check(
+    audio: str | Path, checkpoint: str | Path | None = None, shuffles: int = 5, seed: int = 0
+) -> dict[str, Any]:
+    """Translate a recorded music file (decoded at its own sample rate, then resampled to the
+    feature rate as any input) with ``checkpoint`` (``None``: the packaged one) and check what a
+    robot needs: the angles inside the UR3's joint limits (after the playback mapping of
+    :func:`thesis_lib.ur3.dance.map_dance`), how much each joint moves, and the beat alignment
+    against a shuffled-audio control (:func:`beat_check`).
+
+    Used in: MDLT chapter (recorded music).
+    """
+    from thesis_lib.mdlt.audio import audio_features, load_audio
+    from thesis_lib.mdlt.train import load_checkpoint
+    from thesis_lib.mdlt.translate import packaged_checkpoint
+    from thesis_lib.ur3.dance import map_dance
+    from thesis_lib.ur3.model import POSITION_LIMITS
+
+    ckpt = Path(checkpoint) if checkpoint is not None else packaged_checkpoint()
+    model, scaler, meta = load_checkpoint(ckpt)
+    fps = int(meta.get("fps", 60))
+    y, sr = load_audio(audio)  # its own sample rate
+    raw = audio_features(y, sr=sr, fps=fps)
+
+    def translate(f: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return np.asarray(model.generate(scaler.transform(f).astype(np.float32)), np.float64)
+
+    angles = translate(raw)
+    q = map_dance(angles)
+    inside = bool(
+        np.all(np.abs(angles) <= np.pi)
+        and np.all((q >= POSITION_LIMITS[:, 0]) & (q <= POSITION_LIMITS[:, 1]))
+    )
+    return {
+        "file": Path(audio).name,
+        "sample_rate": int(sr),
+        "seconds": len(y) / sr,
+        "checkpoint": ckpt.name,
+        "frames": len(angles),
+        "inside_ur3_limits": inside,
+        "max_abs_angle": float(np.abs(angles).max()),
+        **{f"std_{j}": float(angles[:, j].std()) for j in range(angles.shape[1])},
+        **beat_check(angles, raw, translate, shuffles=shuffles, seed=seed, fps=fps),
+    }
+
+
+def find_packaged_music(min_seconds: float = 20.0) -> list[Path]:
+    """Audio files of at least ``min_seconds`` shipped inside the installed Python packages
+    (site-packages: ``.ogg``, ``.flac``, ``.wav``, ``.mp3``), for :func:`recorded_music_check`.
+    Nothing is downloaded; on this project's environment the list is empty.
+
+    Used in: MDLT chapter (recorded music).
+    """
+    import site
+
+    import soundfile as sf
+
+    found = []
+    roots = {Path(p) for p in site.getsitepackages() + [site.getusersitepackages()]}
+    for root in sorted(r for r in roots if r.is_dir()):
+        for ext in ("ogg", "flac", "wav", "mp3"):
+            for p in root.rglob(f"*.{ext}"):
+                try:
+                    if sf.info(str(p)).duration >= min_seconds:
+                        found.append(p)
+                except Exception:  # not readable by libsndfile
+                    continue
+    return sorted(found)
+
+
+def recorded_music_table(checkpoint: str | Path | None = None) -> pd.DataFrame:
+    """:func:`recorded_music_check` of every :func:`find_packaged_music` file (one row each);
+    one row saying so when there is none.
+
+    Used in: MDLT chapter (recorded music).
+    """
+    files = find_packaged_music()
+    if not files:
+        return pd.DataFrame(
+            [{"file": "none found", "note": "no audio file >= 20 s in the installed packages"}]
+        )
+    return pd.DataFrame([recorded_music_check(f, checkpoint) for f in files])
+
+
+def run_phantomdance_fps(cfg: Config, summary_6_3: pd.DataFrame) -> pd.DataFrame:
+    """Table 6.3's AJE at the thesis's 60 fps (``summary_6_3``, this run) beside the same folds
+    re-run at the authors' 30 fps (``pd_fps=30``, everything else equal): rows method, columns
+    fps (when ``cfg`` already runs at 30: 60 is the re-run).
+
+    Used in: MDLT chapter (the two undocumented choices).
+    """
+    other = 30 if cfg.phantom_fps() == 60 else 60
+    rerun = summarize(run_table_6_3(dataclasses.replace(cfg, pd_fps=other)).rows)
+    both = pd.concat(
+        [
+            summary_6_3.assign(fps=f"{cfg.phantom_fps()} fps"),
+            rerun.assign(fps=f"{other} fps"),
+        ]
+    )
+    return both.pivot_table(
+        index="variant", columns="fps", values="aje_rad_mean", sort=False
+    ).round(3)
+
+
+def run_mismatch(cfg: Config) -> pd.DataFrame:
+    """MDLT-M's train/inference mismatch on Table 6.2's "All Genres" folds (the checkpoints
+    :func:`run_table_6_2` wrote; nothing is trained): per variant and fold, the AJE of the
+    thesis's whole-song recurrence and of restarting the state every ``K_mamba`` frames (as the
+    training windows start), and their difference ``mismatch_cost`` (> 0: the recurrence costs).
+
+    Used in: MDLT chapter (the two undocumented choices).
+    """
+    from thesis_lib.mdlt.train import load_checkpoint
+
+    out = []
+    if not cfg.all_genres:
+        return pd.DataFrame(out)
+    seqs = _cached_sequences("aist", *data_args(cfg))
+    for fold in range(len(aist_folds(seqs, None, cfg.n_folds))):
+        _, val = aist_folds(seqs, None, cfg.n_folds)[fold]
+        for t in fold_tasks(cfg, "aist", ALL_GENRES, None, fold):
+            if t.config["method"] not in ("mamba", "mamba_audio"):
+                continue
+            path = checkpoint_path(dict(t.config), cfg.checkpoint_dir)
+            if not path.is_file():
+                continue
+            model, scaler, _ = load_checkpoint(path)
+            feats = [scaler.transform(s.features).astype(np.float32) for s in val]
+            with torch.no_grad():
+                whole = model.generate(feats)
+                windowed = model.generate(feats, reset_every=model.config.K)
+            a = float(np.mean([aje(p, s.angles) for p, s in zip(whole, val)]))
+            w = float(np.mean([aje(p, s.angles) for p, s in zip(windowed, val)]))
+            out.append(
+                {
+                    "method": VARIANT_LABELS[t.config["method"]],
+                    "fold": fold,
+                    "frames per song (mean)": float(np.mean([len(s.angles) for s in val])),
+                    "K": model.config.K,
+                    "aje (whole-song recurrence)": a,
+                    "aje (restart every K)": w,
+                    "mismatch_cost": a - w,
+                }
+            )
+    return pd.DataFrame(out)

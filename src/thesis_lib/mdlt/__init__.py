@@ -48,4 +48,11 @@ from .readers import (
 from .sync import nearest_pose_indices, synchronize
 from .synth import GENRES, default_dataset
 from .train import DanceWindows, MDLTTrainer, load_checkpoint, save_checkpoint
-from .translate import DanceResult, animate_arm, dance, plot_angles, ur3_joint_positions
+from .translate import (
+    DanceResult,
+    animate_arm,
+    dance,
+    packaged_checkpoint,
+    plot_angles,
+    ur3_joint_positions,
+)

@@ -1,7 +1,10 @@
 """``thesis mdlt``: music-to-dance commands.
 
-    thesis mdlt dance --audio my_song.wav --checkpoint ckpt.pt --out angles.csv \\
+    thesis mdlt dance --audio my_song.wav --out angles.csv [--checkpoint ckpt.pt] \\
         [--plot angles.png] [--animation arm.gif]
+    thesis mdlt train --out ckpt.pt [--variant mamba] [--iterations N] [--data-size study]
+
+``dance`` without ``--checkpoint`` uses the small checkpoint shipped in the package.
 
 Used in: MDLT chapter (thesis 6.5).
 """
@@ -34,6 +37,45 @@ def _cmd_dance(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    import torch
+
+    from thesis_lib.chapters import mdlt as ch
+
+    torch.set_num_threads(max(1, args.threads))
+    values = {}
+    if args.recipe != "defaults":
+        from thesis_lib.book.study import load_study
+
+        try:
+            values = dict(load_study(args.recipe if args.recipe != "study" else "06_mdlt").config)
+        except FileNotFoundError as err:
+            print(f"{err}\nUsing the chapter's defaults (--recipe defaults).", file=sys.stderr)
+    known = {f.name for f in dataclasses.fields(ch.Config)}
+    cfg = ch.Config(**{k: v for k, v in values.items() if k in known})
+    over = {
+        "iterations": args.iterations,
+        "seed": args.seed,
+        "data_size": args.data_size,
+        "aist_root": args.aist_root,
+        "d_model": args.d_model,
+        "n_layers": args.n_layers,
+        "batch_size": args.batch_size,
+        "progress": not args.quiet,
+    }
+    cfg = dataclasses.replace(cfg, **{k: v for k, v in over.items() if v is not None})
+    path, history = ch.train_translator(cfg, args.variant, args.out, half=not args.full_precision)
+    loss = history["loss"].iloc[-20:].mean() if "loss" in history and len(history) else float("nan")
+    print(
+        f"{ch.VARIANT_LABELS[args.variant]}: {cfg.iterations} updates of batch {cfg.batch_size} on "
+        f"the {cfg.aist_root or cfg.data_size} AIST++-layout data (final loss {loss:.4f}) -> {path} "
+        f"({path.stat().st_size / 1024:.0f} KB)"
+    )
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``thesis mdlt ...`` to the ``thesis`` command line."""
     mdlt = subparsers.add_parser("mdlt", help="music-to-dance translation (thesis chapter 6)")
@@ -45,7 +87,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--audio", required=True, help="audio file (wav, flac, ogg, ...), any sample rate"
     )
     d.add_argument(
-        "--checkpoint", required=True, help="MDLT checkpoint (.pt) carrying its feature scaler"
+        "--checkpoint",
+        help="MDLT checkpoint (.pt) carrying its feature scaler; default: the packaged one",
     )
     d.add_argument("--out", required=True, help="CSV to write: time_s and four joint angles (rad)")
     d.add_argument("--plot", help="PNG of the angle curves")
@@ -59,6 +102,40 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     d.add_argument("--device", default="cpu", help="cpu or cuda")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     d.set_defaults(func=_cmd_dance)
+    t = sub.add_parser(
+        "train",
+        help="train a translator on the AIST++-layout data with the study's recipe; write a checkpoint",
+    )
+    t.add_argument("--out", required=True, help="checkpoint to write (.pt)")
+    t.add_argument(
+        "--variant",
+        default="mamba",
+        choices=["transformer", "mamba", "mamba_audio"],
+        help="MDLT-T, MDLT-M (default) or MDLT-M without the pose input",
+    )
+    t.add_argument(
+        "--recipe",
+        default="study",
+        help="'study' (params/06_mdlt.study.yml's config, default), 'defaults' (the chapter's "
+        "smoke defaults) or a path to a study file",
+    )
+    t.add_argument("--iterations", type=int, help="updates (default: the recipe's)")
+    t.add_argument("--batch-size", type=int, help="windows per batch (default: the recipe's)")
+    t.add_argument("--d-model", type=int, help="embedding size (default: the recipe's)")
+    t.add_argument("--n-layers", type=int, help="layers / Mamba blocks (default: the recipe's)")
+    t.add_argument("--seed", type=int, help="seed (default: the recipe's)")
+    t.add_argument(
+        "--data-size",
+        choices=["smoke", "full", "study"],
+        help="size of the default AIST++-layout data (default: the recipe's)",
+    )
+    t.add_argument("--aist-root", help="a real AIST++ folder instead of the default data")
+    t.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+    t.add_argument(
+        "--full-precision", action="store_true", help="store float32 weights (default float16)"
+    )
+    t.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(func=_cmd_train)
 
 
 if __name__ == "__main__":  # python -m thesis_lib.mdlt.cli dance ...

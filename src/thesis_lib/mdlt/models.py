@@ -435,6 +435,7 @@ class MDLTMamba(nn.Module):
         features: SongInput,
         teacher_poses: np.ndarray | list[np.ndarray] | None = None,
         progress: bool = False,
+        reset_every: int | None = None,
     ) -> np.ndarray | list[np.ndarray]:
         """Translate whole songs with the recurrent step, O(1) per frame: ``(T, 438)`` -> ``(T, 4)``.
 
@@ -442,16 +443,33 @@ class MDLTMamba(nn.Module):
         the true previous poses instead, which makes the result equal :meth:`forward` over the
         whole song). Without ``pose_input`` each song goes through one parallel scan, which
         the recurrence equals. A list of songs is stepped as one batch (a list comes back).
+
+        ``reset_every``: restart from a zero state every this many frames (the previous pose is
+        kept), so that no state holds more history than a training window of that length had
+        (training windows start from a zero state); ``None``: one recurrence over the whole
+        song (the thesis's inference). Used to measure what that mismatch costs.
         """
         from tqdm.auto import tqdm
 
+        if reset_every is not None and int(reset_every) < 1:
+            raise ValueError(f"Expect reset_every >= 1 or None, actually: {reset_every!r}.")
         songs, single = _as_songs(features, self.config.state_dim)
         device = next(self.parameters()).device
         d, n_songs = self.config.act_dim, len(songs)
         lengths = [len(x) for x in songs]
         if self.pose_emb is None:
+            step = int(reset_every) if reset_every else max(max(lengths), 1)
             out = [
-                self._out(self.backbone(self.embed(x.to(device)[None], None)))[0].cpu().numpy()
+                np.concatenate(
+                    [
+                        self._out(
+                            self.backbone(self.embed(x[i : i + step].to(device)[None], None))
+                        )[0]
+                        .cpu()
+                        .numpy()
+                        for i in range(0, len(x), step)
+                    ]
+                )
                 for x in songs
             ]
             return out[0] if single else out
@@ -474,6 +492,8 @@ class MDLTMamba(nn.Module):
         prev = torch.zeros(n_songs, d, device=device)  # the zero start pose
         preds = torch.zeros(n_songs, T, d, device=device)
         for t in tqdm(range(T), disable=not progress, desc="MDLT-M"):
+            if reset_every and t and t % int(reset_every) == 0:
+                state = self.backbone.allocate_state(n_songs, device=device, dtype=x.dtype)
             y, state = self.backbone.step(self.embed(x[:, t], prev), state)
             preds[:, t] = self._out(y)
             prev = preds[:, t] if tp is None else tp[:, t]

@@ -526,7 +526,7 @@ def read_phantom_motion(path: str | Path, quaternion_order: str = "xyzw", rotati
 
 def load_phantomdance(
     root: str | Path,
-    fps: int = PHANTOM_FPS,
+    fps: int | None = None,
     cache_dir: str | Path | None | bool = None,
     paper_compat: bool = False,
     skip: Sequence[str] = (),
@@ -541,13 +541,16 @@ def load_phantomdance(
 
     Args:
         root: folder with ``motion/*.json`` and ``music/*.wav``.
-        fps: audio feature frames per second; default 30, the data set's pose rate, as the
-            authors' code used for PhantomDance (``DanceSequence.fps`` says which).
+        fps: audio feature frames per second (``DanceSequence.fps`` says which); ``None``:
+            60, as the thesis says (6.3.2: "60 times per second"), or with ``paper_compat``
+            30, the data set's pose rate, as the authors' code used for PhantomDance.
         skip: names to leave out (the authors skipped ``'000'``, broken in their download).
         quaternion_order, rotations, frame: how the motion files store rotations; the defaults
             are the official format (see :func:`read_phantom_motion`).
     """
     root = Path(root)
+    if fps is None:
+        fps = PHANTOM_FPS if paper_compat else 60
     if not root.is_dir():
         raise FileNotFoundError(f"No PhantomDance folder at {root}.")
     mdir, adir = root / "motion", root / "music"

@@ -31,6 +31,17 @@ the mean pose per genre, section and beat parity (told all three) 0.31 / 0.35; a
 one second of the 54 non-tempogram features, 1,500 updates, 0.46 / 0.44 (v5: 0.52 / 0.53).
 A model has to recover genre, section and beat from the audio.
 
+**Sizes** (:data:`SIZES`): ``smoke`` (6 pieces of 8 s per genre), ``full`` (6 of 32 s) and,
+for the C13 study, ``study``: 12 pieces of 60 s per genre with a song form (:func:`song_form`:
+intro without drums, verse/chorus sections of 2-8 bars, half-time breakdowns danced with the
+solo move) on AIST's tempo grid (:data:`TEMPO_GRID`: six tempos per genre, each shared by two
+of its pieces). The smoke and full sets are unchanged by the study size (byte-identical files).
+The tempogram is nearly constant within a piece in every size (between-piece share of its
+variance: smoke 0.67, study 0.70), but at the study size the nearest piece mean names a frame's
+piece 32% of the time among 120 pieces (smoke: 80% among 60;
+:func:`thesis_lib.chapters.mdlt.piece_fingerprint`), so a model can no longer tell each
+training piece apart by its tempogram alone.
+
 Poses are SMPL parameters of the project's skeleton (:mod:`.angles`); the four UR3 angles come
 from the same pipeline as for real data (forward kinematics -> :func:`angles.pose_to_ur3_angles`).
 
@@ -124,6 +135,8 @@ SIZES = {
     # per layout: pieces per genre (aist) or pieces (phantomdance), seconds per piece, dancers/music
     ("aist", "smoke"): dict(per_genre=6, seconds=8.0, dancers=2),
     ("aist", "full"): dict(per_genre=6, seconds=32.0, dancers=3),
+    # the study's (C13): minute-long songs with a form, twice the pieces per genre, one dancer
+    ("aist", "study"): dict(per_genre=12, seconds=60.0, dancers=1, form=True, tempo_grid=True),
     ("phantomdance", "smoke"): dict(n=20, seconds=8.0),
     ("phantomdance", "full"): dict(n=260, seconds=24.0),
 }
@@ -193,10 +206,44 @@ class Piece:
     bar_roots: np.ndarray  # (n_bars,) pitch class of each bar's chord root
     bar_chorus: np.ndarray  # (n_bars,) bool: chorus bars (louder, with an arpeggio)
     duration: float
+    bar_break: np.ndarray | None = None
+    """(n_bars,) bool: breakdown / intro bars (``form=True`` only): half-time or no drums."""
 
 
-def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUDIO_SR) -> Piece:
-    """Synthesise one piece of ``genre`` at ``bpm``, about ``seconds`` long (whole bars)."""
+def song_form(n_bars: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Chorus and breakdown flags per bar of a song with a form (the ``study`` size).
+
+    Two intro bars without drums, then sections of 2-8 bars: verse, chorus, verse, chorus, ...
+    with a two-bar half-time breakdown after every second chorus, section lengths drawn per
+    piece. Real songs change their rhythm within a piece; the smoke set's pieces do not.
+
+    Returns:
+        ``(chorus, breakdown)``: (n_bars,) bool each; intro bars count as breakdown bars.
+    """
+    chorus = np.zeros(n_bars, bool)
+    brk = np.zeros(n_bars, bool)
+    brk[: min(2, n_bars)] = True
+    b, k = 2, 0
+    while b < n_bars:
+        if k % 4 == 3:  # after every second chorus: a two-bar breakdown
+            brk[b : b + 2] = True
+            b += 2
+        else:
+            n = int(rng.choice([2, 4, 4, 8]))
+            chorus[b : b + n] = k % 2 == 1
+            b += n
+        k += 1
+    return chorus, brk
+
+
+def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUDIO_SR,
+                form: bool = False) -> Piece:  # fmt: skip
+    """Synthesise one piece of ``genre`` at ``bpm``, about ``seconds`` long (whole bars).
+
+    ``form``: a song form (:func:`song_form`: intro without drums, verse/chorus sections of
+    2-8 bars, half-time breakdowns); ``False``: two-bar verse/chorus alternation (the smoke and
+    full sets, unchanged).
+    """
     g = GENRES[genre]
     rng = _rng(seed, 1)
     spb = 60.0 / bpm
@@ -212,7 +259,11 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
     )
     degrees[0] = 0
     roots = (key + np.array([scale[d] for d in degrees])) % 12
-    chorus = (np.arange(n_bars) // 2) % 2 == 1  # sections of two bars: verse, chorus, verse ...
+    if form:
+        chorus, brk = song_form(n_bars, _rng(seed, 4))
+    else:
+        chorus = (np.arange(n_bars) // 2) % 2 == 1  # sections of two bars: verse, chorus, ...
+        brk = np.zeros(n_bars, bool)
     beat_times = lead_in + np.arange(n_bars * 4) * spb
     sixteenth = spb / 4
     snare, hat, crash = _snare(sr, rng, g.brightness), _hat(sr, rng, g.brightness), _crash(sr, rng)
@@ -220,9 +271,14 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
     for b in range(n_bars):
         bar_t = lead_in + b * 4 * spb
         gain = 1.0 if not chorus[b] else 1.4
-        # drums
+        # drums (none in the intro, half time in a breakdown)
+        intro = bool(brk[b]) and b < 2
         for s in range(16):
             t = bar_t + s * sixteenth + (g.swing * sixteenth if s % 2 else 0.0)
+            if brk[b]:
+                if not intro and s in (0, 8):  # half time: kick on 1, snare on 3
+                    _add(out, t, (_kick(sr, 1.3) if s == 0 else snare) * gain, sr)
+                continue
             if g.kick[s] == "x":
                 _add(out, t, _kick(sr, 1.0 if s else 1.3) * gain, sr)
             if g.snare[s] == "x":
@@ -231,7 +287,8 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
                 _add(out, t, hat * (1.3 if s % 4 == 0 else 0.8) * (1.0 if chorus[b] else 0.5), sr)
             if chorus[b] and s % 4 == 2:  # open hi-hat on the off-beats: the chorus is busier
                 _add(out, t, open_hat, sr)
-        _add(out, bar_t, crash * gain, sr)  # downbeat accent: the bar is audible
+        if not intro:
+            _add(out, bar_t, crash * gain, sr)  # downbeat accent: the bar is audible
         # harmony: a pad chord for the bar, a bass note per beat
         third = 3 if g.minor else 4
         chord = 48 + roots[b] + np.array([0, third, 7, 12])
@@ -270,7 +327,9 @@ def synth_music(genre: str, bpm: float, seconds: float, seed: int, sr: int = AUD
     # a -60 dB noise floor: recordings are never digitally silent, and pure zeros in the lead-in
     # would give MFCC outliers that squeeze every other frame in the min-max scaling
     out = out + 1e-3 * rng.standard_normal(n)
-    return Piece(out.astype(np.float32), float(bpm), beat_times, roots, chorus, n / sr)
+    return Piece(
+        out.astype(np.float32), float(bpm), beat_times, roots, chorus, n / sr, brk if form else None
+    )
 
 
 # ----------------------------------------------------------------------------- dance
@@ -366,7 +425,9 @@ def choreograph(
     kf_vs: list[np.ndarray] = []
     for b, root in enumerate(piece.bar_roots):
         m = 1 if piece.bar_chorus[b] else 0
-        if rng.random() < dancer.improvise:
+        if piece.bar_break is not None and piece.bar_break[b]:
+            m = 2  # a song with a form: the breakdown gets the solo move
+        elif rng.random() < dancer.improvise:
             m = int(rng.choice([1 - m, 2]))
         v = center + dancer.amplitude * (moves[m] - center) + offsets[root] + dancer.bias
         for half in range(2):  # the two-beat move, twice per bar
@@ -512,19 +573,31 @@ def _dump(path: Path, obj) -> None:
         pickle.dump(obj, f, protocol=4)
 
 
-def _tempo(genre: str, k: int, n: int, rng: np.random.Generator) -> float:
+def _tempo(genre: str, k: int, n: int, rng: np.random.Generator, grid: bool = False) -> float:
     lo, hi = GENRES[genre].bpm
-    return float(np.clip(lo + (hi - lo) * k / max(n - 1, 1) + rng.uniform(-2, 2), 80, 135))
+    jitter = rng.uniform(-2, 2)  # drawn either way: the rest of the piece's draws stay put
+    if grid:  # AIST's: six tempos per genre, shared by the pieces k, k + 6, ...
+        return float(lo + (hi - lo) * (k % TEMPO_GRID) / (TEMPO_GRID - 1))
+    return float(np.clip(lo + (hi - lo) * k / max(n - 1, 1) + jitter, 80, 135))
+
+
+TEMPO_GRID = 6
+"""Tempos per genre of the ``study`` size: as AIST's music (six pieces per genre at 80, 90 ...
+130 BPM for most genres), so several pieces share each tempo and a tempogram names the tempo,
+not the piece."""
 
 
 def write_aist_layout(root: str | Path, per_genre: int = 6, seconds: float = 8.0, dancers: int = 2,
-                      seed: int = 0, genres: tuple[str, ...] | None = None, progress: bool = True) -> Path:  # fmt: skip
+                      seed: int = 0, genres: tuple[str, ...] | None = None, progress: bool = True,
+                      form: bool = False, tempo_grid: bool = False) -> Path:  # fmt: skip
     """Write a synthetic data set in the AIST++ layout under ``root`` (see module docstring).
 
     Writes ``motions/``, ``keypoints3d/``, ``keypoints2d/`` (timestamps; one orthographic view),
     ``splits/crossmodal_{train,val,test}.txt`` (pieces 0-3 / 4 / 5 of each genre),
     ``ignore_list.txt`` (one extra sequence) and ``wav/mXX#.wav``; ``dancers`` sequences per music
-    (the reader keeps the first by name unless ``all_sequences=True``).
+    (the reader keeps the first by name unless ``all_sequences=True``). ``form``: songs with a
+    form (:func:`song_form`); ``tempo_grid``: tempos on the genre's grid of
+    :data:`TEMPO_GRID` (pieces ``k`` and ``k + 6`` share one); both as the ``study`` size.
     """
     root = Path(root)
     for sub in ("motions", "keypoints3d", "keypoints2d", "splits", "wav"):
@@ -542,7 +615,13 @@ def write_aist_layout(root: str | Path, per_genre: int = 6, seconds: float = 8.0
         gi = list(GENRES).index(g)
         rng = _rng(seed, 10, gi, k)
         music_id = f"{g}{k}"
-        piece = synth_music(g, _tempo(g, k, per_genre, rng), seconds, seed=int(rng.integers(2**31)))
+        piece = synth_music(
+            g,
+            _tempo(g, k, per_genre, rng, tempo_grid),
+            seconds,
+            seed=int(rng.integers(2**31)),
+            form=form,
+        )
         _write_wav(root / "wav" / f"{music_id}.wav", piece.audio, AUDIO_SR)
         for d in range(dancers):
             dancer_no = 1 + (gi * 3 + (k + d) % 3) % 30
@@ -633,8 +712,10 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
     Args:
         layout: ``"aist"`` (10 genres x 6 pieces, :func:`readers.load_aist`) or
             ``"phantomdance"`` (:func:`readers.load_phantomdance`).
-        size: ``"smoke"`` (8 s pieces, 2 dancers per music / 20 pieces) or ``"full"``
-            (32 s pieces, 3 dancers / 260 pieces of 24 s, PhantomDance's count).
+        size: ``"smoke"`` (8 s pieces, 2 dancers per music / 20 pieces), ``"full"``
+            (32 s pieces, 3 dancers / 260 pieces of 24 s, PhantomDance's count) or, AIST++
+            layout only, ``"study"`` (the C13 study's: 12 pieces per genre of 60 s with a song
+            form, :func:`song_form`, one dancer each).
         seed: everything generated is a function of it.
         root: where to write; default :func:`default_root`. An existing complete set is reused.
 
@@ -643,7 +724,9 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
     """
     if (layout, size) not in SIZES:
         raise ValueError(
-            f"Unknown layout/size {layout!r}/{size!r}. Valid layouts: 'aist', 'phantomdance'; sizes: 'smoke', 'full'."
+            f"Unknown layout/size {layout!r}/{size!r}. Valid: "
+            + ", ".join(f"{a}/{b}" for a, b in SIZES)
+            + "."
         )
     root = Path(root) if root is not None else default_root(layout, size, seed)
     marker = root / ".complete.json"
@@ -690,6 +773,8 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
                 dancers=int(p["dancers"]),
                 seed=seed,
                 progress=progress,
+                form=bool(p.get("form", False)),
+                tempo_grid=bool(p.get("tempo_grid", False)),
             )
         else:
             write_phantomdance_layout(

@@ -215,18 +215,25 @@ def save_checkpoint(
     model: MDLTTransformer | MDLTMamba,
     scaler: Any = None,
     meta: dict | None = None,
+    half: bool = False,
 ) -> Path:
     """Write a model-only checkpoint that :func:`load_checkpoint` (and ``thesis mdlt dance``) reads.
+
+    ``half``: store the floating-point weights as float16 (half the file; loading casts them
+    back to the model's float32), as the packaged checkpoint does.
 
     Used in: MDLT chapter (thesis 6.5).
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    state = model.state_dict()
+    if half:
+        state = {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
     torch.save(
         {
             "model_class": type(model).__name__,
             "model_config": asdict(model.config),
-            "model": model.state_dict(),
+            "model": state,
             "scaler": _to_safe(scaler.state_dict()) if scaler is not None else None,
             "meta": _to_safe(dict(meta or {})),
         },

@@ -25,6 +25,7 @@ __all__ = [
     "DanceResult",
     "animate_arm",
     "dance",
+    "packaged_checkpoint",
     "plot_angles",
     "ur3_joint_positions",
 ]
@@ -49,9 +50,29 @@ class DanceResult(NamedTuple):
     """``time_s`` and one column per joint (what the CSV holds)."""
 
 
+PACKAGED_CHECKPOINT = "mdlt_packaged.pt"
+"""File name of the small checkpoint shipped in ``thesis_lib/mdlt/assets`` (see the README)."""
+
+
+def packaged_checkpoint() -> Path:
+    """The MDLT checkpoint shipped with the package, used by :func:`dance` (and ``thesis mdlt
+    dance``) when no checkpoint is given. Made by ``thesis mdlt train`` (the README says how).
+
+    Raises:
+        FileNotFoundError: The package was installed without its data files.
+    """
+    path = Path(__file__).resolve().parent / "assets" / PACKAGED_CHECKPOINT
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"No packaged MDLT checkpoint at {path}: the package was installed without its data "
+            "files. Train one with 'thesis mdlt train --out ckpt.pt' and pass --checkpoint."
+        )
+    return path
+
+
 def dance(
     audio: str | os.PathLike,
-    checkpoint: str | os.PathLike,
+    checkpoint: str | os.PathLike | None = None,
     out: str | os.PathLike | None = None,
     plot: str | os.PathLike | None = None,
     animation: str | os.PathLike | None = None,
@@ -68,7 +89,8 @@ def dance(
         audio: Any audio file librosa reads (wav, flac, ogg, mp3 with a backend); resampled
             to the feature rate.
         checkpoint: An MDLT checkpoint carrying its feature scaler
-            (:func:`thesis_lib.mdlt.train.load_checkpoint`).
+            (:func:`thesis_lib.mdlt.train.load_checkpoint`); ``None``: the packaged one
+            (:func:`packaged_checkpoint`).
         out: Write the angles as CSV (``time_s`` + one column per joint, radians).
         plot: Write a PNG of the four angle curves.
         animation: Write the arm's motion as a GIF (``.gif``) or an HTML5 page (``.html``).
@@ -87,6 +109,8 @@ def dance(
     audio = Path(audio)
     if not audio.is_file():
         raise FileNotFoundError(f"No audio file at '{audio}'.")
+    if checkpoint is None:
+        checkpoint = packaged_checkpoint()
     model, scaler, meta = load_checkpoint(checkpoint, device=device)
     fps = int(meta.get("fps", 60))
     feats = scaler.transform(audio_features(audio, fps=fps))

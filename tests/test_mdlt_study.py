@@ -1,0 +1,232 @@
+"""The MDLT study (claim C13): its data size, grid, per-run rows, metric, the packaged
+checkpoint and the two undocumented choices (PhantomDance fps, MDLT-M's windows)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from thesis_lib.chapters import mdlt as ex
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_higher_is_better_columns_on_a_hand_case():
+    assert ex.neg_aje(0.4) == -0.4 and ex.neg_aje(0.2) > ex.neg_aje(0.4)
+    assert ex.gain_vs_mean_pose(0.25, 0.5) == pytest.approx(0.5)
+    assert ex.gain_vs_mean_pose(0.5, 0.5) == 0.0 and ex.gain_vs_mean_pose(0.6, 0.5) < 0
+    assert ex.study_label("MDLT-T", ex.ALL_SCOPE) == "MDLT-T (all genres)"
+
+
+def test_piece_fingerprint_between_share_and_identification():
+    rng = np.random.default_rng(0)
+    # tempogram constant within a piece and different between pieces: share 1, named always
+    const = [NS(features=np.tile(rng.random(438), (50, 1)).astype(np.float32)) for _ in range(4)]
+    fp = ex.piece_fingerprint(const, "tempogram", frames_per_piece=20)
+    assert fp["between_share"] == pytest.approx(1.0) and fp["id_accuracy"] == 1.0
+    assert fp["pieces"] == 4 and fp["chance"] == 0.25
+    # the same distribution in every piece: share near 0, naming near chance
+    noise = [NS(features=rng.random((400, 438)).astype(np.float32)) for _ in range(4)]
+    fp = ex.piece_fingerprint(noise, "tempogram", frames_per_piece=100)
+    assert fp["between_share"] < 0.01 and fp["id_accuracy"] < 0.6
+    with pytest.raises(ValueError, match="Unknown feature group"):
+        ex.piece_fingerprint(noise, "tempo")
+
+
+def test_aist_folds_group_pieces_beyond_six():
+    seqs = [NS(genre="mHO", music_id=f"mHO{k:02d}", name=str(k)) for k in range(12)]
+    folds = ex.aist_folds(seqs, "mHO", 6)
+    assert len(folds) == 6
+    assert [s.name for s in folds[0][1]] == ["0", "6"] and len(folds[0][0]) == 10
+    held = sorted(int(s.name) for _, val in folds for s in val)
+    assert held == list(range(12))  # every piece held out exactly once
+    six = ex.aist_folds(seqs[:6], "mHO", 6)  # the thesis's: one piece per fold
+    assert [[s.name for s in v] for _, v in six] == [[str(k)] for k in range(6)]
+
+
+def test_study_file_parses_and_builds_its_grid():
+    from thesis_lib.book.study import load_study, study_config, study_tasks
+
+    study = load_study(REPO / "params" / "06_mdlt.study.yml")
+    assert study.chapter == "06_mdlt" and study.metric == "neg_aje"
+    cfg = study_config(study)
+    assert cfg.data_size == "study" and cfg.n_folds == 6 and len(cfg.study_seeds) >= 3
+    cfg = ex.Config(**{**study.config, "genres": ["mBR", "mHO"]})  # no data needed
+    tasks = ex.study_tasks(cfg)
+    per_seed = 2 * (1 + len(cfg.variants)) + (1 + len(cfg.variants) + 1)  # 2 genres + all
+    assert len(tasks) == per_seed * len(cfg.study_seeds)
+    assert {t.config["method"] for t in tasks} == {"baselines", "transformer", "mamba", "probe"}
+    assert {t.config["seed"] for t in tasks} == set(cfg.study_seeds)
+    assert all(t.config["folds"] == list(range(6)) for t in tasks)
+    probe = next(t for t in tasks if t.config["method"] == "probe")
+    assert probe.config["cfg"]["mute_features"] == ["tempogram"]
+    assert len({t.key for t in tasks}) == len(tasks)
+    assert len(study_tasks(study)) > len(ex.study_tasks(study_config(study)))  # + scale check
+
+
+TINY = dict(genres=["mHO"], n_folds=1, iterations=3, d_model=16, d_ff=32, n_layers=1,
+            K_mamba=8, variants=["transformer", "mamba"], study_seeds=[0])  # fmt: skip
+
+
+def test_study_run_rows_on_a_tiny_config():
+    tasks = ex.study_tasks(ex.Config(**TINY))
+    by = {(t.config["scope"], t.config["method"]): t for t in tasks}
+    base = pd.DataFrame(by[(ex.ALL_SCOPE, "baselines")].fn(by[(ex.ALL_SCOPE, "baselines")].config))
+    assert set(base.method) == {"mean pose (all genres)", "genre mean (all genres)"}
+    assert base.setting.nunique() == 10 and (base.songs == 1).all()
+    mp = base[base.method == "mean pose (all genres)"]
+    np.testing.assert_allclose(mp.gain_vs_mean_pose, 0.0, atol=1e-12)
+    t = by[(ex.PER_GENRE, "mamba")]
+    rows = pd.DataFrame(t.fn(t.config))
+    assert list(rows.method) == ["MDLT-M"] and list(rows.setting) == ["mHO"]
+    r = rows.iloc[0]
+    assert r.seed == 0 and r.scope == ex.PER_GENRE and r.scale == "study" and r.folds == 1
+    for c in ("aje", "neg_aje", "aje_mean_pose", "gain_vs_mean_pose", "fid", "aje_windowed"):
+        assert np.isfinite(r[c]), c
+    assert r.neg_aje == -r.aje and r.mismatch_cost == pytest.approx(r.aje - r.aje_windowed)
+
+
+def test_windowed_generation_restarts_the_state():
+    import torch
+
+    from thesis_lib.mdlt.models import MDLTConfig, build_model
+
+    torch.manual_seed(0)
+    m = build_model(MDLTConfig(variant="mamba", K=4, d_model=8, n_layers=1, pose_input=True))
+    m.eval()
+    x = np.random.default_rng(0).random((10, 438)).astype(np.float32)
+    whole, reset = m.generate(x), m.generate(x, reset_every=4)
+    np.testing.assert_allclose(whole[:4], reset[:4], atol=1e-6)  # the first window: the same
+    assert not np.allclose(whole[4:], reset[4:])
+    np.testing.assert_allclose(m.generate(x, reset_every=100), whole, atol=1e-6)
+    with pytest.raises(ValueError, match="reset_every"):
+        m.generate(x, reset_every=0)
+
+
+def test_phantomdance_fps_follows_the_text_unless_paper_compat():
+    assert ex.Config().phantom_fps() == 60
+    assert ex.Config(paper_compat=True).phantom_fps() == 30
+    assert ex.Config(paper_compat=True, pd_fps=60).phantom_fps() == 60
+    with pytest.raises(ValueError, match="pd_fps"):
+        ex.Config(pd_fps=25)
+
+
+def test_thesis_table_6_2_beside_an_empty_and_a_filled_study():
+    empty = ex.study_table_6_2(pd.DataFrame())
+    assert (empty["what differs"] == "not run").all() and len(empty) == 22
+    rows = pd.DataFrame(
+        [
+            {"method": m, "setting": g, "seed": s, "scope": sc, "scale": "study", "aje": a}
+            for s in (0, 1)
+            for g in ("mHO", "mBR")
+            for m, sc, a in (
+                ("MDLT-T", ex.PER_GENRE, 0.3),
+                ("MDLT-T (all genres)", ex.ALL_SCOPE, 0.5),
+                ("mean pose", ex.PER_GENRE, 0.4),
+            )
+        ]
+    )
+    t = ex.study_table_6_2(rows)
+    ours = t.dropna(subset=["ours"]).set_index(["genre", "variant"])["ours"]
+    assert ours[("mHO", "MDLT-T")] == pytest.approx(0.3)
+    assert ours[(ex.ALL_GENRES, "MDLT-T")] == pytest.approx(0.5)
+
+
+def test_beat_check_against_a_shuffled_control():
+    fps, n = 60, 600
+    feats = np.zeros((n, 438), np.float32)
+    feats[::30, ex.BEAT_COLUMN] = 1.0  # a beat every half second
+
+    def translate(f):  # a "translator" that hits a pose on every beat it hears
+        hit = f[:, ex.BEAT_COLUMN] > 0.5
+        out = np.zeros((len(f), 4))
+        phase = np.zeros(len(f))
+        last = -100
+        for i in range(len(f)):
+            last = i if hit[i] else last
+            phase[i] = i - last
+        out[:, 0] = np.exp(-phase / 5.0)
+        return out
+
+    r = ex.beat_check(translate(feats), feats, translate, shuffles=3, block_s=0.35, fps=fps)
+    assert r["beats"] == 20 and r["beat_align"] > r["beat_align_shuffled"]
+
+
+@pytest.mark.skipif(
+    not (REPO / "src/thesis_lib/mdlt/assets/mdlt_packaged.pt").is_file(),
+    reason="no packaged checkpoint in this checkout",
+)
+def test_thesis_mdlt_dance_without_checkpoint(tmp_path):
+    import soundfile as sf
+
+    from thesis_lib.mdlt.synth import synth_music
+    from thesis_lib.ur3.dance import map_dance
+    from thesis_lib.ur3.model import POSITION_LIMITS
+
+    assert (REPO / "src/thesis_lib/mdlt/assets/mdlt_packaged.pt").stat().st_size < 400_000
+    piece = synth_music("mPO", 118.0, 12.0, seed=7)
+    import librosa
+
+    y = librosa.resample(piece.audio, orig_sr=22050, target_sr=44100)
+    wav = tmp_path / "song.ogg"
+    sf.write(wav, np.stack([y, y], 1), 44100)  # a stereo OGG at 44.1 kHz, as a user's
+    out = tmp_path / "angles.csv"
+    res = subprocess.run(
+        [sys.executable, "-m", "thesis_lib.mdlt.cli", "dance", "--audio", str(wav),
+         "--out", str(out), "-q"],
+        capture_output=True, text=True, cwd=REPO, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    df = pd.read_csv(out)
+    a = df.drop(columns="time_s").to_numpy()
+    assert len(a) == pytest.approx(60 * piece.duration, abs=3) and np.isfinite(a).all()
+    assert np.abs(a).max() <= np.pi
+    q = map_dance(a)
+    assert ((q >= POSITION_LIMITS[:, 0]) & (q <= POSITION_LIMITS[:, 1])).all()
+    assert a.std(0).max() > 0.02  # it moves
+
+
+def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
+    from thesis_lib.cli import main
+    from thesis_lib.mdlt.train import load_checkpoint
+
+    out = tmp_path / "ckpt.pt"
+    rc = main(
+        ["mdlt", "train", "--out", str(out), "--recipe", "defaults", "--data-size", "smoke",
+         "--iterations", "3", "--d-model", "16", "--n-layers", "1", "-q"]
+    )  # fmt: skip
+    assert rc == 0 and out.is_file()
+    model, scaler, meta = load_checkpoint(out)
+    assert meta["variant"] == "mamba" and meta["pieces"] == 60 and meta["iterations"] == 3
+    assert model.config.d_model == 16 and scaler.min_.shape == (438,)
+    assert next(model.parameters()).dtype.is_floating_point  # float16 on disk, float32 loaded
+    with pytest.raises(SystemExit):
+        main(["mdlt", "train", "--out", str(out), "--variant", "gru"])
+
+
+@pytest.mark.skipif(
+    not (REPO / "src/thesis_lib/mdlt/assets/mdlt_packaged.pt").is_file(),
+    reason="no packaged checkpoint in this checkout",
+)
+def test_recorded_music_check_at_the_files_own_rate(tmp_path):
+    import soundfile as sf
+
+    from thesis_lib.mdlt.synth import synth_music
+
+    piece = synth_music("mHO", 120.0, 10.0, seed=3)
+    wav = tmp_path / "song.flac"
+    sf.write(wav, piece.audio, 22050)
+    r = ex.recorded_music_check(wav, shuffles=2)
+    assert r["sample_rate"] == 22050 and r["checkpoint"] == "mdlt_packaged.pt"
+    assert r["inside_ur3_limits"] and r["max_abs_angle"] <= np.pi
+    assert r["frames"] == pytest.approx(60 * piece.duration, abs=3) and r["beats"] > 5
+    for k in ("beat_align", "beat_align_shuffled", "std_0"):
+        assert np.isfinite(r[k]), k
+    table = ex.recorded_music_table()
+    assert len(table) >= 1 and "file" in table
