@@ -59,8 +59,15 @@ def test_study_file_parses_and_builds_its_grid():
     assert cfg.data_size == "study" and cfg.n_folds == 6 and len(cfg.study_seeds) >= 3
     cfg = ex.Config(**{**study.config, "genres": ["mBR", "mHO"]})  # no data needed
     tasks = ex.study_tasks(cfg)
-    per_seed = 2 * (1 + len(cfg.variants)) + (1 + len(cfg.variants) + 1)  # 2 genres + all
+    # 2 genres (baselines + variants) + all genres (baselines + variants + probe + TF variants)
+    per_seed = 2 * (1 + len(cfg.variants)) + (1 + len(cfg.variants) + 1 + len(cfg.variants))
     assert len(tasks) == per_seed * len(cfg.study_seeds)
+    tf = [t for t in tasks if t.config.get("recipe") == "teacher forcing"]
+    assert {t.config["scope"] for t in tf} == {ex.ALL_SCOPE}
+    assert {t.config["cfg"]["pose_noise"] for t in tf} == {0.0}
+    assert (
+        {t.config["cfg"]["pose_noise"] for t in tasks if t not in tf} == {cfg.pose_noise} != {0.0}
+    )
     assert {t.config["method"] for t in tasks} == {"baselines", "transformer", "mamba", "probe"}
     assert {t.config["seed"] for t in tasks} == set(cfg.study_seeds)
     assert all(t.config["folds"] == list(range(6)) for t in tasks)
@@ -230,3 +237,11 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
         assert np.isfinite(r[k]), k
     table = ex.recorded_music_table()
     assert len(table) >= 1 and "file" in table
+
+
+def test_teacher_forcing_runs_are_labelled_apart():
+    tasks = ex.study_tasks(ex.Config(**{**TINY, "genres": ["mHO"], "study_teacher_forcing": True}))
+    t = next(t for t in tasks if t.config.get("recipe") == "teacher forcing"
+             and t.config["method"] == "transformer")  # fmt: skip
+    rows = pd.DataFrame(t.fn(t.config))
+    assert set(rows.method) == {"MDLT-T TF (all genres)"} and rows.setting.nunique() == 10

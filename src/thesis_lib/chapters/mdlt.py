@@ -204,6 +204,9 @@ class Config:
     """Seeds of the C13 study (``params/06_mdlt.study.yml``; :func:`study_tasks`)."""
     study_probe: bool = True
     """The C13 study also runs the probe (:func:`probe_config`) on "All Genres", reported apart."""
+    study_teacher_forcing: bool = False
+    """The C13 study also trains each variant on "All Genres" with the thesis's plain teacher
+    forcing (``pose_noise`` 0), labelled ``"<variant> TF"`` and reported apart."""
     profile: str = "smoke"
     """Name of the parameter profile (recorded only)."""
 
@@ -1136,6 +1139,8 @@ PER_GENRE, ALL_SCOPE = "per genre", "all genres"
 """The two scopes of Table 6.2: a model per genre, or one model for all genres."""
 _METHOD_INDEX = {"transformer": 0, "mamba": 1, "mamba_audio": 2}
 PROBE_LABEL = "MDLT-M probe"
+TF_SUFFIX = "TF"
+"""Label suffix of the study's plain teacher-forcing runs (``study_teacher_forcing``)."""
 """The probe (:func:`probe_config`: audio-only MDLT-M, tempogram muted, batch 64) in the study."""
 
 
@@ -1210,8 +1215,9 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     :data:`ALL_SCOPE`), ``genre`` (the genre of a per-genre task; ``None`` for all genres),
     ``method`` (a variant, ``"probe"``, or ``"baselines"``: the mean pose and, for all
     genres, the genre-mean pose), ``folds`` (fold indices), ``seed``, ``cfg`` (the
-    :data:`TRAIN_FIELDS` of the chapter's :class:`Config`; ``seed`` is overridden) and
-    ``scale`` (``study`` or ``check``).
+    :data:`TRAIN_FIELDS` of the chapter's :class:`Config`; ``seed`` is overridden),
+    ``scale`` (``study`` or ``check``) and, for the plain teacher-forcing runs, ``recipe``
+    (``"teacher forcing"``: the method's label gains :data:`TF_SUFFIX`).
 
     Each fold trains the method on the fold's training pieces (held-out music: the fold's
     validation pieces are never trained on) and translates every validation piece from its
@@ -1236,6 +1242,8 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     method, scope = config["method"], config["scope"]
     if method == "probe":  # the task's cfg is already probe_config's
         variants, labels = ["mamba_audio"], [PROBE_LABEL]
+    elif config.get("recipe") == "teacher forcing":  # the task's cfg has pose_noise 0
+        variants, labels = [method], [f"{VARIANT_LABELS[method]} {TF_SUFFIX}"]
     elif method == "baselines":
         variants = ["mean_pose"] + (["genre_mean"] if scope == ALL_SCOPE else [])
         labels = [VARIANT_LABELS["mean_pose"], "genre mean"][: len(variants)]
@@ -1279,7 +1287,8 @@ def study_tasks(cfg: Config) -> list[Task]:
     """The tasks of the chapter's pre-registered study (``params/06_mdlt.study.yml``, C13):
     per genre (each of ``cfg.genres``, all when ``None``) and, with ``cfg.all_genres``, all
     genres; each of ``cfg.variants`` and the baselines (and, with ``cfg.study_probe``, the
-    probe on all genres), each of ``cfg.study_seeds``, every one of the first ``cfg.n_folds``
+    probe on all genres; with ``cfg.study_teacher_forcing``, each variant trained with plain
+    teacher forcing on all genres), each of ``cfg.study_seeds``, every one of the first ``cfg.n_folds``
     folds inside one task (:func:`study_run`).
 
     Used in: ``thesis study 06_mdlt`` (C13).
@@ -1316,6 +1325,19 @@ def study_tasks(cfg: Config) -> list[Task]:
                         },
                     )
                 )
+            if cfg.study_teacher_forcing and scope == ALL_SCOPE:
+                for m in cfg.variants:
+                    tf = {
+                        "data": data,
+                        "scope": scope,
+                        "genre": genre,
+                        "method": m,
+                        "folds": folds,
+                        "seed": int(seed),
+                        "cfg": {**train, "pose_noise": 0.0},
+                        "recipe": "teacher forcing",
+                    }
+                    tasks.append(Task(study_run, tf))
     return tasks
 
 
