@@ -358,7 +358,7 @@ def aist_folds(sequences: Sequence, genre: str | None, n_folds: int = 6) -> list
 
 def piece_fingerprint(
     sequences: Sequence, group: str = "tempogram", frames_per_piece: int = 200, seed: int = 0
-) -> dict[str, float]:
+) -> dict[str, Any]:
     """How much a feature group names the piece it comes from: the memorisation risk of C13.
 
     The features are min-max scaled over all ``sequences`` (as :class:`FeatureScaler` does) and
@@ -1618,9 +1618,10 @@ def run_mismatch(cfg: Config) -> pd.DataFrame:
 
     Used in: MDLT chapter (the two undocumented choices).
     """
+    from thesis_lib.mdlt.models import MDLTMamba
     from thesis_lib.mdlt.train import load_checkpoint
 
-    out = []
+    out: list[dict[str, Any]] = []
     if not cfg.all_genres:
         return pd.DataFrame(out)
     seqs = _cached_sequences("aist", *data_args(cfg))
@@ -1633,6 +1634,8 @@ def run_mismatch(cfg: Config) -> pd.DataFrame:
             if not path.is_file():
                 continue
             model, scaler, _ = load_checkpoint(path)
+            if not isinstance(model, MDLTMamba):  # only MDLT-M restarts its state
+                continue
             feats = [scaler.transform(s.features).astype(np.float32) for s in val]
             with torch.no_grad():
                 whole = model.generate(feats)
