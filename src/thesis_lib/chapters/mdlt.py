@@ -361,8 +361,9 @@ def piece_fingerprint(
 ) -> dict[str, Any]:
     """How much a feature group names the piece it comes from: the memorisation risk of C13.
 
-    The features are min-max scaled over all ``sequences`` (as :class:`FeatureScaler` does) and
-    restricted to ``group`` (:data:`~thesis_lib.mdlt.audio.FEATURE_SLICES`). Then:
+    The features are min-max scaled over all ``sequences`` (as
+    :class:`~thesis_lib.mdlt.audio.FeatureScaler` does) and restricted to ``group``
+    (:data:`~thesis_lib.mdlt.audio.FEATURE_SLICES`). Then:
 
     * ``between_share``: the share of the group's total variance (summed over its dimensions)
       that lies between the pieces' means; 1 = constant within a piece, 0 = the same mean in
