@@ -1308,37 +1308,17 @@ def study_tasks(cfg: Config) -> list[Task]:
     tasks = []
     for seed in cfg.study_seeds:
         for scope, genre in scopes:
+            base = {"data": data, "scope": scope, "genre": genre, "folds": folds, "seed": int(seed)}
             methods = ["baselines", *cfg.variants]
             if cfg.study_probe and scope == ALL_SCOPE:
                 methods.append("probe")
             for m in methods:
-                tasks.append(
-                    Task(
-                        study_run,
-                        {
-                            "data": data,
-                            "scope": scope,
-                            "genre": genre,
-                            "method": m,
-                            "folds": folds,
-                            "seed": int(seed),
-                            "cfg": probe if m == "probe" else train,
-                        },
-                    )
-                )
+                run = {**base, "method": m, "cfg": probe if m == "probe" else train}
+                tasks.append(Task(study_run, run))
             if cfg.study_teacher_forcing and scope == ALL_SCOPE:
+                tf = {"cfg": {**train, "pose_noise": 0.0}, "recipe": "teacher forcing"}
                 for m in cfg.variants:
-                    tf = {
-                        "data": data,
-                        "scope": scope,
-                        "genre": genre,
-                        "method": m,
-                        "folds": folds,
-                        "seed": int(seed),
-                        "cfg": {**train, "pose_noise": 0.0},
-                        "recipe": "teacher forcing",
-                    }
-                    tasks.append(Task(study_run, tf))
+                    tasks.append(Task(study_run, {**base, "method": m, **tf}))
     return tasks
 
 
