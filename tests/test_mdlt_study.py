@@ -13,6 +13,11 @@ import pandas as pd
 import pytest
 
 from thesis_lib.chapters import mdlt as ex
+from thesis_lib.mdlt.translate import (
+    PACKAGED_RECORDING,
+    PACKAGED_RECORDING_CREDIT,
+    packaged_recording,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -233,10 +238,36 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
     assert r["sample_rate"] == 22050 and r["checkpoint"] == "mdlt_packaged.pt"
     assert r["inside_ur3_limits"] and r["max_abs_angle"] <= np.pi
     assert r["frames"] == pytest.approx(60 * piece.duration, abs=3) and r["beats"] > 5
+    assert isinstance(r["beat_above_control"], bool)
     for k in ("beat_align", "beat_align_shuffled", "std_0"):
         assert np.isfinite(r[k]), k
-    table = ex.recorded_music_table()
-    assert len(table) >= 1 and "file" in table
+    table = ex.recorded_music_table()  # the packaged recording first, with its credit
+    first = table.iloc[0]
+    assert first["file"] == PACKAGED_RECORDING and first["licence"] == "CC BY-SA 3.0"
+    assert first["sample_rate"] == 44100 and first["seconds"] > 60
+    assert bool(first["inside_ur3_limits"]) and first["beats"] > 60  # ~140 bpm for 62 s
+
+
+def test_packaged_recording_is_recorded_music_with_its_credit():
+    import soundfile as sf
+
+    path = packaged_recording()
+    info = sf.info(str(path))
+    assert (info.samplerate, info.channels) == (44100, 1) and 60 < info.duration < 65
+    credit = (path.parent / "MUSIC.md").read_text()
+    for field in PACKAGED_RECORDING_CREDIT.values():
+        assert field.split(" (")[0] in credit, field
+    assert PACKAGED_RECORDING not in [p.name for p in ex.find_packaged_music()]
+
+
+def test_thesis_mdlt_dance_without_audio_dances_to_the_packaged_recording(tmp_path, capsys):
+    from thesis_lib.cli import main
+
+    out = tmp_path / "angles.csv"
+    assert main(["mdlt", "dance", "--out", str(out), "-q"]) == 0
+    assert "Will Savino" in capsys.readouterr().out  # the credit is printed
+    df = pd.read_csv(out)
+    assert len(df) == pytest.approx(60 * 62.3, abs=3) and df["time_s"].iloc[-1] > 62
 
 
 def test_teacher_forcing_runs_are_labelled_apart():

@@ -1494,7 +1494,8 @@ def recorded_music_check(
     feature rate as any input) with ``checkpoint`` (``None``: the packaged one) and check what a
     robot needs: the angles inside the UR3's joint limits (after the playback mapping of
     :func:`thesis_lib.ur3.dance.map_dance`), how much each joint moves, and the beat alignment
-    against a shuffled-audio control (:func:`beat_check`).
+    against a shuffled-audio control (:func:`beat_check`); ``beat_above_control``: the score
+    beats every shuffled control.
 
     Used in: MDLT chapter (recorded music).
     """
@@ -1529,13 +1530,15 @@ def recorded_music_check(
         "inside_ur3_limits": inside,
         "max_abs_angle": float(np.abs(angles).max()),
         **{f"std_{j}": float(angles[:, j].std()) for j in range(angles.shape[1])},
-        **beat_check(angles, raw, translate, shuffles=shuffles, seed=seed, fps=fps),
+        **(beats := beat_check(angles, raw, translate, shuffles=shuffles, seed=seed, fps=fps)),
+        "beat_above_control": bool(beats["beat_align"] > beats["shuffled_max"]),
     }
 
 
 def find_packaged_music(min_seconds: float = 20.0) -> list[Path]:
     """Audio files of at least ``min_seconds`` shipped inside the installed Python packages
-    (site-packages: ``.ogg``, ``.flac``, ``.wav``, ``.mp3``), for :func:`recorded_music_check`.
+    (site-packages: ``.ogg``, ``.flac``, ``.wav``, ``.mp3``), for :func:`recorded_music_check`;
+    thesis_lib's own recording is left out (:func:`recorded_music_table` adds it first).
     Nothing is downloaded; on this project's environment the list is empty.
 
     Used in: MDLT chapter (recorded music).
@@ -1544,11 +1547,15 @@ def find_packaged_music(min_seconds: float = 20.0) -> list[Path]:
 
     import soundfile as sf
 
+    from thesis_lib.mdlt.translate import PACKAGED_RECORDING
+
     found = []
     roots = {Path(p) for p in site.getsitepackages() + [site.getusersitepackages()]}
     for root in sorted(r for r in roots if r.is_dir()):
         for ext in ("ogg", "flac", "wav", "mp3"):
             for p in root.rglob(f"*.{ext}"):
+                if p.name == PACKAGED_RECORDING and p.parent.name == "assets":
+                    continue
                 try:
                     if sf.info(str(p)).duration >= min_seconds:
                         found.append(p)
@@ -1558,17 +1565,17 @@ def find_packaged_music(min_seconds: float = 20.0) -> list[Path]:
 
 
 def recorded_music_table(checkpoint: str | Path | None = None) -> pd.DataFrame:
-    """:func:`recorded_music_check` of every :func:`find_packaged_music` file (one row each);
-    one row saying so when there is none.
+    """:func:`recorded_music_check` of the recording shipped with the package
+    (:func:`thesis_lib.mdlt.translate.packaged_recording`, with its credit) and of every
+    :func:`find_packaged_music` file found in the installed packages: one row each.
 
     Used in: MDLT chapter (recorded music).
     """
-    files = find_packaged_music()
-    if not files:
-        return pd.DataFrame(
-            [{"file": "none found", "note": "no audio file >= 20 s in the installed packages"}]
-        )
-    return pd.DataFrame([recorded_music_check(f, checkpoint) for f in files])
+    from thesis_lib.mdlt.translate import PACKAGED_RECORDING_CREDIT, packaged_recording
+
+    rows = [{**recorded_music_check(packaged_recording(), checkpoint), **PACKAGED_RECORDING_CREDIT}]
+    rows += [recorded_music_check(f, checkpoint) for f in find_packaged_music()]
+    return pd.DataFrame(rows)
 
 
 def run_phantomdance_fps(cfg: Config, summary_6_3: pd.DataFrame) -> pd.DataFrame:

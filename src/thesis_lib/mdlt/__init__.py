@@ -53,6 +53,7 @@ from .translate import (
     animate_arm,
     dance,
     packaged_checkpoint,
+    packaged_recording,
     plot_angles,
     ur3_joint_positions,
 )

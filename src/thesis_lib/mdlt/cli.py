@@ -4,7 +4,8 @@
         [--plot angles.png] [--animation arm.gif]
     thesis mdlt train --out ckpt.pt [--variant mamba] [--iterations N] [--data-size study]
 
-``dance`` without ``--checkpoint`` uses the small checkpoint shipped in the package.
+``dance`` without ``--checkpoint`` uses the small checkpoint shipped in the package, and without
+``--audio`` the recording shipped in it (:func:`thesis_lib.mdlt.translate.packaged_recording`).
 
 Used in: MDLT chapter (thesis 6.5).
 """
@@ -16,10 +17,17 @@ import sys
 
 
 def _cmd_dance(args: argparse.Namespace) -> int:
-    from thesis_lib.mdlt.translate import dance
+    from thesis_lib.mdlt.translate import PACKAGED_RECORDING_CREDIT, dance, packaged_recording
 
+    audio = args.audio
+    if audio is None:
+        audio = packaged_recording()
+        c = PACKAGED_RECORDING_CREDIT
+        print(
+            f"No --audio: the packaged recording, '{c['title']}' by {c['artist']} ({c['licence']})."
+        )
     result = dance(
-        args.audio,
+        audio,
         args.checkpoint,
         out=args.out,
         plot=args.plot,
@@ -84,7 +92,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "dance", help="translate a music file into UR3 joint angles with a trained MDLT checkpoint"
     )
     d.add_argument(
-        "--audio", required=True, help="audio file (wav, flac, ogg, ...), any sample rate"
+        "--audio",
+        help="audio file (wav, flac, ogg, ...), any sample rate; default: the packaged recording "
+        "(Will Savino's 'Caribbean', CC BY-SA 3.0)",
     )
     d.add_argument(
         "--checkpoint",

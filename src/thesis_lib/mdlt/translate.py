@@ -26,6 +26,7 @@ __all__ = [
     "animate_arm",
     "dance",
     "packaged_checkpoint",
+    "packaged_recording",
     "plot_angles",
     "ur3_joint_positions",
 ]
@@ -66,6 +67,37 @@ def packaged_checkpoint() -> Path:
         raise FileNotFoundError(
             f"No packaged MDLT checkpoint at {path}: the package was installed without its data "
             "files. Train one with 'thesis mdlt train --out ckpt.pt' and pass --checkpoint."
+        )
+    return path
+
+
+PACKAGED_RECORDING = "savino_caribbean.ogg"
+"""File name of the recorded music shipped in ``thesis_lib/mdlt/assets``: Will Savino's
+"Caribbean" from HyperRogue's soundtrack (CC BY-SA 3.0, Debian's ``hyperrogue-music``), the
+whole 62-s track at its own 44.1 kHz, downmixed to mono and re-encoded as Ogg Vorbis. The credit
+and licence are in ``assets/MUSIC.md``; :data:`PACKAGED_RECORDING_CREDIT` gives them as fields."""
+
+PACKAGED_RECORDING_CREDIT = {
+    "title": "Caribbean",
+    "artist": "Will Savino",
+    "licence": "CC BY-SA 3.0",
+    "source": "Debian package hyperrogue-music 12.0q-1 (music/hr-savino-caribbean.ogg)",
+}
+"""Credit of :data:`PACKAGED_RECORDING`, as the licence requires."""
+
+
+def packaged_recording() -> Path:
+    """The recorded music shipped with the package (:data:`PACKAGED_RECORDING`): real music the
+    book does not synthesise, for trying the translator (``thesis mdlt dance --audio``) without
+    finding a file first. Nothing is downloaded.
+
+    Raises:
+        FileNotFoundError: The package was installed without its data files.
+    """
+    path = Path(__file__).resolve().parent / "assets" / PACKAGED_RECORDING
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"No packaged recording at {path}: the package was installed without its data files."
         )
     return path
 
