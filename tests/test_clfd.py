@@ -279,25 +279,10 @@ def test_reader_reads_videos(tmp_path):
         read_multiview_folder(tmp_path)
 
 
-def test_chapter_experiments_at_tiny_scale(tmp_path, monkeypatch):
+def test_chapter_experiments_at_tiny_scale(clfd_tiny, tmp_path):
     from thesis_lib.chapters import clfd as ex
 
-    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
-    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
-    cfg = ex.Config(
-        n_demos=3,
-        image_size=16,
-        encoders=["tcn"],
-        methods=["clfd", "tcn"],
-        epochs=1,
-        eval_every=1,
-        tcn_width=4,
-        mlp_epochs=5,
-        rl_methods=["clfd"],
-        rl_episodes=2,
-        rl_steps=3,
-        compat_encoders=["tcn"],
-    )
+    cfg = ex.Config(**clfd_tiny, rl_episodes=2, compat_encoders=["tcn"])
     t41 = ex.run_table_4_1(cfg)
     assert list(t41["method"]) == ["untrained", "CLfD", "TCN"]
     assert t41["alignment_error_pct"].between(0, 100).all()

@@ -74,28 +74,15 @@ def test_rl_success_curve_on_a_hand_made_run():
         ex.rl_success_curve(ep, 7, 0.03)
 
 
-TINY = dict(
-    n_demos=3,
-    image_size=16,
-    encoders=["tcn"],
-    methods=["clfd", "tcn"],
-    epochs=1,
-    eval_every=1,
-    tcn_width=4,
-    mlp_epochs=5,
-    rl_methods=["clfd"],
-    rl_episodes=4,
-    rl_steps=3,
-    rl_checkpoints=2,
-    rl_success_m=10.0,  # every episode ends within 10 m of the box: success 1 by hand
-    seeds=[3],
-)
-
-
-def test_study_tasks_give_one_row_per_run_with_finite_numbers(tmp_path, monkeypatch):
-    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
-    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
-    tasks = ex.study_tasks(ex.Config(**TINY))
+def test_study_tasks_give_one_row_per_run_with_finite_numbers(clfd_tiny, tmp_path):
+    tiny = {
+        **clfd_tiny,
+        "rl_episodes": 4,
+        "rl_checkpoints": 2,
+        "rl_success_m": 10.0,  # every episode ends within 10 m of the box: success 1 by hand
+        "seeds": [3],
+    }
+    tasks = ex.study_tasks(ex.Config(**tiny))
     assert len(tasks) == 2 + 2 + 2  # alignment x2, stage x2 (CLfD, untrained), RL x2
     rows = [r for t in tasks for r in t.fn(dict(t.config))]
     df = pd.DataFrame(rows)
@@ -202,20 +189,10 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     assert clfd.success.iloc[-1] == pytest.approx(0.8)
 
 
-def test_study_section_renders_before_the_study_ran(monkeypatch, tmp_path):
-    import matplotlib
-
-    matplotlib.use("Agg")
+def test_study_section_renders_before_the_study_ran(unstarted_study):
     from thesis_lib.book import evidence as evi
 
-    (tmp_path / "_toc.yml").write_text("root: intro\n")
-    (tmp_path / "params").mkdir()
-    text = (REPO / "params" / "02_clfd.study.yml").read_text()
-    (tmp_path / "params" / "02_clfd.study.yml").write_text(text)
-    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
-    ev = evi.load_evidence("02_clfd", reps=100)
-    assert "not run yet" in evi.status_line(ev) and ev.rows.empty
-    assert set(evi.comparisons_table(ev).verdict) == {"pending"}
+    ev = unstarted_study("02_clfd")
     assert ex.study_rl_curves(ev.rows).empty
     ex.plot_study_rl_curves(ex.study_rl_curves(ev.rows))
     t41, t42 = ex.study_tables_vs_thesis(ev.rows, {"scale": "test"})

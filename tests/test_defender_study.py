@@ -172,20 +172,10 @@ def test_study_file_parses_and_names_methods_study_tasks_makes(monkeypatch):
     assert check_recipe <= recipe
 
 
-def test_study_section_renders_before_the_study_ran(monkeypatch, tmp_path):
-    import matplotlib
-
-    matplotlib.use("Agg")
+def test_study_section_renders_before_the_study_ran(unstarted_study):
     from thesis_lib.book import evidence as evi
 
-    (tmp_path / "_toc.yml").write_text("root: intro\n")
-    (tmp_path / "params").mkdir()
-    text = (REPO / "params" / "03_defender.study.yml").read_text()
-    (tmp_path / "params" / "03_defender.study.yml").write_text(text)
-    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
-    ev = evi.load_evidence("03_defender", reps=100)
-    assert "not run yet" in evi.status_line(ev) and ev.rows.empty
-    assert set(evi.comparisons_table(ev).verdict) == {"pending"}
+    ev = unstarted_study("03_defender")
     assert ex.study_summary(ev.rows).empty and ex.study_curves(ev.rows).empty
     assert ex.study_topup_table(ev.rows).empty and ex.study_demo_sources(ev.rows).empty
     ex.plot_study_curves(ev.rows)
