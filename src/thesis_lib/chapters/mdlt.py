@@ -1547,14 +1547,14 @@ def find_packaged_music(min_seconds: float = 20.0) -> list[Path]:
 
     import soundfile as sf
 
-    from thesis_lib.mdlt.translate import PACKAGED_RECORDING
+    from thesis_lib.mdlt.translate import ASSETS
 
     found = []
     roots = {Path(p) for p in site.getsitepackages() + [site.getusersitepackages()]}
     for root in sorted(r for r in roots if r.is_dir()):
         for ext in ("ogg", "flac", "wav", "mp3"):
             for p in root.rglob(f"*.{ext}"):
-                if p.name == PACKAGED_RECORDING and p.parent.name == "assets":
+                if p.resolve().parent == ASSETS:  # thesis_lib's own (a non-editable install)
                     continue
                 try:
                     if sf.info(str(p)).duration >= min_seconds:

@@ -51,6 +51,21 @@ class DanceResult(NamedTuple):
     """``time_s`` and one column per joint (what the CSV holds)."""
 
 
+ASSETS = Path(__file__).resolve().parent / "assets"
+"""Folder of the files shipped with the package (checkpoint, recording, their credits)."""
+
+
+def _asset(name: str, what: str, hint: str = "") -> Path:
+    """``ASSETS / name``, or a FileNotFoundError that says the data files are missing."""
+    path = ASSETS / name
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"No packaged {what} at {path}: the package was installed without its data files."
+            + hint
+        )
+    return path
+
+
 PACKAGED_CHECKPOINT = "mdlt_packaged.pt"
 """File name of the small checkpoint shipped in ``thesis_lib/mdlt/assets`` (see the README)."""
 
@@ -62,13 +77,11 @@ def packaged_checkpoint() -> Path:
     Raises:
         FileNotFoundError: The package was installed without its data files.
     """
-    path = Path(__file__).resolve().parent / "assets" / PACKAGED_CHECKPOINT
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"No packaged MDLT checkpoint at {path}: the package was installed without its data "
-            "files. Train one with 'thesis mdlt train --out ckpt.pt' and pass --checkpoint."
-        )
-    return path
+    return _asset(
+        PACKAGED_CHECKPOINT,
+        "MDLT checkpoint",
+        " Train one with 'thesis mdlt train --out ckpt.pt' and pass --checkpoint.",
+    )
 
 
 PACKAGED_RECORDING = "savino_caribbean.ogg"
@@ -94,12 +107,7 @@ def packaged_recording() -> Path:
     Raises:
         FileNotFoundError: The package was installed without its data files.
     """
-    path = Path(__file__).resolve().parent / "assets" / PACKAGED_RECORDING
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"No packaged recording at {path}: the package was installed without its data files."
-        )
-    return path
+    return _asset(PACKAGED_RECORDING, "recording")
 
 
 def dance(
