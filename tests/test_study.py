@@ -257,6 +257,14 @@ def test_claim_readings_say_where_we_differ_and_why(project):
     assert (
         read.loc["C2", "ours"] == "fails" and "may differ because of" in read.loc["C2", "reading"]
     )
+    assert "the data" in read.loc["C2", "reading"]
+    own = evi.claim_readings(
+        evi.load_evidence("04_hdt", reps=200), reps=200, claim_notes={"C2": "the hardware"}
+    ).set_index("claim")
+    assert "the hardware" in own.loc["C2", "reading"] and "the data" not in own.loc["C2", "reading"]
+    assert own.loc["C3", "reading"] == read.loc["C3", "reading"]
+    with pytest.raises(ValueError, match="C9"):
+        evi.claim_readings(evi.load_evidence("04_hdt", reps=200), claim_notes={"C9": "x"})
 
 
 def test_aggregate_table_and_performance_profiles(project):

@@ -27,6 +27,7 @@ every chapter that gets a study.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -439,6 +440,7 @@ def claim_readings(
     data_note: str = "the data (our data sets are made here, not the thesis's)",
     reps: int = 10_000,
     secondary: bool = True,
+    claim_notes: Mapping[str, str] | None = None,
 ) -> pd.DataFrame:
     """Per claim of the study: our verdict, the verdict on the thesis's metric, whether the
     scale check kept the ranking, and one sentence that says where we differ from the thesis
@@ -452,10 +454,20 @@ def claim_readings(
         secondary: judge the comparisons on the study's secondary metric too, with the same
             margins; set ``False`` where the secondary metric has other units than the
             primary (UR3: the share of test starts reaching all five goals).
+        claim_notes: a claim's own reason, used for it instead of ``data_note`` where the
+            data cannot be why (C6's timings: the hardware), e.g.
+            ``{"C6": "the hardware (CPU times here, GPU times in the thesis)"}``.
+
+    Raises:
+        ValueError: ``claim_notes`` names a claim the study does not answer.
     """
     from thesis_lib.stats.claims import CLAIMS, claim_verdicts
 
     claims = list(dict.fromkeys(s["claim"] for s in ev.study.comparisons))
+    claim_notes = dict(claim_notes or {})
+    unknown = sorted(set(claim_notes) - set(claims))
+    if unknown:
+        raise ValueError(f"claim_notes names {unknown}; this study answers {claims}")
     if not ev.complete or ev.comparisons.empty:
         return pd.DataFrame(
             {
@@ -490,7 +502,7 @@ def claim_readings(
                 why.append("the metric (on the thesis's best-during-training metric it holds)")
             if same_rank is False:
                 why.append("the scale (the scale check ranked the methods differently)")
-            why.append(data_note)
+            why.append(claim_notes.get(cl, data_note))
             text += " It may differ because of " + "; ".join(why) + "."
         elif v2 not in ("holds", "n/a"):
             text += f" On the thesis's metric it is {v2}."
