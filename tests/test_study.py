@@ -267,6 +267,27 @@ def test_claim_readings_say_where_we_differ_and_why(project):
         evi.claim_readings(evi.load_evidence("04_hdt", reps=200), claim_notes={"C9": "x"})
 
 
+def test_claim_readings_name_the_comparison_that_decided_the_verdict(project):
+    from thesis_lib.book import evidence as evi
+
+    two = {
+        **STUDY,
+        "comparisons": [
+            {"claim": "C3", "x": "HDT", "y": "DT", "kind": "superior", "margin": 2.0},
+            {"claim": "C3", "x": "DT", "y": "HDT", "kind": "superior", "label": "the other way"},
+            {"claim": "C2", "x": "HDT", "y": "DT", "kind": "superior", "margin": 2.0},
+        ],
+    }
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(two))
+    st.run_study("04_hdt", progress=False)
+    read = evi.claim_readings(evi.load_evidence("04_hdt", reps=200), reps=200).set_index("claim")
+    # C3's headline (HDT vs DT, +10) holds, but its second comparison fails: so does C3
+    c3 = read.loc["C3", "reading"]
+    assert read.loc["C3", "ours"] == "fails" and "effect 10 [" in c3
+    assert "Decided by the other way (score): fails, effect -10 [" in c3
+    assert "Decided by" not in read.loc["C2", "reading"]  # its headline is its verdict
+
+
 def test_aggregate_table_and_performance_profiles(project):
     import matplotlib
 
