@@ -202,6 +202,24 @@ def test_committed_studies_match_their_parameter_files(run_json, monkeypatch):
     )
 
 
+COMPLETE = [p.parent.name for p in COMMITTED if json.loads(p.read_text()).get("complete")]
+
+
+@pytest.mark.skipif(not COMPLETE, reason="no complete study committed yet")
+def test_committed_claims_follow_from_the_committed_rows(monkeypatch):
+    """studies/claims.csv holds, for every complete study, what the rule gives on its rows."""
+    from thesis_lib.stats.claims import claim_verdicts
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    committed = pd.read_csv(REPO / "studies" / "claims.csv").set_index("claim")
+    for chapter in COMPLETE:
+        for r in claim_verdicts(st.evaluate_study(chapter)).itertuples():
+            c = committed.loc[r.claim]
+            assert c.chapter == chapter and c.verdict == r.verdict, (r.claim, "run thesis claims")
+            assert c.effect == pytest.approx(r.effect) and c.ci_low == pytest.approx(r.ci_low)
+            assert c.ci_high == pytest.approx(r.ci_high)
+
+
 # ------------------------------------------------------------------ a chapter's evidence section
 
 
@@ -286,6 +304,16 @@ def test_claim_readings_name_the_comparison_that_decided_the_verdict(project):
     assert read.loc["C3", "ours"] == "fails" and "effect 10 [" in c3
     assert "Decided by the other way (score): fails, effect -10 [" in c3
     assert "Decided by" not in read.loc["C2", "reading"]  # its headline is its verdict
+    # claims.csv and the Claims page's ledger say it too
+    from thesis_lib.chapters.claims import ledger_table
+
+    claims = st.write_claims(reps=200)
+    by = pd.read_csv(project / "studies" / "claims.csv").set_index("claim")
+    assert by.loc["C3", "decided_by"].startswith("the other way (score): fails, effect -10 [")
+    assert pd.isna(by.loc["C2", "decided_by"])
+    ours = ledger_table(claims).set_index("claim").ours
+    assert "; decided by the other way (score): fails" in ours["C3"]
+    assert "decided by" not in ours["C2"]
 
 
 def test_aggregate_table_and_performance_profiles(project):

@@ -435,24 +435,6 @@ def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
     )
 
 
-def _deciding(comparisons: pd.DataFrame, claim: str, verdict: str) -> str:
-    """Where a claim's verdict is not its headline comparison's (the first counted one), the
-    comparisons that decided it: ``" Decided by: <label>: fails [lo, hi]."``; else ``""``."""
-    grp = comparisons[comparisons["claim"] == claim]
-    if "counts" in grp:
-        counted = grp[grp["counts"].astype(bool)]
-        grp = counted if len(counted) else grp
-    if grp.empty or grp.iloc[0]["verdict"] == verdict:
-        return ""
-    deciding = grp[grp["verdict"] == verdict]
-    parts = [
-        f"{c.label or f'{c.x} vs {c.y}'} ({c.metric}): {c.verdict}, effect {c.effect:.3g} "
-        f"[{c.ci_low:.3g}, {c.ci_high:.3g}]"
-        for c in deciding.itertuples()
-    ]
-    return " Decided by " + "; ".join(parts) + "."
-
-
 def claim_readings(
     ev: Evidence,
     data_note: str = "the data (our data sets are made here, not the thesis's)",
@@ -516,7 +498,8 @@ def claim_readings(
             f"P(X>Y) {r['prob_improvement']:.2f}, {int(r['seeds'])} seeds x "
             f"{int(r['settings'])} settings."
         )
-        text += _deciding(ev.comparisons, cl, r["verdict"])
+        if r["decided_by"]:
+            text += f" Decided by {r['decided_by']}."
         if r["verdict"] != "holds":
             why = []
             if v2 == "holds":

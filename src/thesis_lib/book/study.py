@@ -333,6 +333,7 @@ CLAIMS_COLUMNS = [
     "prob_improvement",
     "seeds",
     "settings",
+    "decided_by",
     "chapter",
     "study",
     "study_commit",

@@ -47,7 +47,11 @@ def _fmt(x: Any, digits: int = 3) -> str:
 
 
 def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
-    """Per claim: the statement, the thesis's evidence, ours, the verdict and the chapter."""
+    """Per claim: the statement, the thesis's evidence, ours, the verdict and the chapter.
+
+    "ours" is the headline comparison's effect and interval, and, where another comparison
+    gave the verdict, that one too (``decided_by``).
+    """
     by = claims.set_index("claim")
     rows = []
     for cid, (section, statement) in CLAIMS.items():
@@ -62,6 +66,9 @@ def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
                 f"P(X>Y) {_fmt(r['prob_improvement'], 2)}, {int(r['seeds'])} seeds x "
                 f"{int(r['settings'])} settings"
             )
+            decided = r.get("decided_by", "")
+            if isinstance(decided, str) and decided:
+                ours += f"; decided by {decided}"
         rows.append(
             {
                 "claim": cid,

@@ -156,12 +156,20 @@ def evaluate_comparisons(
     return pd.DataFrame(out)
 
 
+def _name(r: Any) -> str:
+    """A comparison's label, or ``x vs y`` where it has none."""
+    label = getattr(r, "label", "")
+    return str(label) if isinstance(label, str) and label else f"{r.x} vs {r.y}"
+
+
 def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
     """Fold comparisons into one row per claim.
 
     A claim *holds* when every comparison of it holds, *fails* when any fails, and is
     *inconclusive* otherwise. Its effect and interval are those of its first comparison
-    (the study file lists the headline comparison first). Comparisons pre-registered with
+    (the study file lists the headline comparison first); where the verdict is not the
+    headline's, ``decided_by`` names the comparisons that gave it (else it is empty).
+    Comparisons pre-registered with
     ``counts: false`` (reported apart, e.g. C3's sparse-reward settings) are listed but do
     not take part in the verdict.
     """
@@ -179,6 +187,7 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
             else ("inconclusive")
         )
         head = counted.iloc[0]
+        deciding = counted[counted["verdict"] == verdict] if head["verdict"] != verdict else grp[:0]
         rows.append(
             {
                 "claim": claim,
@@ -190,6 +199,11 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
                 "prob_improvement": head["prob_improvement"],
                 "seeds": int(grp["seeds"].min()),
                 "settings": int(grp["settings"].max()),
+                "decided_by": "; ".join(
+                    f"{_name(r)} ({r.metric}): {r.verdict}, effect {r.effect:.3g} "
+                    f"[{r.ci_low:.3g}, {r.ci_high:.3g}]"
+                    for r in deciding.itertuples()
+                ),
                 "comparisons": "; ".join(
                     f"{r.x} vs {r.y} ({r.metric}"
                     + ("" if getattr(r, "counts", True) else ", reported apart")
