@@ -265,6 +265,24 @@ def test_scale_check_table_ranks_both_scales(project):
     assert t.loc["DT", "seeds (check)"] == 3
 
 
+def test_thesis_study_runs_several_in_order_and_status_writes_nothing_before_a_run(project, capsys):
+    from thesis_lib.cli import main
+
+    other = {**STUDY, "study": "fake-05-v1", "chapter": "05_decision_mamba"}
+    (project / "params" / "05_decision_mamba.study.yml").write_text(yaml.safe_dump(other))
+    assert main(["study", "04_hdt", "05_decision_mamba", "--status"]) == 0
+    assert '"tasks_done": 0' in capsys.readouterr().out
+    assert not (project / "studies").exists()  # --status on unstarted studies leaves no files
+    assert main(["study", "04_hdt", "06_nope"]) == 1  # a typo fails before any study runs
+    assert "No study file" in capsys.readouterr().err and not CALLS
+    assert main(["study", "04_hdt", "05_decision_mamba"]) == 0
+    assert len(CALLS) == 2 * 20  # both grids, one after the other
+    for ch in ("04_hdt", "05_decision_mamba"):
+        assert json.loads((project / "studies" / ch / "run.json").read_text())["complete"]
+    main(["study", "04_hdt", "--status"])
+    assert '"tasks_done": 20' in capsys.readouterr().out
+
+
 def test_claim_readings_say_where_we_differ_and_why(project):
     from thesis_lib.book import evidence as evi
 

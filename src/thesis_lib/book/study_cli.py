@@ -3,6 +3,7 @@
 thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
 thesis study 04_hdt --status          # tasks done / total, CPU-hours so far
+thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
 thesis claims                         # studies/claims.csv from every committed study
 """
 
@@ -13,31 +14,37 @@ import json
 import sys
 
 
+def _status(chapter: str) -> dict:
+    """Progress of one study; refreshes its ``rows.csv`` / ``run.json`` once a task has run
+    (an unstarted study gets no files)."""
+    from thesis_lib.book import study as st
+
+    s = st.load_study(chapter)
+    keys = [t.key for t in st.study_tasks(s)]
+    if st.study_rows(s, keys).empty:
+        return {"study": s.study, "tasks_done": 0, "tasks_total": len(keys), "cpu_hours": 0.0}
+    info = st.write_study_summary(s, keys)
+    return {k: info[k] for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")}
+
+
 def _cmd_study(args: argparse.Namespace) -> int:
     from thesis_lib.book import study as st
 
+    for chapter in args.chapter:  # every study file first: a typo fails before hours of work
+        st.load_study(chapter)
     if args.status:
-        s = st.load_study(args.chapter)
-        keys = [t.key for t in st.study_tasks(s)]
-        info = st.write_study_summary(s, keys)
-        print(
-            json.dumps(
-                {
-                    k: info[k]
-                    for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")
-                },
-                indent=1,
-            )
-        )
+        for chapter in args.chapter:
+            print(json.dumps(_status(chapter), indent=1))
         return 0
-    rows = st.run_study(
-        args.chapter,
-        executor=args.executor,
-        n_jobs=args.jobs,
-        address=args.address,
-        force=args.force,
-    )
-    print(f"{args.chapter}: {len(rows)} rows in {st.studies_dir(args.chapter)}")
+    for chapter in args.chapter:  # in order; a complete study finds every task stored
+        rows = st.run_study(
+            chapter,
+            executor=args.executor,
+            n_jobs=args.jobs,
+            address=args.address,
+            force=args.force,
+        )
+        print(f"{chapter}: {len(rows)} rows in {st.studies_dir(chapter)}")
     return 0
 
 
@@ -53,7 +60,11 @@ def _cmd_claims(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``study`` and ``claims`` to the ``thesis`` command."""
     p = subparsers.add_parser("study", help="run or resume a chapter's pre-registered study")
-    p.add_argument("chapter", help="e.g. 04_hdt (reads params/<chapter>.study.yml)")
+    p.add_argument(
+        "chapter",
+        nargs="+",
+        help="e.g. 04_hdt (reads params/<chapter>.study.yml); several run one after another",
+    )
     p.add_argument(
         "--executor",
         choices=["inprocess", "local", "ray"],
