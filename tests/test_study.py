@@ -283,6 +283,42 @@ def test_thesis_study_runs_several_in_order_and_status_writes_nothing_before_a_r
     assert '"tasks_done": 20' in capsys.readouterr().out
 
 
+def test_status_line_says_what_changed_in_the_library_since_the_study(project):
+    import subprocess
+
+    from thesis_lib.book import evidence as evi
+
+    def git(*args: str) -> None:
+        subprocess.run(
+            ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args],
+            cwd=project, check=True, capture_output=True,
+        )  # fmt: skip
+
+    st.run_study("04_hdt", progress=False)  # outside git: commit "unknown"
+    assert evi.code_changes_since(evi.load_evidence("04_hdt", reps=100)) is None
+    assert "changed" not in evi.status_line(evi.load_evidence("04_hdt", reps=100))
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "study code")
+    st.run_study("04_hdt", progress=False, force=True)  # now at that commit
+    ev = evi.load_evidence("04_hdt", reps=100)
+    assert evi.code_changes_since(ev).empty
+    assert "The library has not changed since." in evi.status_line(ev)
+    lib = project / "src" / "thesis_lib"
+    lib.mkdir(parents=True)
+    (lib / "model.py").write_text("x = 1\n")
+    git("add", "-A")
+    git("commit", "-qm", "change the model")
+    (project / "notes.md").write_text("prose\n")  # not the library: not listed
+    (lib / "book").mkdir()
+    (lib / "book" / "page.py").write_text("y = 2\n")  # the book's rendering: not listed
+    git("add", "-A")
+    git("commit", "-qm", "prose and rendering")
+    since = evi.code_changes_since(ev)
+    assert list(since.subject) == ["change the model"]
+    assert "Since then, 1 commit(s) changed the library" in evi.status_line(ev)
+
+
 def test_claim_readings_say_where_we_differ_and_why(project):
     from thesis_lib.book import evidence as evi
 

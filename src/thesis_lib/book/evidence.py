@@ -38,6 +38,7 @@ __all__ = [
     "Evidence",
     "aggregate_table",
     "claim_readings",
+    "code_changes_since",
     "comparisons_table",
     "load_evidence",
     "per_setting_table",
@@ -101,16 +102,71 @@ def load_evidence(chapter: str, reps: int = 10_000) -> Evidence:
 
 
 def status_line(ev: Evidence) -> str:
-    """One sentence: the study, tasks done of total, CPU-hours, the commits it ran at."""
+    """The study, tasks done of total, CPU-hours, the commits it ran at, and once it is
+    complete whether the library changed since (:func:`code_changes_since`)."""
     i = ev.info
     if not i or i.get("study_hash") != ev.study.hash:
         return f"Study {ev.study.study}: not run yet (`thesis study {ev.study.chapter}`)."
     commits = ", ".join(c[:7] for c in i.get("commits", [])) or "none"
     state = "complete" if ev.complete else "in progress: verdicts wait for the full grid"
-    return (
+    line = (
         f"Study {i['study']}: {i['tasks_done']}/{i['tasks_total']} tasks ({state}), "
         f"{i.get('cpu_hours', 0):.1f} CPU-hours, run at commit(s) {commits}."
     )
+    since = code_changes_since(ev) if ev.complete else None
+    if since is not None:
+        line += (
+            " The library has not changed since."
+            if since.empty
+            else f" Since then, {len(since)} commit(s) changed the library (newest "
+            f"{since.commit.iloc[0]}, {since.date.iloc[0]}); they took no part in these rows."
+        )
+    return line
+
+
+#: What a study's rows depend on: the library (less the book's rendering code) and its file.
+STUDY_CODE_PATHS = ("src/thesis_lib", ":(exclude)src/thesis_lib/book")
+
+
+def _git(args: list[str]) -> str | None:
+    import subprocess
+
+    from thesis_lib.book.paths import project_root
+
+    try:
+        out = subprocess.run(
+            ["git", *args], cwd=project_root(), capture_output=True, text=True, timeout=30
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout if out.returncode == 0 else None
+
+
+def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
+    """The commits after the study's last commit that changed what its rows depend on: the
+    library (:data:`STUDY_CODE_PATHS`, any part of it) and its study file. Columns
+    ``commit, date, subject``, newest first; ``None`` where it cannot be known: before the
+    study ran, or where git or the study's commits cannot be read (a copy without history).
+
+    CLAIMS.md asks each page to say at which commit a study was computed and what changed
+    since: a change listed here did not take part in the verdicts.
+    """
+    cols = ["commit", "date", "subject"]
+    commits = [c.removesuffix("-dirty") for c in ev.info.get("commits", [])]
+    stamps = {}
+    for c in commits:
+        t = _git(["log", "-1", "--format=%ct", c, "--"])
+        if t and t.strip():
+            stamps[c] = int(t.strip())
+    if not stamps:
+        return None
+    last = max(stamps, key=lambda c: stamps[c])
+    paths = [*STUDY_CODE_PATHS, f"params/{ev.study.chapter}.study.yml"]
+    log = _git(["log", "--format=%h%x09%cs%x09%s", f"{last}..HEAD", "--", *paths])
+    if log is None:
+        return None
+    rows = [line.split("\t", 2) for line in (log or "").splitlines() if line.count("\t") >= 2]
+    return pd.DataFrame(rows, columns=cols)
 
 
 def _mean_ci(values: np.ndarray, reps: int, seed: int = 0) -> tuple[float, float, float]:
