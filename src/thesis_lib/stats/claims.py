@@ -169,9 +169,8 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
     *inconclusive* otherwise. Its effect and interval are those of its first comparison
     (the study file lists the headline comparison first); where the verdict is not the
     headline's, ``decided_by`` names the comparisons that gave it (else it is empty).
-    Comparisons pre-registered with
-    ``counts: false`` (reported apart, e.g. C3's sparse-reward settings) are listed but do
-    not take part in the verdict.
+    Comparisons pre-registered with ``counts: false`` (reported apart, e.g. C3's
+    sparse-reward settings) are listed but do not take part in the verdict.
     """
     rows = []
     for claim, grp in comparisons.groupby("claim", sort=False):
