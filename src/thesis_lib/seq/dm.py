@@ -51,7 +51,7 @@ from thesis_lib.seq.models import (
     _check_inputs,
     _ModelConfig,
     _rsa_tokens,
-    masked_mse,
+    _TwoLevel,
 )
 from thesis_lib.seq.tokens import deinterleave_embeddings, interleave_embeddings
 
@@ -247,7 +247,7 @@ class DecisionMamba(nn.Module):
         )
 
 
-class HDM(nn.Module):
+class HDM(_TwoLevel):
     """Hierarchical Decision Mamba (thesis 5.3.2): HDT's two levels with Mamba trunks.
 
     * high level: tokens ``(g_{t-1}, s_t)``, the sub-goal ``g_t`` read at ``s_t``;
@@ -277,12 +277,6 @@ class HDM(nn.Module):
         self.low = TokenMamba(config)
         self.predict_action = _action_head(d, config.act_dim)
 
-    def clip_groups(self) -> list[list[nn.Parameter]]:
-        """Parameters of each level: the trainer clips their gradient norms separately."""
-        high = [p for n, p in self.named_parameters() if n.startswith(("high", "predict_subgoal"))]
-        ids = {id(p) for p in high}
-        return [high, [p for p in self.parameters() if id(p) not in ids]]
-
     def _keys(self) -> tuple[str, ...]:
         action_key = _action_key(self.config.paper_compat)
         return ("states", action_key, "subgoals", "prev_subgoals")
@@ -306,29 +300,6 @@ class HDM(nn.Module):
         ]
         h = self.low(tokens)
         return self.predict_action(h[1]) * self.config.max_action  # read at s_t
-
-    def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
-        """Predict ``g_t`` (high) and ``a_t`` (low, on ``batch["subgoals"]``); with targets, ``L_high + L_low``."""
-        _check_inputs(self, batch, self._keys())
-        subgoals = self.high_forward(batch)
-        actions = self.low_forward(batch, batch["subgoals"])  # teacher forcing
-        if targets is None:
-            return SeqOutput(actions, subgoals)
-        mask = batch.get("mask")
-        l_high = masked_mse(subgoals, targets["subgoals"], mask)
-        l_low = masked_mse(actions, targets["actions"], mask)
-        return SeqOutput(
-            actions, subgoals, l_high + l_low, {"subgoal": l_high.item(), "action": l_low.item()}
-        )
-
-    @torch.no_grad()
-    def act(self, history: Tensors) -> SeqOutput:
-        """Windowed acting: sub-goal and action at the last step of each history (as :meth:`HDT.act`)."""
-        _check_inputs(self, history, self._keys())
-        g = self.high_forward(history)[:, -1]  # (B, state_dim)
-        subgoals = history["subgoals"].clone()
-        subgoals[:, -1] = g
-        return SeqOutput(self.low_forward(history, subgoals)[:, -1], g)
 
     def recurrent_policy(self, n_envs: int) -> RecurrentPolicy | None:
         """A :class:`RecurrentPolicy` for ``n_envs`` episodes, or ``None`` when ``eval_mode`` is ``"window"``."""

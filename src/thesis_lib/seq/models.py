@@ -436,7 +436,62 @@ class DecisionTransformer(nn.Module):
         return SeqOutput(self.forward(history).actions[:, -1])
 
 
-class HDT(nn.Module):
+class _TwoLevel(nn.Module):
+    """What HDT and HDM share: per-level gradient clipping, teacher-forced training on
+    ``L_high + L_low``, and windowed acting. A subclass builds its two levels in
+    ``__init__`` and gives :meth:`_keys`, :meth:`high_forward` and :meth:`low_forward`; this
+    class holds no parameters, so it does not change a model's initialisation.
+    """
+
+    def _keys(self) -> tuple[str, ...]:
+        raise NotImplementedError
+
+    def high_forward(self, batch: Tensors) -> torch.Tensor:
+        """Sub-goals ``g_t`` ``(B, T, state_dim)``."""
+        raise NotImplementedError
+
+    def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
+        """Actions ``a_t`` ``(B, T, act_dim)`` given the sub-goals."""
+        raise NotImplementedError
+
+    def clip_groups(self) -> list[list[nn.Parameter]]:
+        """Parameters of each level: the trainer clips their gradient norms separately, as the authors."""
+        high = [p for n, p in self.named_parameters() if n.startswith(("high", "predict_subgoal"))]
+        ids = {id(p) for p in high}
+        return [high, [p for p in self.parameters() if id(p) not in ids]]
+
+    def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
+        """Predict ``g_t`` (high) and ``a_t`` (low, on ``batch["subgoals"]``); with targets, ``L_high + L_low``."""
+        _check_inputs(self, batch, self._keys())
+        subgoals = self.high_forward(batch)  # (B, T, state_dim)
+        actions = self.low_forward(batch, batch["subgoals"])  # teacher forcing
+        if targets is None:
+            return SeqOutput(actions, subgoals)
+        mask = batch.get("mask")
+        l_high = masked_mse(subgoals, targets["subgoals"], mask)
+        l_low = masked_mse(actions, targets["actions"], mask)
+        loss = l_high + l_low
+        return SeqOutput(
+            actions, subgoals, loss, {"subgoal": l_high.item(), "action": l_low.item()}
+        )
+
+    @torch.no_grad()
+    def act(self, history: Tensors) -> SeqOutput:
+        """Sub-goal and action at the last step of each history (windowed acting).
+
+        ``history["prev_subgoals"]`` holds the sub-goals the high level predicted before
+        (zero at the episode start); ``history["subgoals"][:, -1]`` is overwritten with the
+        new prediction. Returns ``SeqOutput(actions (B, act_dim), subgoals (B, state_dim))``.
+        """
+        _check_inputs(self, history, self._keys())
+        g = self.high_forward(history)[:, -1]  # (B, state_dim)
+        subgoals = history["subgoals"].clone()
+        subgoals[:, -1] = g
+        actions = self.low_forward(history, subgoals)[:, -1]  # (B, act_dim)
+        return SeqOutput(actions, g)
+
+
+class HDT(_TwoLevel):
     """Hierarchical Decision Transformer (thesis 5.2): a high level proposes sub-goals, a low level acts.
 
     * high level: tokens ``(s_t, g_{t-1})``; ``g_t`` is read at the ``g_{t-1}`` token
@@ -469,12 +524,6 @@ class HDT(nn.Module):
         self.low = TokenTransformer(config)
         self.predict_action = _action_head(d, config.act_dim)
 
-    def clip_groups(self) -> list[list[nn.Parameter]]:
-        """Parameters of each level: the trainer clips their gradient norms separately, as the authors."""
-        high = [p for n, p in self.named_parameters() if n.startswith(("high", "predict_subgoal"))]
-        ids = {id(p) for p in high}
-        return [high, [p for p in self.parameters() if id(p) not in ids]]
-
     def high_forward(self, batch: Tensors) -> torch.Tensor:
         """Sub-goal predictions ``g_t`` ``(B, T, state_dim)`` from ``(s_t, g_{t-1})`` tokens."""
         tokens = [
@@ -501,33 +550,3 @@ class HDT(nn.Module):
         action_key = _action_key(self.config.paper_compat)
         keys = ("states", action_key, "timesteps", "subgoals", "prev_subgoals")
         return keys + (("returns_to_go",) if self.config.low_use_rtg else ())
-
-    def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
-        """Predict ``g_t`` (high) and ``a_t`` (low, on ``batch["subgoals"]``); with targets, ``L_high + L_low``."""
-        _check_inputs(self, batch, self._keys())
-        subgoals = self.high_forward(batch)  # (B, T, state_dim)
-        actions = self.low_forward(batch, batch["subgoals"])  # teacher forcing
-        if targets is None:
-            return SeqOutput(actions, subgoals)
-        mask = batch.get("mask")
-        l_high = masked_mse(subgoals, targets["subgoals"], mask)
-        l_low = masked_mse(actions, targets["actions"], mask)
-        loss = l_high + l_low
-        return SeqOutput(
-            actions, subgoals, loss, {"subgoal": l_high.item(), "action": l_low.item()}
-        )
-
-    @torch.no_grad()
-    def act(self, history: Tensors) -> SeqOutput:
-        """Sub-goal and action at the last step of each history.
-
-        ``history["prev_subgoals"]`` holds the sub-goals the high level predicted before
-        (zero at the episode start); ``history["subgoals"][:, -1]`` is overwritten with the
-        new prediction. Returns ``SeqOutput(actions (B, act_dim), subgoals (B, state_dim))``.
-        """
-        _check_inputs(self, history, self._keys())
-        g = self.high_forward(history)[:, -1]  # (B, state_dim)
-        subgoals = history["subgoals"].clone()
-        subgoals[:, -1] = g
-        actions = self.low_forward(history, subgoals)[:, -1]  # (B, act_dim)
-        return SeqOutput(actions, g)
