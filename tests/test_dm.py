@@ -335,8 +335,14 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale(tmp_path, monkeypatch):
     )
     counts = ch.run_parameter_counts(d_model=16, n_layers=1).set_index("model").parameters
     assert counts["DM, plain Mamba blocks"] < counts["DM, gated MLP (authors' later code)"]
-    ch.plot_methods(summary, data)
-    ch.plot_sweep(ch.summarize_dm(sweep), "DM-noRTG", data)
+    ax = ch.plot_methods(summary, data)
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    names = [ch.THESIS_METHOD[m].replace("_", " ") for m in ch.DM_METHODS]
+    assert labels == [n for n in names if n in labels] and len(labels) == 5
+    assert len(ax.patches) == len(labels) * len(ax.get_xticks())  # a bar per method and set
+    ax = ch.plot_sweep(ch.summarize_dm(sweep), "DM-noRTG", data)
+    archs = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "L1 D8 K2" in archs and len(ax.patches) == len(archs) * len(ax.get_xticks())
 
 
 @pytest.mark.parametrize("method", ["DM-RTG", "HDM"])

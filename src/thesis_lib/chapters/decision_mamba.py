@@ -23,7 +23,7 @@ Used in: Decision Mamba chapter (thesis 5.3; Tables 5.5, 5.6; Figs 5.3-5.6).
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal, NamedTuple
 
@@ -863,6 +863,28 @@ def _one_mode(summary: pd.DataFrame, eval_mode: str) -> pd.DataFrame:
     return summary[(summary.eval_mode == eval_mode) | ~summary.method.isin(MAMBA_METHODS)]
 
 
+def _grouped_bars(
+    ax: Any,
+    s: pd.DataFrame,
+    key: str,
+    groups: Sequence[str],
+    sets: Sequence[tuple[str, str]],
+    label: Callable[[str], str],
+) -> None:
+    """One bar per ``s[key]`` group and data set (``value`` with ``err`` bars), grouped by
+    data set: what Figs 5.3-5.6 share."""
+    width = 0.8 / max(len(groups), 1)
+    for i, grp in enumerate(groups):
+        g = s[s[key] == grp].set_index(["task", "tier"]).reindex(sets)
+        x = np.arange(len(sets)) + i * width
+        ax.bar(x, g["value"], width, yerr=g["err"].fillna(0), label=label(grp), capsize=2)
+    ax.set_xticks(
+        np.arange(len(sets)) + width * (len(groups) - 1) / 2, [f"{t}\n{r}" for t, r in sets]
+    )
+    ax.set_ylabel("return / data set max")
+    ax.legend(fontsize=8)
+
+
 def plot_sweep(
     summary: pd.DataFrame,
     method: str,
@@ -889,25 +911,10 @@ def plot_sweep(
     archs = sorted(s.arch.unique(), key=lambda a: tuple(int(x[1:]) for x in a.split()))
     if ax is None:
         _, ax = plt.subplots(figsize=(max(5, 1.6 * len(sets) * len(archs) / 2), 3.5))
-    width = 0.8 / max(len(archs), 1)
-    for i, a in enumerate(archs):
-        g = s[s.arch == a].set_index(["task", "tier"]).reindex(sets)
-        ax.bar(
-            np.arange(len(sets)) + i * width,
-            g["value"],
-            width,
-            yerr=g["err"].fillna(0),
-            label=a,
-            capsize=2,
-        )
-    ax.set_xticks(
-        np.arange(len(sets)) + width * (len(archs) - 1) / 2, [f"{t}\n{r}" for t, r in sets]
-    )
-    ax.set_ylabel("return / data set max")
+    _grouped_bars(ax, s, "arch", archs, sets, str)
     ax.set_title(
         f"{method}: architectures ({'best during training' if metric == 'best' else 'final checkpoint'})"
     )
-    ax.legend(fontsize=8)
     return ax
 
 
@@ -932,25 +939,10 @@ def plot_methods(
     methods = [m for m in DM_METHODS if m in set(s.method)]
     if ax is None:
         _, ax = plt.subplots(figsize=(max(5, 2.2 * len(sets)), 3.5))
-    width = 0.8 / max(len(methods), 1)
-    for i, m in enumerate(methods):
-        g = s[s.method == m].set_index(["task", "tier"]).reindex(sets)
-        ax.bar(
-            np.arange(len(sets)) + i * width,
-            g["value"],
-            width,
-            yerr=g["err"].fillna(0),
-            label=THESIS_METHOD[m].replace("_", " "),
-            capsize=2,
-        )
-    ax.set_xticks(
-        np.arange(len(sets)) + width * (len(methods) - 1) / 2, [f"{t}\n{r}" for t, r in sets]
-    )
-    ax.set_ylabel("return / data set max")
+    _grouped_bars(ax, s, "method", methods, sets, lambda m: THESIS_METHOD[m].replace("_", " "))
     ax.set_title(
         f"Five methods ({'best during training' if metric == 'best' else 'final checkpoint'})"
     )
-    ax.legend(fontsize=8)
     return ax
 
 
