@@ -23,7 +23,7 @@ Used in: HDT chapter (Tables 5.1-5.3, Figures of 5.2.2).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
@@ -489,6 +489,24 @@ def run_paper_compat(cfg: Config) -> pd.DataFrame:
     return _run(cfg, tasks, "paper_compat")
 
 
+def _over_seeds(g: Any, column: Callable[[str, str], str]) -> pd.DataFrame:
+    """Mean and std over seeds of each run's best and final return and score, from a groupby
+    of one row per run; ``column("return", "best")`` names a run's column (the chapter's runs
+    and the study's rows name them differently)."""
+    rb, sb = column("return", "best"), column("score", "best")
+    rf, sf = column("return", "final"), column("score", "final")
+    return pd.DataFrame({
+        "best_return": g[rb].mean(),
+        "best_return_std": g[rb].std(ddof=0),
+        "best_score": g[sb].mean(),
+        "final_return_mean": g[rf].mean(),
+        "final_return_std": g[rf].std(ddof=0),
+        "final_score_mean": g[sf].mean(),
+        "final_score_std": g[sf].std(ddof=0),
+        "n_seeds": g["seed"].nunique(),
+    }).reset_index()  # fmt: skip
+
+
 def summarize(curves: pd.DataFrame) -> pd.DataFrame:
     """Both metrics per ``method, task, tier, target`` from :func:`run_curves` rows.
 
@@ -512,17 +530,7 @@ def summarize(curves: pd.DataFrame) -> pd.DataFrame:
         "final_return": per_run["return_mean"].last(),
         "final_score": per_run["score_mean"].last(),
     }).reset_index()  # fmt: skip
-    g = runs.groupby(keys, sort=False)
-    out = pd.DataFrame({
-        "best_return": g["best_return"].mean(),
-        "best_return_std": g["best_return"].std(ddof=0),
-        "best_score": g["best_score"].mean(),
-        "final_return_mean": g["final_return"].mean(),
-        "final_return_std": g["final_return"].std(ddof=0),
-        "final_score_mean": g["final_score"].mean(),
-        "final_score_std": g["final_score"].std(ddof=0),
-        "n_seeds": g["seed"].nunique(),
-    }).reset_index()  # fmt: skip
+    out = _over_seeds(runs.groupby(keys, sort=False), lambda q, which: f"{which}_{q}")
     order = {m: i for i, m in enumerate(METHODS)} | {t: i for i, t in enumerate(TARGET_ORDER)}
     out = out.sort_values(
         ["task", "tier", "method", "target"],
@@ -1081,15 +1089,4 @@ def study_summary(rows: pd.DataFrame) -> pd.DataFrame:
     keys = ["method", "task", "tier", "target"]
     if rows.empty:
         return pd.DataFrame(columns=keys + ["best_return", "final_return_mean", "n_seeds"])
-    g = rows.groupby(keys, sort=False)
-    out = pd.DataFrame({
-        "best_return": g["return_best"].mean(),
-        "best_return_std": g["return_best"].std(ddof=0),
-        "best_score": g["score_best"].mean(),
-        "final_return_mean": g["return_final"].mean(),
-        "final_return_std": g["return_final"].std(ddof=0),
-        "final_score_mean": g["score_final"].mean(),
-        "final_score_std": g["score_final"].std(ddof=0),
-        "n_seeds": g["seed"].nunique(),
-    }).reset_index()  # fmt: skip
-    return out
+    return _over_seeds(rows.groupby(keys, sort=False), lambda q, which: f"{q}_{which}")
