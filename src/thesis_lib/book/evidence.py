@@ -128,20 +128,6 @@ def status_line(ev: Evidence) -> str:
 STUDY_CODE_PATHS = ("src/thesis_lib", ":(exclude)src/thesis_lib/book")
 
 
-def _git(args: list[str]) -> str | None:
-    import subprocess
-
-    from thesis_lib.book.paths import project_root
-
-    try:
-        out = subprocess.run(
-            ["git", *args], cwd=project_root(), capture_output=True, text=True, timeout=30
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout if out.returncode == 0 else None
-
-
 def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     """The commits after the study's last commit that changed what its rows depend on: the
     library (:data:`STUDY_CODE_PATHS`, any part of it) and its study file. Columns
@@ -151,21 +137,23 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     CLAIMS.md asks each page to say at which commit a study was computed and what changed
     since: a change listed here did not take part in the verdicts.
     """
+    from thesis_lib.book.results import git_output
+
     cols = ["commit", "date", "subject"]
     commits = [c.removesuffix("-dirty") for c in ev.info.get("commits", [])]
     stamps = {}
     for c in commits:
-        t = _git(["log", "-1", "--format=%ct", c, "--"])
+        t = git_output(["log", "-1", "--format=%ct", c, "--"])
         if t and t.strip():
             stamps[c] = int(t.strip())
     if not stamps:
         return None
     last = max(stamps, key=lambda c: stamps[c])
     paths = [*STUDY_CODE_PATHS, f"params/{ev.study.chapter}.study.yml"]
-    log = _git(["log", "--format=%h%x09%cs%x09%s", f"{last}..HEAD", "--", *paths])
+    log = git_output(["log", "--format=%h%x09%cs%x09%s", f"{last}..HEAD", "--", *paths])
     if log is None:
         return None
-    rows = [line.split("\t", 2) for line in (log or "").splitlines() if line.count("\t") >= 2]
+    rows = [line.split("\t", 2) for line in log.splitlines() if line.count("\t") >= 2]
     return pd.DataFrame(rows, columns=cols)
 
 

@@ -45,35 +45,30 @@ RECORDED_PACKAGES = (
 )
 
 
-def git_commit(path: str | Path | None = None) -> str:
-    """The checkout's commit hash, suffixed ``-dirty`` when there are uncommitted changes.
-
-    Returns ``"unknown"`` outside a git checkout.
-    """
+def git_output(args: list[str], path: str | Path | None = None) -> str | None:
+    """``git <args>``'s standard output in the checkout (``path`` or the project root), or
+    ``None`` where git fails or is missing (outside a checkout, an unknown commit)."""
     try:
         cwd = Path(path) if path else project_root()
     except FileNotFoundError:
         cwd = Path.cwd()
     try:
-        sha = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=cwd,
-            capture_output=True,
-            text=True,
-            check=True,
-            timeout=10,
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=cwd,
-            capture_output=True,
-            text=True,
-            check=True,
-            timeout=10,
-        ).stdout.strip()
+        out = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10)
     except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout if out.returncode == 0 else None
+
+
+def git_commit(path: str | Path | None = None) -> str:
+    """The checkout's commit hash, suffixed ``-dirty`` when there are uncommitted changes.
+
+    Returns ``"unknown"`` outside a git checkout.
+    """
+    sha = git_output(["rev-parse", "HEAD"], path)
+    dirty = git_output(["status", "--porcelain", "--untracked-files=no"], path)
+    if sha is None or dirty is None:
         return "unknown"
-    return f"{sha}-dirty" if dirty else sha
+    return f"{sha.strip()}-dirty" if dirty.strip() else sha.strip()
 
 
 def package_versions(names: tuple[str, ...] = RECORDED_PACKAGES) -> dict[str, str]:
