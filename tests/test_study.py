@@ -7,6 +7,7 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
@@ -218,6 +219,7 @@ def test_committed_claims_follow_from_the_committed_rows(monkeypatch):
             assert c.chapter == chapter and c.verdict == r.verdict, (r.claim, "run thesis claims")
             assert c.effect == pytest.approx(r.effect) and c.ci_low == pytest.approx(r.ci_low)
             assert c.ci_high == pytest.approx(r.ci_high)
+            assert (c.kind, c.margin) == (r.kind, pytest.approx(r.margin))
 
 
 # ------------------------------------------------------------------ a chapter's evidence section
@@ -368,6 +370,72 @@ def test_claim_readings_name_the_comparison_that_decided_the_verdict(project):
     ours = ledger_table(claims).set_index("claim").ours
     assert "; decided by the other way (score): fails" in ours["C3"]
     assert "decided by" not in ours["C2"]
+
+
+def test_claims_plot_gives_each_claim_its_own_axis_and_its_margin():
+    """Effects in different units get their own axes; the margin that decides is drawn."""
+    from thesis_lib.chapters.claims import plot_claims
+
+    def row(claim, verdict, effect, lo, hi, kind, margin, comparisons):
+        return dict(
+            claim=claim,
+            verdict=verdict,
+            effect=effect,
+            ci_low=lo,
+            ci_high=hi,
+            kind=kind,
+            margin=margin,
+            comparisons=comparisons,
+            decided_by=np.nan,
+        )
+
+    claims = pd.DataFrame(
+        [
+            row(
+                "C1",
+                "inconclusive",
+                -1.0,
+                -6.0,
+                4.0,
+                "superior",
+                5.0,
+                "DT vs DT-noRTG (score_final): inconclusive [-6, 4]",
+            ),
+            row(
+                "C4",
+                "holds",
+                0.5,
+                -2.0,
+                3.0,
+                "noninferior",
+                5.0,
+                "DM-noRTG vs DM-RTG (score_final): holds [-2, 3]",
+            ),
+            row(
+                "C6",
+                "fails",
+                -140.0,
+                -156.0,
+                -127.0,
+                "superior",
+                0.0,
+                "DM-noRTG vs DT (act_per_s_window): fails [-156, -127]; DM vs DT (act_per_s): holds",
+            ),
+            row("C7", "pending", np.nan, np.nan, np.nan, None, np.nan, "0/126 tasks done"),
+        ]
+    )
+    fig = plot_claims(claims)
+    c1, c4, c6 = fig.axes  # the pending claim has no panel
+    for ax, (lo, hi) in zip(fig.axes, [(-6, 5), (-5, 3), (-156, 0)]):
+        assert ax.get_xlim()[0] < lo and ax.get_xlim()[1] > hi
+    assert c1.get_xlim()[0] > -10  # not stretched to C6's actions per second
+    assert c1.get_title(loc="left") == "DT vs DT-noRTG (score_final)"
+    assert c6.get_title(loc="left") == "DM-noRTG vs DT (act_per_s_window)"
+    assert c6.get_yticklabels()[0].get_text() == "C6\nfails"
+    assert len(c1.patches) == 1 and not c4.patches and not c6.patches  # superior's band
+    assert [ln.get_xdata()[0] for ln in c4.lines if ln.get_linestyle() == "--"] == [-5.0]
+    empty = plot_claims(claims[claims.verdict == "pending"])
+    assert empty.axes[0].texts[0].get_text() == "no claim judged yet"
 
 
 def test_aggregate_table_and_performance_profiles(project):

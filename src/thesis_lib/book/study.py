@@ -331,6 +331,8 @@ CLAIMS_COLUMNS = [
     "ci_low",
     "ci_high",
     "prob_improvement",
+    "kind",
+    "margin",
     "seeds",
     "settings",
     "decided_by",

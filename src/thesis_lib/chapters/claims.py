@@ -100,31 +100,68 @@ def verdict_counts(claims: pd.DataFrame) -> pd.Series:
     return v.value_counts().reindex(list(VERDICT_COLOURS), fill_value=0)
 
 
-def plot_claims(claims: pd.DataFrame, ax: Any = None) -> Any:
-    """Effects with their 95% intervals, one row per judged claim, coloured by verdict."""
+def headline(comparisons: Any) -> str:
+    """The headline comparison (the one whose effect the ledger quotes) from ``comparisons``.
+
+    >>> headline("DT vs DT-noRTG (score_final): inconclusive [-6.45, 4.56]; x vs y (m): holds [1, 2]")
+    'DT vs DT-noRTG (score_final)'
+    """
+    if not isinstance(comparisons, str):
+        return ""
+    return comparisons.split("; ")[0].rsplit(":", 1)[0].strip()
+
+
+def plot_claims(claims: pd.DataFrame) -> Any:
+    """Effects with their 95% intervals, one panel per judged claim, coloured by verdict.
+
+    The effects are in different units (score points, goals reached, actions per second), so
+    each claim has its own x-axis, labelled with its headline comparison and metric. The
+    solid line is "no effect"; the grey band is a ``superior`` claim's margin (an interval
+    inside it is "no effect that matters": fails); the dashed line is a ``noninferior``
+    claim's margin (the interval must stay right of it to hold).
+    """
     import matplotlib.pyplot as plt
 
     judged = claims.dropna(subset=["effect"]) if "effect" in claims else claims.iloc[:0]
-    if ax is None:
-        _, ax = plt.subplots(figsize=(6, 0.45 * max(len(judged), 2) + 1))
     if judged.empty:
+        fig, ax = plt.subplots(figsize=(6.5, 1.5))
         ax.text(0.5, 0.5, "no claim judged yet", ha="center", va="center")
         ax.set_axis_off()
-        return ax.figure
-    y = np.arange(len(judged))[::-1]
-    for yi, r in zip(y, judged.itertuples()):
+        return fig
+    fig, axes = plt.subplots(len(judged), 1, figsize=(6.5, 0.75 * len(judged) + 0.6), squeeze=False)
+    for ax, r in zip(axes[:, 0], judged.itertuples()):
         c = VERDICT_COLOURS.get(r.verdict, "k")
-        ax.plot([r.ci_low, r.ci_high], [yi, yi], color=c, lw=2)
-        ax.plot([r.effect], [yi], "o", color=c)
-    ax.axvline(0, color="k", lw=0.8)
-    ax.set_yticks(y, judged["claim"])
-    ax.set_xlabel("effect (x - y) with its 95% interval")
-    return ax.figure
+        ax.plot([r.ci_low, r.ci_high], [0, 0], color=c, lw=2)
+        ax.plot([r.effect], [0], "o", color=c)
+        ax.axvline(0, color="k", lw=0.8)
+        m = float(getattr(r, "margin", 0.0) or 0.0)
+        m = 0.0 if np.isnan(m) else m
+        kind = getattr(r, "kind", "superior")
+        if m > 0 and kind == "noninferior":
+            ax.axvline(-m, color="0.4", lw=0.8, ls="--")
+        elif m > 0:
+            ax.axvspan(-m, m, color="0.9", zorder=0)
+        lo = min(r.ci_low, r.effect, -m)
+        hi = max(r.ci_high, r.effect, m if kind == "superior" else 0.0)
+        pad = 0.08 * (hi - lo) or 1.0
+        ax.set_xlim(lo - pad, hi + pad)
+        ax.set_ylim(-1, 1)
+        ax.set_yticks([0], [f"{r.claim}\n{r.verdict}"], fontsize=8)
+        ax.tick_params(axis="x", labelsize=7)
+        title = headline(getattr(r, "comparisons", ""))
+        decided = getattr(r, "decided_by", "")
+        if isinstance(decided, str) and decided:
+            title += f"; the verdict: {decided}"
+        ax.set_title(title, fontsize=7, loc="left")
+    axes[-1, 0].set_xlabel("effect (x - y) with its 95% interval, in each comparison's unit")
+    fig.tight_layout()
+    return fig
 
 
 __all__ = [
     "Config",
     "VERDICT_COLOURS",
+    "headline",
     "ledger_table",
     "link_chapters",
     "load_claims",

@@ -166,8 +166,8 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
     """Fold comparisons into one row per claim.
 
     A claim *holds* when every comparison of it holds, *fails* when any fails, and is
-    *inconclusive* otherwise. Its effect and interval are those of its first comparison
-    (the study file lists the headline comparison first); where the verdict is not the
+    *inconclusive* otherwise. Its effect, interval, kind and margin are those of its first
+    comparison (the study file lists the headline comparison first); where the verdict is not the
     headline's, ``decided_by`` names the comparisons that gave it (else it is empty).
     Comparisons pre-registered with ``counts: false`` (reported apart, e.g. C3's
     sparse-reward settings) are listed but do not take part in the verdict.
@@ -196,6 +196,8 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
                 "ci_low": head["ci_low"],
                 "ci_high": head["ci_high"],
                 "prob_improvement": head["prob_improvement"],
+                "kind": head["kind"],
+                "margin": head["margin"],
                 "seeds": int(grp["seeds"].min()),
                 "settings": int(grp["settings"].max()),
                 "decided_by": "; ".join(
