@@ -6,6 +6,7 @@ It renders ``studies/claims.csv``, which ``thesis claims`` writes from the commi
 
 from __future__ import annotations
 
+import textwrap
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -152,7 +153,7 @@ def plot_claims(claims: pd.DataFrame) -> Any:
         decided = getattr(r, "decided_by", "")
         if isinstance(decided, str) and decided:
             title += f"; the verdict: {decided}"
-        ax.set_title(title, fontsize=7, loc="left")
+        ax.set_title(textwrap.fill(title, 100), fontsize=7, loc="left")
     axes[-1, 0].set_xlabel("effect (x - y) with its 95% interval, in each comparison's unit")
     fig.tight_layout()
     return fig
