@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import types
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -220,6 +221,35 @@ def test_committed_claims_follow_from_the_committed_rows(monkeypatch):
             assert c.effect == pytest.approx(r.effect) and c.ci_low == pytest.approx(r.ci_low)
             assert c.ci_high == pytest.approx(r.ci_high)
             assert (c.kind, c.margin) == (r.kind, pytest.approx(r.margin))
+
+
+READING = re.compile(
+    r"\*\*Reading the verdicts\*\* \(study `([^`]+)`, complete: (\d+) runs, ([\d.]+) CPU-hours"
+)
+SAID = re.compile(r"\*\*(C\d+)[ ,]+(holds|fails|inconclusive)\b")
+READ_BY_HAND = [
+    p
+    for p in sorted((REPO / "notebooks").glob("*.ipynb"))
+    if "Reading the verdicts" in p.read_text(encoding="utf-8")
+]
+
+
+@pytest.mark.parametrize("notebook", READ_BY_HAND, ids=lambda p: p.stem)
+def test_hand_written_readings_quote_the_committed_study_and_verdicts(notebook):
+    """A chapter's hand-written "Reading the verdicts" names its study as committed and gives
+    each claim the verdict of studies/claims.csv: the prose cannot drift from the rows."""
+    import nbformat
+
+    cells = [c.source for c in nbformat.read(notebook, 4).cells if c.cell_type == "markdown"]
+    (text,) = [c for c in cells if "Reading the verdicts" in c]
+    m = READING.search(text)
+    assert m, f"{notebook.name}: the reading must start with its study id, runs and CPU-hours"
+    info = json.loads((REPO / "studies" / notebook.stem / "run.json").read_text())
+    assert info["complete"] and info["study"] == m[1]
+    assert int(m[2]) == info["tasks_total"] and float(m[3]) == round(info["cpu_hours"], 1)
+    claims = pd.read_csv(REPO / "studies" / "claims.csv")
+    mine = claims[claims.chapter == notebook.stem]
+    assert dict(SAID.findall(text)) == dict(zip(mine.claim, mine.verdict))
 
 
 # ------------------------------------------------------------------ a chapter's evidence section
