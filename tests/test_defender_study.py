@@ -287,3 +287,18 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     curves = ex.study_curves(rows, reps=50)
     sac_crash = curves[(curves.method == "SAC") & (curves.measure == "crash_rate")]
     assert (sac_crash.seeds == 5).all() and (sac_crash.ci_low <= sac_crash["mean"]).all()
+
+
+def test_study_curves_render_while_the_study_has_run_only_some_methods(monkeypatch):
+    """Mid-study (the first task done): a curve plot of methods not run yet is a placeholder,
+    not a zero-column grid (the chapter built in CI while the study was running)."""
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study = st.load_study("03_defender")
+    first = next(t for t in ex.study_tasks(st.study_config(study)) if t.config["label"] == "SAC")
+    rows = pd.DataFrame([_fake_row(first.config, np.random.default_rng(0))])
+    waiting = ex.plot_study_curves(rows, methods=["TD3", "TD3+MeanDemoW5/MeanDemoW10"])
+    assert waiting.axes[0].texts[0].get_text() == "no study rows of these methods yet"
+    ran = ex.plot_study_curves(rows, methods=["SAC", "TD3"])
+    assert len(ran.axes) == 3  # crash rate, filtered rate, return for the one task

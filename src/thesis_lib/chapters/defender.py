@@ -1579,13 +1579,13 @@ def plot_study_curves(
     import matplotlib.pyplot as plt
 
     curves = study_curves(rows, reps=reps)
-    if curves.empty:
+    if methods is not None and not curves.empty:
+        curves = curves[curves["method"].isin(methods)]
+    if curves.empty:  # before the study, or while it has no run of these methods yet
         fig, ax = plt.subplots(figsize=(5, 1.5))
-        ax.text(0.5, 0.5, "no study rows yet", ha="center", va="center")
+        ax.text(0.5, 0.5, "no study rows of these methods yet", ha="center", va="center")
         ax.set_axis_off()
         return fig
-    if methods is not None:
-        curves = curves[curves["method"].isin(methods)]
     settings = list(dict.fromkeys(curves["setting"]))
     measures = (
         ("crash_rate", "crash rate"),
