@@ -213,3 +213,17 @@ def test_claims_page_links_c10_to_c12_to_this_chapters_study_section():
         assert linked[c] == '<a href="02_clfd.html#evidence-at-study-scale">02_clfd</a>'
     nb = (REPO / "notebooks" / "02_clfd.ipynb").read_text()
     assert "## Evidence at study scale" in nb
+
+
+def test_study_tables_render_mid_study_before_any_alignment_row(monkeypatch):
+    """Mid-study, with only stage-classification rows committed, the thesis-beside-us tables
+    still build (Table 4.1 empty of ours, Table 4.2 filled) instead of a KeyError."""
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    tasks = ex.study_tasks(st.study_config(st.load_study("02_clfd")))
+    stage = [t for t in tasks if t.fn is ex.study_stage_task][:1]
+    rows = _fake_rows(stage, np.random.default_rng(0))
+    assert "encoder" not in rows
+    t41, t42 = ex.study_tables_vs_thesis(rows, {"data": "d", "scale": "s"})
+    assert t41["seeds"].isna().all() and t42["seeds"].notna().any()

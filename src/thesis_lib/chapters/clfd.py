@@ -980,7 +980,8 @@ def study_tables_vs_thesis(
     t42 = pd.DataFrame(columns=["viewpoints", "accuracy_pct", "ci_low", "ci_high", "seeds"])
     if "claim" in rows:
         out = []
-        for (enc, m), g in rows[rows["claim"] == "C10"].groupby(["encoder", "method"], sort=False):
+        c10 = rows[rows["claim"] == "C10"]  # mid-study: maybe no alignment row (nor column) yet
+        for (enc, m), g in c10.groupby(["encoder", "method"], sort=False) if len(c10) else []:
             mean, lo, hi = _mean_ci(g["alignment_error_pct"])
             out.append(
                 ["PickPlace", enc, m, mean, lo, hi, g["seed"].nunique(), g["val_best_pct"].mean()]
