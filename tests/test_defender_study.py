@@ -302,3 +302,25 @@ def test_study_curves_render_while_the_study_has_run_only_some_methods(monkeypat
     assert waiting.axes[0].texts[0].get_text() == "no study rows of these methods yet"
     ran = ex.plot_study_curves(rows, methods=["SAC", "TD3"])
     assert len(ran.axes) == 3  # crash rate, filtered rate, return for the one task
+
+
+def test_demos_file_writes_once_by_content_and_leaves_no_part_file(tmp_path, monkeypatch):
+    """Study workers may write the same set at once: each uses its own temporary file and
+    renames it over the target, so none fails on another's rename, and none is left behind."""
+    from thesis_lib.defender.demos import Demonstration, DemoSet
+
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    rng = np.random.default_rng(0)
+
+    def demo(term: bool) -> Demonstration:
+        return Demonstration(
+            rng.normal(size=(4, 3)), rng.normal(size=(3, 2)), rng.normal(size=3), term, not term
+        )
+
+    demos = DemoSet([demo(False)], [demo(True)], "Hopper-v5")
+    name = ex.demos_file(demos)
+    assert ex.demos_file(demos) == name  # same content, same file
+    folder = next(tmp_path.rglob(name)).parent
+    assert [p.name for p in folder.iterdir()] == [name]
+    back = ex.load_demos_file(name)
+    np.testing.assert_array_equal(back.safe[0].observations, demos.safe[0].observations)

@@ -30,6 +30,8 @@ Used in: DEFENDER chapter (thesis 4.3).
 from __future__ import annotations
 
 import hashlib
+import os
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -485,7 +487,9 @@ def demos_file(demos: DemoSet, label: str = "") -> str:
     name = f"{label or thesis_env_name(str(demos.env_id))}-{h.hexdigest()[:16]}.npz"
     path = results_dir(CHAPTER) / "demos" / name
     if not path.is_file():
-        tmp = path.with_name(path.stem + ".part.npz")
+        # one temporary file per process: two study workers may write the same set at once
+        # (same content), and each then renames its own file atomically over the target
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.part.npz")
         save_demonstrations(demos, tmp)
         tmp.replace(path)
     return name
