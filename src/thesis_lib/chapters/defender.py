@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-import uuid
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -487,11 +487,13 @@ def demos_file(demos: DemoSet, label: str = "") -> str:
     name = f"{label or thesis_env_name(str(demos.env_id))}-{h.hexdigest()[:16]}.npz"
     path = results_dir(CHAPTER) / "demos" / name
     if not path.is_file():
-        # one temporary file per process: two study workers may write the same set at once
-        # (same content), and each then renames its own file atomically over the target
-        tmp = path.with_name(f"{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.part.npz")
+        # a temporary file of its own (as mdlt.audio's cache): two study workers may write the
+        # same set at once (same content), and each renames its own file atomically over it
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f"{path.stem}.", suffix=".part.npz")
+        os.close(fd)
         save_demonstrations(demos, tmp)
-        tmp.replace(path)
+        os.replace(tmp, path)
     return name
 
 
