@@ -4,8 +4,8 @@ The layers (``thesis_lib.<top>``, the first name after ``thesis_lib``):
 
 - **foundation** ``data``, ``dtw``, ``rl``: what every method builds on;
 - **methods** the foundation plus ``seq``, ``defender``, ``clfd``, ``mdlt``, ``ur3``;
-- **services** ``book``, ``sweep``, ``stats``: shared machinery (paths, results, paper tables,
-  the task engine, the evidence rules) that any layer may use;
+- **services** ``book``, ``sweep``, ``stats``, ``_io``: shared machinery (paths, results, paper
+  tables, the task engine, the evidence rules, atomic file writes) that any layer may use;
 - **chapters** ``chapters`` (one module per notebook; the legacy ``background`` module counts as
   chapter code until it moves there);
 - **entry points** ``thesis_lib.cli`` and every package's ``cli`` module (the ``thesis data``,
@@ -24,7 +24,7 @@ The rules, one test each (parametrised, so a failure names the rule):
    and ``thesis_lib.book`` *inside a function* (the runner and ``thesis params`` map a chapter
    name to its ``Config``; a lazy import keeps ``import thesis_lib.book`` free of every method).
    Notebooks import chapters too; they are not under ``src``.
-4. ``services-import-no-methods-at-module-level``: ``book``, ``sweep`` and ``stats`` import no
+4. ``services-import-no-methods-at-module-level``: ``book``, ``sweep``, ``stats`` and ``_io`` import no
    method package, chapter or the CLI at module level (inside a function is allowed: e.g. a
    service that renders a method's output on demand).
 
@@ -51,7 +51,7 @@ PKG = "thesis_lib"
 
 FOUNDATION = {"data", "dtw", "rl"}
 METHODS = FOUNDATION | {"seq", "defender", "clfd", "mdlt", "ur3"}
-SERVICES = {"book", "sweep", "stats"}
+SERVICES = {"book", "sweep", "stats", "_io"}
 CHAPTERS = {"chapters", "background"}
 ENTRY = {"cli"}
 # (importer, imported): edges between method packages that the design wants

@@ -30,8 +30,6 @@ Used in: DEFENDER chapter (thesis 4.3).
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +39,7 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
+from thesis_lib._io import atomic_write
 from thesis_lib.book import results_dir
 from thesis_lib.defender import (
     METHODS,
@@ -487,13 +486,9 @@ def demos_file(demos: DemoSet, label: str = "") -> str:
     name = f"{label or thesis_env_name(str(demos.env_id))}-{h.hexdigest()[:16]}.npz"
     path = results_dir(CHAPTER) / "demos" / name
     if not path.is_file():
-        # a temporary file of its own (as mdlt.audio's cache): two study workers may write the
-        # same set at once (same content), and each renames its own file atomically over it
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f"{path.stem}.", suffix=".part.npz")
-        os.close(fd)
-        save_demonstrations(demos, tmp)
-        os.replace(tmp, path)
+        # two study workers may write the same set at once (same content): each writes a
+        # temporary file of its own and renames it atomically over the set
+        atomic_write(path, lambda tmp: save_demonstrations(demos, tmp), keep_suffix=True)
     return name
 
 

@@ -32,7 +32,6 @@ Used to make the D4RL-recipe data sets of HDT 5.2 and Decision Mamba 5.3.
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
@@ -40,6 +39,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from thesis_lib._io import atomic_write
 
 from .experts import evaluate  # one roll-out loop for ARS and TQC policies
 from .tasks import get_task
@@ -210,13 +211,6 @@ def export_actor(model: Any, backend: str) -> MLPPolicy:
     return MLPPolicy(ws, bs, low, high)
 
 
-def _atomic_save(save: Callable[[Path], object], dest: Path) -> None:
-    """Write via ``save(tmp)`` then rename over ``dest``: never a half-written file."""
-    tmp = dest.with_name(dest.name + ".tmp")
-    save(tmp)
-    os.replace(tmp, dest)
-
-
 @dataclass
 class RunState:
     """What a training run has done so far (``state.json`` in its folder)."""
@@ -324,8 +318,8 @@ def train_deep_expert(
     model.set_logger(_silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
 
     def checkpoint() -> None:
-        _atomic_save(model.save, folder / "model.zip")
-        _atomic_save(model.save_replay_buffer, folder / "replay.pkl")
+        atomic_write(folder / "model.zip", model.save)
+        atomic_write(folder / "replay.pkl", model.save_replay_buffer)
         st.checkpoint_steps = st.steps
         _write_state(st, state_path)
 
@@ -468,7 +462,7 @@ def ship_deep_expert(
         arrays.update(pol[s["step"]].to_arrays(f"ckpt{i}_"))
     out = Path(out_dir) if out_dir is not None else POLICY_DIR
     out.mkdir(parents=True, exist_ok=True)
-    _atomic_save(lambda p: _savez(p, arrays), out / f"{task}.npz")
+    atomic_write(out / f"{task}.npz", lambda p: _savez(p, arrays))
     cfg = dict(st.config)
     rec = PolicyRecord(
         task=task,
@@ -497,8 +491,8 @@ def ship_deep_expert(
         expert_step=int(exp_step),
         snapshot_returns={str(s["step"]): s["return"] for s in snaps},
     )
-    _atomic_save(
-        lambda p: p.write_text(json.dumps(asdict(rec), indent=1) + "\n"), out / f"{task}.json"
+    atomic_write(
+        out / f"{task}.json", lambda p: p.write_text(json.dumps(asdict(rec), indent=1) + "\n")
     )
     return rec
 
@@ -514,7 +508,7 @@ def _jsonable(d: dict[str, Any]) -> dict[str, Any]:
 
 
 def _write_state(st: RunState, path: Path) -> None:
-    _atomic_save(lambda p: p.write_text(json.dumps(asdict(st), indent=1) + "\n"), path)
+    atomic_write(path, lambda p: p.write_text(json.dumps(asdict(st), indent=1) + "\n"))
 
 
 __all__ = [

@@ -30,11 +30,12 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
+
+from thesis_lib._io import atomic_write
 
 HOP_LENGTH = 512
 """Samples between feature frames (the authors' value); the sample rate is ``fps * HOP_LENGTH``."""
@@ -294,11 +295,7 @@ def cached_audio_features(
         except Exception:  # a truncated cache file: recompute it
             pass
     x = audio_features(path, fps=fps)
-    cdir.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=cdir, suffix=".npy.tmp")
-    with os.fdopen(fd, "wb") as f:
-        np.save(f, x)
-    os.replace(tmp, cfile)  # atomic: parallel workers never read half a file
+    atomic_write(cfile, lambda tmp: np.save(tmp, x), keep_suffix=True)  # workers share the cache
     return x
 
 

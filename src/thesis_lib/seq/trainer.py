@@ -33,6 +33,8 @@ import torch
 import torch.nn as nn
 from tqdm.auto import tqdm
 
+from thesis_lib._io import atomic_write
+
 __all__ = ["TrainConfig", "Trainer", "batch_to_torch"]
 
 
@@ -285,11 +287,8 @@ class Trainer:
 
     def save(self, path: str | os.PathLike) -> None:
         """Write a checkpoint (atomically: a crash mid-write keeps the previous one)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        torch.save(self.state_dict(), tmp)
-        os.replace(tmp, path)
+        state = self.state_dict()
+        atomic_write(path, lambda tmp: torch.save(state, tmp))
 
     def load(self, path: str | os.PathLike) -> None:
         """Restore a checkpoint written by :meth:`save` into this trainer (model included).

@@ -50,6 +50,8 @@ from typing import Any, TypeAlias
 
 import pandas as pd
 
+from thesis_lib._io import atomic_write
+
 #: result rows a task function returns: a DataFrame or a list of flat dicts.
 Rows: TypeAlias = pd.DataFrame | list[dict[str, Any]]
 
@@ -271,11 +273,8 @@ class TaskStore:
     def write(self, record: dict[str, Any], extra: Mapping[str, Any] | None = None) -> Path:
         self.root.mkdir(parents=True, exist_ok=True)
         rec = {**record, **(extra or {})}
-        p = self.path(rec["key"])
-        tmp = p.with_name(p.name + ".tmp")
-        tmp.write_text(json.dumps(rec, indent=1, default=_json_default) + "\n")
-        os.replace(tmp, p)
-        return p
+        text = json.dumps(rec, indent=1, default=_json_default) + "\n"
+        return atomic_write(self.path(rec["key"]), lambda tmp: tmp.write_text(text))
 
 
 def _env_default(name: str, default: str | None) -> str | None:
