@@ -315,7 +315,7 @@ def test_thesis_study_runs_several_in_order_and_status_writes_nothing_before_a_r
     assert '"tasks_done": 20' in capsys.readouterr().out
 
 
-def test_status_line_says_what_changed_in_the_library_since_the_study(project):
+def test_status_line_says_what_changed_in_the_library_since_the_study(project, monkeypatch):
     import subprocess
 
     from thesis_lib.book import evidence as evi
@@ -335,7 +335,7 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project):
     st.run_study("04_hdt", progress=False, force=True)  # now at that commit
     ev = evi.load_evidence("04_hdt", reps=100)
     assert evi.code_changes_since(ev).empty
-    assert "The library has not changed since." in evi.status_line(ev)
+    assert "The code its tasks run has not changed since." in evi.status_line(ev)
     lib = project / "src" / "thesis_lib"
     lib.mkdir(parents=True)
     (lib / "model.py").write_text("x = 1\n")
@@ -346,9 +346,38 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project):
     (lib / "book" / "page.py").write_text("y = 2\n")  # the book's rendering: not listed
     git("add", "-A")
     git("commit", "-qm", "prose and rendering")
-    since = evi.code_changes_since(ev)
+    since = evi.code_changes_since(ev)  # the task function is not library code: all of it counts
     assert list(since.subject) == ["change the model"]
-    assert "Since then, 1 commit(s) changed the library" in evi.status_line(ev)
+    assert "Since then, 1 commit(s) changed the code its tasks run" in evi.status_line(ev)
+
+    # a task function in the library: only the modules it runs count
+    def write(rel: str, text: str) -> None:
+        (lib / rel).parent.mkdir(parents=True, exist_ok=True)
+        (lib / rel).write_text(text)
+
+    write("__init__.py", "")
+    write("chapters/__init__.py", "")
+    write("chapters/fake.py", "from thesis_lib.m import f\n\ndef run(c):\n    from ..n import g\n")
+    write("m.py", "def f(): ...\n")
+    write("n/__init__.py", "from .x import g\n")
+    write("n/x.py", "def g(): ...\n")
+    write("n/unused.py", "z = 0\n")
+    git("add", "-A")
+    git("commit", "-qm", "the library's layout")
+    assert evi.study_code_paths({"thesis_lib.chapters.fake"}, project) == [
+        f"src/thesis_lib/{f}"
+        for f in ["__init__.py", "chapters/__init__.py", "chapters/fake.py", "m.py",
+                  "n/__init__.py", "n/x.py"]
+    ]  # fmt: skip
+    st.run_study("04_hdt", progress=False, force=True)  # at HEAD
+    monkeypatch.setattr(st, "study_task_functions", lambda study: {"thesis_lib.chapters.fake:run"})
+    ev = evi.load_evidence("04_hdt", reps=100)
+    for rel, subject in [("n/x.py", "lazily imported"), ("n/unused.py", "not imported"),
+                         ("model.py", "not imported either"), ("chapters/fake.py", "the task")]:  # fmt: skip
+        write(rel, (lib / rel).read_text() + "# changed\n")
+        git("add", "-A")
+        git("commit", "-qm", subject)
+    assert list(evi.code_changes_since(ev).subject) == ["the task", "lazily imported"]
 
 
 def test_claim_readings_say_where_we_differ_and_why(project):

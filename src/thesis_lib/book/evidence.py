@@ -29,6 +29,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,6 +49,7 @@ __all__ = [
     "scale_check_table",
     "secondary_comparisons",
     "status_line",
+    "study_code_paths",
 ]
 
 
@@ -116,27 +118,96 @@ def status_line(ev: Evidence) -> str:
     since = code_changes_since(ev) if ev.complete else None
     if since is not None:
         line += (
-            " The library has not changed since."
+            " The code its tasks run has not changed since."
             if since.empty
-            else f" Since then, {len(since)} commit(s) changed the library (newest "
+            else f" Since then, {len(since)} commit(s) changed the code its tasks run (newest "
             f"{since.commit.iloc[0]}, {since.date.iloc[0]}); they took no part in these rows."
         )
     return line
 
 
-#: What a study's rows depend on: the library (less the book's rendering code) and its file.
+#: What a study's rows depend on when its task functions cannot be traced (a task function
+#: outside the library): the whole library, less the book's rendering code.
 STUDY_CODE_PATHS = ("src/thesis_lib", ":(exclude)src/thesis_lib/book")
+
+
+def _module_file(name: str, src: Path) -> Path | None:
+    base = src.joinpath(*name.split("."))
+    for f in (base.with_suffix(".py"), base / "__init__.py"):
+        if f.is_file():
+            return f
+    return None
+
+
+def _imported_modules(name: str, file: Path, src: Path) -> set[str]:
+    """The ``thesis_lib`` modules ``file`` (module ``name``) imports, anywhere in it (a lazy
+    import inside a function runs too): ``import a.b``, ``from a import b`` (``a`` and, where
+    it is a module, ``a.b``), relative imports resolved against ``name``'s package."""
+    import ast
+
+    package = name if file.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(file.read_text(), str(file))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[: len(parts) - node.level + 1])
+                mod = f"{base}.{node.module}" if node.module else base
+            else:
+                mod = node.module or ""
+            found.add(mod)
+            found.update(
+                f"{mod}.{a.name}" for a in node.names if _module_file(f"{mod}.{a.name}", src)
+            )
+    return {m for m in found if m == "thesis_lib" or m.startswith("thesis_lib.")}
+
+
+def study_code_paths(modules: set[str], root: Path | None = None) -> list[str] | None:
+    """The library files a study's task functions run, relative to the project ``root``: the
+    modules named (``thesis_lib.chapters.defender``, ...) and, transitively, every
+    ``thesis_lib`` module they import, with the ``__init__.py`` of each package on the way.
+    ``thesis_lib.book`` (paths, provenance, rendering) is left out, as in
+    :data:`STUDY_CODE_PATHS`. ``None`` where a module is not a file under ``root/src``.
+
+    Example: the 07 study's tasks (``thesis_lib.chapters.ur3``) run ``ur3``, ``seq``, ``data``
+    and ``sweep`` code, but no ``mdlt`` or ``defender`` module: a commit that only changes MDLT
+    did not change what the 07 rows depend on.
+    """
+    from thesis_lib.book.paths import project_root
+
+    root = Path(root) if root is not None else project_root()
+    src = root / "src"
+    todo, seen, files = list(modules), set(), set()
+    while todo:
+        name = todo.pop()
+        if name in seen or name == "thesis_lib.book" or name.startswith("thesis_lib.book."):
+            continue
+        seen.add(name)
+        f = _module_file(name, src)
+        if f is None:
+            if name in modules:
+                return None
+            continue  # a name imported from a module (a function), not a module
+        files.add(f)
+        parts = name.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts))]  # its packages run first
+        todo += _imported_modules(name, f, src)
+    return sorted(str(f.relative_to(root)) for f in files)
 
 
 def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     """The commits after the study's last commit that changed what its rows depend on: the
-    library (:data:`STUDY_CODE_PATHS`, any part of it) and its study file. Columns
-    ``commit, date, subject``, newest first; ``None`` where it cannot be known: before the
-    study ran, or where git or the study's commits cannot be read (a copy without history).
+    library code its task functions run (:func:`study_code_paths`; the whole library, less
+    ``book/``, where they cannot be traced) and its study file. Columns ``commit, date,
+    subject``, newest first; ``None`` where it cannot be known: before the study ran, or where
+    git or the study's commits cannot be read (a copy without history).
 
     CLAIMS.md asks each page to say at which commit a study was computed and what changed
     since: a change listed here did not take part in the verdicts.
     """
+    from thesis_lib.book import study as st
     from thesis_lib.book.results import git_output
 
     cols = ["commit", "date", "subject"]
@@ -149,7 +220,9 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     if not stamps:
         return None
     last = max(stamps, key=lambda c: stamps[c])
-    paths = [*STUDY_CODE_PATHS, f"params/{ev.study.chapter}.study.yml"]
+    fns = st.study_task_functions(ev.study)
+    traced = study_code_paths({f.partition(":")[0] for f in fns}) if fns else None
+    paths = [*(traced or STUDY_CODE_PATHS), f"params/{ev.study.chapter}.study.yml"]
     log = git_output(["log", "--format=%h%x09%cs%x09%s", f"{last}..HEAD", "--", *paths])
     if log is None:
         return None

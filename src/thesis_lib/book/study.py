@@ -255,6 +255,11 @@ def _records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]
     return recs
 
 
+def study_task_functions(study: Study) -> set[str]:
+    """The task functions (``module:qualname``) that a study's stored tasks ran."""
+    return {str(r["fn"]) for r in _records(study) if r.get("fn")}
+
+
 def study_rows(study: Study, keys: list[str] | None = None) -> pd.DataFrame:
     """Tidy rows of a study's finished tasks (those written under this study's hash)."""
     frames = []
@@ -397,6 +402,7 @@ __all__ = [
     "study_config",
     "study_path",
     "study_rows",
+    "study_task_functions",
     "reuse_tasks",
     "study_tasks",
     "write_claims",
