@@ -14,14 +14,18 @@ import pytest
 import yaml
 
 from thesis_lib.book import study as st
-from thesis_lib.sweep import Task
+from thesis_lib.sweep import Task, TaskFailed
 
 CALLS: list[str] = []
+FAIL: set[str] = set()  # runs that raise, as "method/setting/seed"
 
 
 def fake_task(cfg: dict) -> list[dict]:
     """A 'training run': method HDT scores 10 above DT, seeds add noise."""
-    CALLS.append(f"{cfg['method']}/{cfg['setting']}/{cfg['seed']}")
+    run = f"{cfg['method']}/{cfg['setting']}/{cfg['seed']}"
+    CALLS.append(run)
+    if run in FAIL:
+        raise FloatingPointError(f"{run} diverged")
     base = {"HDT": 60.0, "DT": 50.0}[cfg["method"]] + cfg["offset"]
     return [{**cfg, "score": base + (cfg["seed"] % 3) - 1.0}]
 
@@ -65,6 +69,7 @@ def project(tmp_path, monkeypatch):
     mod = types.SimpleNamespace(Config=FakeConfig, study_tasks=fake_study_tasks)
     monkeypatch.setattr(st, "chapter_module", lambda chapter: mod)
     CALLS.clear()
+    FAIL.clear()
     return tmp_path
 
 
@@ -313,6 +318,36 @@ def test_thesis_study_runs_several_in_order_and_status_writes_nothing_before_a_r
         assert json.loads((project / "studies" / ch / "run.json").read_text())["complete"]
     main(["study", "04_hdt", "--status"])
     assert '"tasks_done": 20' in capsys.readouterr().out
+
+
+def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsys):
+    from thesis_lib.cli import main
+
+    other = {**STUDY, "study": "fake-05-v1", "chapter": "05_decision_mamba"}
+    (project / "params" / "05_decision_mamba.study.yml").write_text(yaml.safe_dump(other))
+    FAIL.update({"DT/a/0", "HDT/b/4"})  # both studies have these runs
+    with pytest.raises(TaskFailed, match="HDT/b/4 diverged"):  # no flag: the first stops all
+        main(["study", "04_hdt", "05_decision_mamba"])
+    assert len(CALLS) == 10  # HDT's a and b seeds, in grid order, then it stopped
+    info = json.loads((project / "studies" / "04_hdt" / "run.json").read_text())
+    assert info["tasks_done"] == 9  # the summary of what finished is written anyway
+    CALLS.clear()
+    assert main(["study", "04_hdt", "05_decision_mamba", "--keep-going"]) == 1
+    err = capsys.readouterr().err
+    assert len(CALLS) == 20 - 9 + 20  # every run not stored yet, of both studies, was tried
+    assert "04_hdt: 2 of 20 task(s) failed" in err and "05_decision_mamba: 2 of 20" in err
+    assert "Failed tasks in: 04_hdt (2 task(s)), 05_decision_mamba (2 task(s))" in err
+    info = json.loads((project / "studies" / "04_hdt" / "run.json").read_text())
+    assert info["tasks_done"] == 18 and not info["complete"]
+    assert main(["study", "04_hdt", "--status"]) == 0
+    assert len(json.loads(capsys.readouterr().out)["tasks_failed"]) == 2
+    FAIL.clear()  # fixed: a rerun runs only the failed tasks, and forgets their failures
+    CALLS.clear()
+    assert main(["study", "04_hdt", "--keep-going"]) == 0
+    assert sorted(CALLS) == ["DT/a/0", "HDT/b/4"]
+    capsys.readouterr()
+    main(["study", "04_hdt", "--status"])
+    assert "tasks_failed" not in json.loads(capsys.readouterr().out)
 
 
 def test_status_line_says_what_changed_in_the_library_since_the_study(project, monkeypatch):

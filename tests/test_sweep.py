@@ -12,7 +12,15 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from thesis_lib.sweep import Task, TaskFailed, TaskStore, config_hash, execute, run_tasks
+from thesis_lib.sweep import (
+    GridFailed,
+    Task,
+    TaskFailed,
+    TaskStore,
+    config_hash,
+    execute,
+    run_tasks,
+)
 
 HERE = Path(__file__).resolve().parent
 
@@ -212,6 +220,45 @@ def test_local_executor_failure_names_the_config_and_keeps_finished_tasks(tmp_pa
         assert len(store.read(key)["rows"]) == 2
 
 
+@pytest.mark.parametrize("executor", ["inprocess", "local"])
+def test_a_failure_keeps_its_traceback_until_the_task_succeeds(tmp_path, executor):
+    tasks = grid(n=3, fail_at=1)
+    with pytest.raises(TaskFailed, match="cursed"):
+        run_tasks(tasks, store=tmp_path, executor=executor, n_jobs=2, progress=False)
+    store = TaskStore(tmp_path)
+    assert store.failures() == [tasks[1].key]
+    text = store.failure_path(tasks[1].key).read_text()
+    assert '"x":1' in text and "ValueError: x=1 is cursed" in text and "Traceback" in text
+    assert "failed" not in store.keys()  # the folder is not a task
+    # the task succeeds later (here: its record is stored as run_tasks stores it)
+    store.write({**execute(Task(square, {"x": 1})), "key": tasks[1].key})
+    assert store.failures() == []
+
+
+@pytest.mark.parametrize("executor", ["inprocess", "local"])
+def test_keep_going_runs_every_other_task_then_lists_the_failures(tmp_path, executor, monkeypatch):
+    log = tmp_path / "calls.txt"
+    tasks = grid(log, n=5, fail_at=1) + [Task(square, {"x": 3, "fail_at": 3, "seed": 7})]
+    with pytest.raises(GridFailed) as info:
+        run_tasks(tasks, store=tmp_path / "s", executor=executor, n_jobs=2, progress=False,
+                  keep_going=True)  # fmt: skip
+    err = info.value
+    assert sorted(calls(log)) == [0, 1, 2, 3, 4]  # the failure stopped nothing
+    assert sorted(f.key for f in err.failures) == sorted([tasks[1].key, tasks[5].key])
+    assert isinstance(err, TaskFailed) and err.key == err.failures[0].key
+    msg = str(err)
+    assert msg.startswith("2 of 6 task(s) failed; the others ran")
+    assert str(tmp_path / "s" / "failed") in msg and "x=1 is cursed" in msg
+    store = TaskStore(tmp_path / "s")
+    assert len(store.keys()) == 4 and len(store.failures()) == 2
+    # the environment's default (a notebook's grid takes it without a parameter)
+    monkeypatch.setenv("THESIS_SWEEP_KEEP_GOING", "1")
+    with pytest.raises(GridFailed):
+        run_tasks(grid(n=3, fail_at=0), store=tmp_path / "e", executor=executor, n_jobs=2,
+                  progress=False)  # fmt: skip
+    assert len(TaskStore(tmp_path / "e").keys()) == 2
+
+
 def test_task_failed_keeps_the_error_type():
     task = Task(square, {"x": 1})
     err = TaskFailed.of(task, KeyError("seed"))
@@ -322,6 +369,10 @@ def test_ray_local_instance_gives_the_same_rows_as_local(tmp_path, monkeypatch):
         with pytest.raises(TaskFailed, match=r'"x":2.*cursed'):
             run_tasks(bad, store=tmp_path / "bad", executor="ray", progress=False)
         assert bad[2].key not in TaskStore(tmp_path / "bad").keys()
+        with pytest.raises(GridFailed, match="1 of 4 task"):  # keep going: the others run
+            run_tasks(grid(n=4, fail_at=0), store=tmp_path / "kg", executor="ray",
+                      progress=False, keep_going=True)  # fmt: skip
+        assert len(TaskStore(tmp_path / "kg").keys()) == 3
     finally:
         ray.shutdown()
         shutil.rmtree(ray_tmp, ignore_errors=True)  # leave no session folder behind

@@ -220,8 +220,14 @@ def run_study(
     address: str | None = None,
     force: bool = False,
     progress: bool | None = None,
+    keep_going: bool = False,
 ) -> pd.DataFrame:
-    """Run (or resume) the study of ``chapter``; returns its rows and rewrites its files."""
+    """Run (or resume) the study of ``chapter``; returns its rows and rewrites its files
+    (``rows.csv``, ``run.json``: also when a task fails, for the tasks that finished).
+
+    ``keep_going``: a failed task does not stop the study; the others run, and
+    :class:`~thesis_lib.sweep.GridFailed` lists the failures at the end (their tracebacks are in
+    ``studies/<chapter>/tasks/failed/``)."""
     from thesis_lib.book.results import git_commit
     from thesis_lib.sweep import run_tasks
 
@@ -230,18 +236,22 @@ def run_study(
     out = studies_dir(chapter)
     if study.reuse and not force:
         reuse_tasks(study, [t.key for t in tasks])
-    rows = run_tasks(
-        tasks,
-        out / "tasks",
-        executor=executor,
-        n_jobs=n_jobs,
-        address=address,
-        force=force,
-        desc=f"study {study.study}",
-        progress=progress,
-        provenance={"study": study.study, "study_hash": study.hash, "commit": git_commit()},
-    )
-    write_study_summary(study, [t.key for t in tasks])
+    try:
+        rows = run_tasks(
+            tasks,
+            out / "tasks",
+            executor=executor,
+            n_jobs=n_jobs,
+            address=address,
+            force=force,
+            desc=f"study {study.study}",
+            progress=progress,
+            provenance={"study": study.study, "study_hash": study.hash, "commit": git_commit()},
+            keep_going=keep_going,
+        )
+    finally:
+        if _records(study):
+            write_study_summary(study, [t.key for t in tasks])
     return rows
 
 

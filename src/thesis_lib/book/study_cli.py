@@ -4,6 +4,7 @@ thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
 thesis study 04_hdt --status          # tasks done / total, CPU-hours so far
 thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
+thesis study 03_defender 02_clfd -j 2 --keep-going   # unattended: a failed task stops nothing
 thesis claims                         # studies/claims.csv from every committed study
 """
 
@@ -18,13 +19,19 @@ def _status(chapter: str) -> dict:
     """Progress of one study; refreshes its ``rows.csv`` / ``run.json`` once a task has run
     (an unstarted study gets no files)."""
     from thesis_lib.book import study as st
+    from thesis_lib.sweep import TaskStore
 
     s = st.load_study(chapter)
     keys = [t.key for t in st.study_tasks(s)]
+    failed = [k for k in TaskStore(st.studies_dir(chapter) / "tasks").failures() if k in keys]
     if st.study_rows(s, keys).empty:
-        return {"study": s.study, "tasks_done": 0, "tasks_total": len(keys), "cpu_hours": 0.0}
-    info = st.write_study_summary(s, keys)
-    return {k: info[k] for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")}
+        out = {"study": s.study, "tasks_done": 0, "tasks_total": len(keys), "cpu_hours": 0.0}
+    else:
+        info = st.write_study_summary(s, keys)
+        out = {k: info[k] for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")}
+    if failed:  # the last run of these tasks raised: tasks/failed/<key>.txt says why
+        out["tasks_failed"] = failed
+    return out
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
@@ -36,15 +43,27 @@ def _cmd_study(args: argparse.Namespace) -> int:
         for chapter in args.chapter:
             print(json.dumps(_status(chapter), indent=1))
         return 0
+    from thesis_lib.sweep import GridFailed
+
+    failed = []
     for chapter in args.chapter:  # in order; a complete study finds every task stored
-        rows = st.run_study(
-            chapter,
-            executor=args.executor,
-            n_jobs=args.jobs,
-            address=args.address,
-            force=args.force,
-        )
+        try:
+            rows = st.run_study(
+                chapter,
+                executor=args.executor,
+                n_jobs=args.jobs,
+                address=args.address,
+                force=args.force,
+                keep_going=args.keep_going,
+            )
+        except GridFailed as e:  # --keep-going: the next study still runs
+            print(f"{chapter}: {e}", file=sys.stderr)
+            failed.append(f"{chapter} ({len(e.failures)} task(s))")
+            continue
         print(f"{chapter}: {len(rows)} rows in {st.studies_dir(chapter)}")
+    if failed:
+        print(f"Failed tasks in: {', '.join(failed)}; rerun to retry them.", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -75,6 +94,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (or $RAY_ADDRESS)")
     p.add_argument("--force", action="store_true", help="recompute finished tasks")
     p.add_argument("--status", action="store_true", help="print progress; run nothing")
+    p.add_argument(
+        "-k",
+        "--keep-going",
+        action="store_true",
+        help="a failed task stops nothing: run the others (and the next studies), keep its "
+        "traceback in studies/<chapter>/tasks/failed/, exit 1 at the end",
+    )
     p.set_defaults(func=_cmd_study)
     c = subparsers.add_parser("claims", help="write studies/claims.csv from the studies")
     c.add_argument("--reps", type=int, default=10_000, help="bootstrap replications")

@@ -18,7 +18,9 @@ the grid's tasks (the stored ones as done) and shows an ETA.
 Each stored record holds the task's config, rows, timing and host, plus the git commit and
 package versions of the run (:func:`default_provenance`) and when it was stored. A task that
 raises stops the grid with :class:`TaskFailed`, which names its config; what finished before
-stays stored.
+stays stored. With ``keep_going=True`` (``thesis study --keep-going``, for long unattended
+runs) every other task still runs, and :class:`GridFailed` lists the failures at the end. Either
+way each failure's traceback is kept in ``<store>/failed/<key>.txt`` until the task succeeds.
 
 Example (``train_and_evaluate`` defined at module level in a library module)::
 
@@ -173,6 +175,23 @@ class TaskFailed(RuntimeError):
 _FAILED_TYPES: dict[type, type[TaskFailed]] = {}
 
 
+class GridFailed(TaskFailed):
+    """Tasks of a grid run with ``keep_going=True`` raised; every other task ran and is stored.
+
+    ``failures`` holds each failed task's :class:`TaskFailed`, in the order they failed; the
+    first one's ``key``, ``fn``, ``config`` and ``error`` are also this exception's.
+    """
+
+    def __init__(self, failures: Sequence[TaskFailed], n_total: int, store: Path | None = None):
+        first = failures[0]
+        self.failures = list(failures)
+        self.key, self.fn, self.config, self.error = first.key, first.fn, first.config, first.error
+        where = f"; their tracebacks are in {store / 'failed'}" if store is not None else ""
+        lines = [f"{len(failures)} of {n_total} task(s) failed; the others ran{where}:"]
+        lines += [f"- {f.key}: {f.fn} raised {f.error}" for f in self.failures]
+        RuntimeError.__init__(self, "\n".join(lines) + f"\n\nThe first: {first}")
+
+
 RAY_MISSING = (
     'The Ray executor needs Ray, an optional extra of thesis_lib: pip install ".[ray]" '
     '(from the checkout) or pip install "ray>=2.9".'
@@ -271,10 +290,30 @@ class TaskStore:
         return sorted(p.stem for p in self.root.glob("*.json"))
 
     def write(self, record: dict[str, Any], extra: Mapping[str, Any] | None = None) -> Path:
+        """Store a finished task's record (and forget an earlier failure of it)."""
         self.root.mkdir(parents=True, exist_ok=True)
         rec = {**record, **(extra or {})}
         text = json.dumps(rec, indent=1, default=_json_default) + "\n"
-        return atomic_write(self.path(rec["key"]), lambda tmp: tmp.write_text(text))
+        out = atomic_write(self.path(rec["key"]), lambda tmp: tmp.write_text(text))
+        self.failure_path(rec["key"]).unlink(missing_ok=True)
+        return out
+
+    def failure_path(self, key: str) -> Path:
+        """Where the last failure of task ``key`` is kept: ``<root>/failed/<key>.txt``."""
+        return self.root / "failed" / f"{key}.txt"
+
+    def write_failure(self, failure: TaskFailed, traceback_text: str = "") -> Path:
+        """Keep a failed task's message and traceback (with the time) until it succeeds."""
+        stamp = datetime.now(UTC).isoformat(timespec="seconds")
+        text = f"{stamp}\n{failure}\n"
+        if traceback_text and traceback_text not in text:
+            text += f"\nTraceback of the task:\n{traceback_text.rstrip()}\n"
+        return atomic_write(self.failure_path(failure.key), lambda tmp: tmp.write_text(text))
+
+    def failures(self) -> list[str]:
+        """Keys of the tasks whose last run failed (sorted)."""
+        folder = self.root / "failed"
+        return sorted(p.stem for p in folder.glob("*.txt")) if folder.is_dir() else []
 
 
 def _env_default(name: str, default: str | None) -> str | None:
@@ -310,6 +349,7 @@ def run_tasks(
     desc: str = "tasks",
     progress: bool | None = None,
     provenance: Mapping[str, Any] | None = None,
+    keep_going: bool | None = None,
 ) -> pd.DataFrame:
     """Run the tasks that have no stored result and return every task's rows, in task order.
 
@@ -325,6 +365,9 @@ def run_tasks(
         progress: show a progress bar with an ETA (default: unless ``TQDM_DISABLE`` is set).
         provenance: extra fields written into each stored record, on top of the git commit,
             the package versions (:func:`default_provenance`) and ``stored_utc``.
+        keep_going: after a task fails, run every other task, then raise :class:`GridFailed`
+            (default ``$THESIS_SWEEP_KEEP_GOING``, else ``False``: the first failure stops
+            the grid). A failed task's traceback is kept in ``<store>/failed/<key>.txt``.
 
     Returns:
         The rows of all tasks, concatenated, with a ``task_key`` column.
@@ -333,6 +376,7 @@ def run_tasks(
         ValueError: two tasks with the same key, or an unknown executor.
         TaskFailed: a task raised (its config is in the message); the tasks that finished
             before it are stored.
+        GridFailed: with ``keep_going``, one or more tasks raised; all the others are stored.
         RuntimeError: a stored result is damaged (the message names the file).
         ImportError: ``executor="ray"`` without Ray installed.
     """
@@ -349,6 +393,8 @@ def run_tasks(
         )
     if force is None:
         force = _env_default("THESIS_SWEEP_FORCE", "0") not in ("0", "false", "False")
+    if keep_going is None:
+        keep_going = _env_default("THESIS_SWEEP_KEEP_GOING", "0") not in ("0", "false", "False")
     ex, jobs = resolve_executor(executor, n_jobs)
     st = TaskStore(store) if store is not None else None
     done: dict[str, dict[str, Any]] = {}
@@ -367,11 +413,17 @@ def run_tasks(
             st.write(rec, {**extra, "stored_utc": stamp})
         done[rec["key"]] = rec
 
+    def failed(exc: TaskFailed, traceback_text: str) -> None:
+        if st is not None:
+            st.write_failure(exc, traceback_text)
+
     from ._executors import run_pending
 
-    run_pending(
+    failures = run_pending(
         todo,
         finished,
+        failed,
+        keep_going=keep_going,
         executor=ex,
         n_jobs=jobs,
         address=address or _env_default("RAY_ADDRESS", None),
@@ -380,6 +432,8 @@ def run_tasks(
         n_total=len(tasks),
         n_done=len(tasks) - len(todo),
     )
+    if failures:
+        raise GridFailed(failures, len(tasks), st.root if st is not None else None)
     frames = []
     for k in keys:
         df = pd.DataFrame(done[k]["rows"])
@@ -410,6 +464,7 @@ def probe(config: dict[str, Any]) -> list[dict[str, Any]]:
 
 __all__ = [
     "EXECUTORS",
+    "GridFailed",
     "RAY_MISSING",
     "Task",
     "TaskFailed",

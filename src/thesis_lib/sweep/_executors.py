@@ -2,8 +2,10 @@
 
 Each executor runs the pending tasks and hands every finished task's record to ``finished``
 in this process as soon as it arrives (the store writes it at once), advancing one progress
-bar over the whole grid. The first task that raises stops the grid: the executor cancels what
-has not started and raises :class:`~thesis_lib.sweep.TaskFailed` naming the task's config.
+bar over the whole grid, and every failed task's :class:`~thesis_lib.sweep.TaskFailed` (with
+its traceback) to ``failed``. The first task that raises stops the grid: the executor cancels
+what has not started and raises the ``TaskFailed``, naming the task's config. With
+``keep_going`` the executor runs every other task and returns the failures instead.
 """
 
 from __future__ import annotations
@@ -21,7 +23,9 @@ from typing import TYPE_CHECKING, Any
 from tqdm.auto import tqdm
 
 if TYPE_CHECKING:
-    from . import Task
+    from . import Task, TaskFailed
+
+Failed = Callable[["TaskFailed", str], None]
 
 #: ``Task.resources`` keys that are Ray task options; any other key is a custom Ray resource.
 RAY_OPTION_KEYS = ("num_cpus", "num_gpus", "memory")
@@ -30,7 +34,9 @@ RAY_OPTION_KEYS = ("num_cpus", "num_gpus", "memory")
 def run_pending(
     todo: list[Task],
     finished: Callable[[dict[str, Any]], None],
+    failed: Failed,
     *,
+    keep_going: bool,
     executor: str,
     n_jobs: int,
     address: str | None,
@@ -38,12 +44,14 @@ def run_pending(
     progress: bool | None,
     n_total: int,
     n_done: int,
-) -> None:
+) -> list[TaskFailed]:
     """Run ``todo`` and call ``finished(record)`` as each task ends (in this process).
 
     Args:
         todo: the tasks without a stored result.
         finished: called with each task's record as it arrives.
+        failed: called with each failed task's ``TaskFailed`` and traceback text.
+        keep_going: run every other task after a failure (and return the failures).
         executor: ``inprocess``, ``local`` or ``ray``.
         n_jobs: processes for ``local``; for ``ray`` without ``address``, the CPUs of the local
             Ray instance it starts (when > 1).
@@ -52,8 +60,11 @@ def run_pending(
         progress: ``False`` hides the bar, ``None`` shows it unless ``TQDM_DISABLE`` is set.
         n_total: tasks in the grid; n_done: those already stored (the bar starts there).
 
+    Returns:
+        With ``keep_going``, the failures in the order they happened (else always empty).
+
     Raises:
-        TaskFailed: the first task that raised.
+        TaskFailed: without ``keep_going``, the first task that raised.
     """
     if progress is None:
         progress = os.environ.get("TQDM_DISABLE", "").lower() in ("", "0", "false")
@@ -65,29 +76,43 @@ def run_pending(
         disable=not progress,
         dynamic_ncols=True,
     )
+    failures: list[TaskFailed] = []
+
+    def fail(exc: TaskFailed, traceback_text: str) -> bool:
+        """Record a failure; ``True`` where the grid goes on."""
+        failed(exc, traceback_text)
+        if keep_going:
+            failures.append(exc)
+            bar.set_postfix(failed=len(failures))
+        return keep_going
+
     try:
         if not todo:
-            return
+            return failures
         if executor == "inprocess":
-            _run_inprocess(todo, finished, bar)
+            _run_inprocess(todo, finished, fail, bar)
         elif executor == "local":
-            _run_joblib(todo, finished, bar, n_jobs)
+            _run_joblib(todo, finished, fail, bar, n_jobs)
         elif executor == "ray":
-            _run_ray(todo, finished, bar, n_jobs, address)
+            _run_ray(todo, finished, fail, bar, n_jobs, address)
         else:
             raise ValueError(f"unknown executor {executor!r}")
     finally:
         bar.close()
+    return failures
 
 
-def _run_inprocess(todo: list[Task], finished: Callable[..., None], bar: Any) -> None:
+def _run_inprocess(todo: list[Task], finished: Callable[..., None], fail: Any, bar: Any) -> None:
     from . import TaskFailed, execute
 
     for t in todo:
         try:
             rec = execute(t)
         except Exception as e:
-            raise TaskFailed.of(t, e) from e
+            exc = TaskFailed.of(t, e)
+            if not fail(exc, traceback.format_exc()):
+                raise exc from e
+            continue
         finished(rec)
         bar.update()
 
@@ -127,12 +152,14 @@ THREAD_VARS = (
 )
 
 
-def _run_joblib(todo: list[Task], finished: Callable[..., None], bar: Any, n_jobs: int) -> None:
+def _run_joblib(
+    todo: list[Task], finished: Callable[..., None], fail: Any, bar: Any, n_jobs: int
+) -> None:
     """``n_jobs`` local processes (joblib's loky executor, reused across grids).
 
     Each worker holds one task at a time (the next is sent when one finishes). After a
-    failure no new task starts; the running ones finish and are stored, then
-    :class:`TaskFailed` is raised. Ctrl-C stops the workers at once.
+    failure no new task starts (unless the grid keeps going); the running ones finish and are
+    stored, then :class:`TaskFailed` is raised. Ctrl-C stops the workers at once.
     """
     from concurrent.futures import FIRST_COMPLETED, wait
 
@@ -165,9 +192,11 @@ def _run_joblib(todo: list[Task], finished: Callable[..., None], bar: Any, n_job
                 except Exception as e:  # the worker died (killed, out of memory …)
                     out = {"error": e, "message": f"{type(e).__name__}: {e}", "traceback": ""}
                 if "error" in out:
-                    if failure is None:
-                        err = out["error"]
-                        failure = TaskFailed.of(task, err, out["message"], out["traceback"])
+                    exc = TaskFailed.of(task, out["error"], out["message"], out["traceback"])
+                    if fail(exc, out["traceback"]):
+                        submit_next()
+                    elif failure is None:
+                        failure = exc
                     continue
                 finished(out["record"])
                 bar.update()
@@ -221,6 +250,7 @@ def _ray_execute(task: Task) -> dict[str, Any]:
 def _run_ray(
     todo: list[Task],
     finished: Callable[..., None],
+    fail: Any,
     bar: Any,
     n_jobs: int,
     address: str | None,
@@ -270,10 +300,16 @@ def _run_ray(
                 try:
                     out = ray.get(ref)
                 except ray.exceptions.RayError as e:  # the worker died, was cancelled …
-                    raise TaskFailed.of(t, e) from e
+                    exc = TaskFailed.of(t, e)
+                    if not fail(exc, ""):
+                        raise exc from e
+                    continue
                 if "error" in out:
                     err = out["error"]
-                    raise TaskFailed.of(t, err, out["message"], out["traceback"]) from err
+                    exc = TaskFailed.of(t, err, out["message"], out["traceback"])
+                    if not fail(exc, out["traceback"]):
+                        raise exc from err
+                    continue
                 finished(out["record"])
                 bar.update()
     finally:
