@@ -38,6 +38,15 @@ def square(config: dict) -> list[dict]:
     ]
 
 
+def die(config: dict) -> list[dict]:
+    """A task whose worker process dies (as one killed for memory)."""
+    if config["x"] == config.get("die_at"):
+        import signal
+
+        os.kill(os.getpid(), signal.SIGKILL)
+    return square(config)
+
+
 def frame_task(config: dict) -> pd.DataFrame:
     return pd.DataFrame({"x": [config["x"]], "half": [config["x"] / 2]})
 
@@ -257,6 +266,18 @@ def test_keep_going_runs_every_other_task_then_lists_the_failures(tmp_path, exec
         run_tasks(grid(n=3, fail_at=0), store=tmp_path / "e", executor=executor, n_jobs=2,
                   progress=False)  # fmt: skip
     assert len(TaskStore(tmp_path / "e").keys()) == 2
+
+
+def test_keep_going_survives_a_dead_worker(tmp_path):
+    """A worker killed mid-task breaks joblib's pool: the grid gets a fresh one and goes on."""
+    tasks = [Task(die, {"x": x, "die_at": 0}) for x in range(6)]
+    with pytest.raises(GridFailed) as info:
+        run_tasks(tasks, store=tmp_path, executor="local", n_jobs=2, progress=False,
+                  keep_going=True)  # fmt: skip
+    dead = {f.key for f in info.value.failures}
+    assert tasks[0].key in dead  # (a task running beside it when the pool broke may fail too)
+    stored = set(TaskStore(tmp_path).keys())
+    assert stored | dead == {t.key for t in tasks} and len(stored) >= 4
 
 
 def test_task_failed_keeps_the_error_type():

@@ -162,6 +162,7 @@ def _run_joblib(
     stored, then :class:`TaskFailed` is raised. Ctrl-C stops the workers at once.
     """
     from concurrent.futures import FIRST_COMPLETED, wait
+    from concurrent.futures.process import BrokenProcessPool
 
     from joblib import cpu_count
     from joblib.externals.loky import get_reusable_executor
@@ -175,9 +176,16 @@ def _run_joblib(
     pending: dict[Any, Task] = {}
 
     def submit_next() -> None:
+        nonlocal executor
         task = next(queue, None)
-        if task is not None:
-            pending[executor.submit(_guarded, task)] = task
+        if task is None:
+            return
+        try:
+            fut = executor.submit(_guarded, task)
+        except BrokenProcessPool:  # a worker died (killed, out of memory): a fresh pool
+            executor = get_reusable_executor(max_workers=n_jobs, env=env)
+            fut = executor.submit(_guarded, task)
+        pending[fut] = task
 
     for _ in range(n_jobs):
         submit_next()
