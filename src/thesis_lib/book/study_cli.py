@@ -2,7 +2,7 @@
 
 thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
-thesis study 04_hdt --status          # tasks done / total, CPU-hours so far
+thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate)
 thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
 thesis study 03_defender 02_clfd -j 2 --keep-going   # unattended: a failed task stops nothing
 thesis claims                         # studies/claims.csv from every committed study
@@ -29,6 +29,9 @@ def _status(chapter: str) -> dict:
     else:
         info = st.write_study_summary(s, keys)
         out = {k: info[k] for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")}
+        left = info["tasks_total"] - info["tasks_done"]
+        if left:  # at the mean cost of the tasks done so far (tasks of a grid differ)
+            out["cpu_hours_left_estimate"] = round(info["cpu_hours"] / info["tasks_done"] * left, 1)
     if failed:  # the last run of these tasks raised: tasks/failed/<key>.txt says why
         out["tasks_failed"] = failed
     return out
