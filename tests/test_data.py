@@ -132,6 +132,27 @@ def test_get_dataset_generates_once_then_caches():
     assert c.n_transitions == 500
 
 
+def test_a_newly_shipped_expert_remakes_its_cached_sets(monkeypatch):
+    """A set made by an earlier expert is never served for the one shipped now (the TQC
+    experts replace the ARS ones under the same names and the same generator version)."""
+    from thesis_lib.data import experts
+
+    a = data.get_dataset("hopper", "medium", n_transitions=300)
+    shipped = experts.policy_fingerprint("hopper")
+    assert a.metadata["thesis_info"]["policy_fingerprint"] == shipped and len(shipped) == 16
+    mtime = (a.path / "data" / "main_data.hdf5").stat().st_mtime_ns
+    again = data.get_dataset("hopper", "medium", n_transitions=300)  # same expert: cached
+    assert (again.path / "data" / "main_data.hdf5").stat().st_mtime_ns == mtime
+    r = data.get_dataset("hopper", "random", n_transitions=300)
+    assert r.metadata["thesis_info"]["policy_fingerprint"] is None  # no policy in a random set
+    monkeypatch.setattr(experts, "policy_fingerprint", lambda task: "a-new-expert")
+    b = data.get_dataset("hopper", "medium", n_transitions=300)
+    assert b.metadata["thesis_info"]["policy_fingerprint"] == "a-new-expert"
+    assert (b.path / "data" / "main_data.hdf5").stat().st_mtime_ns != mtime
+    r2 = data.get_dataset("hopper", "random", n_transitions=300)  # not made from the expert
+    assert r2.metadata["thesis_info"] == r.metadata["thesis_info"]
+
+
 # --- tiers ---------------------------------------------------------------------------------
 
 

@@ -158,6 +158,25 @@ def has_policies(task: str) -> bool:
     return (POLICY_DIR / f"{task}.npz").exists()
 
 
+def policy_fingerprint(task: str) -> str | None:
+    """A hash of the shipped policy files of ``task`` (``policies/<task>.npz`` and ``.json``),
+    ``None`` where none ships. Stored with every data set made from them, so that a set made
+    by an earlier expert is never served for the one shipped now.
+
+    >>> len(policy_fingerprint("hopper")), policy_fingerprint("no-such-task")
+    (16, None)
+    """
+    import hashlib
+
+    files = [POLICY_DIR / f"{task}.npz", POLICY_DIR / f"{task}.json"]
+    if not all(f.is_file() for f in files):
+        return None
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def load_policy_record(task: str) -> PolicyRecord:
     """Read ``policies/<task>.json``."""
     path = POLICY_DIR / f"{task}.json"

@@ -21,8 +21,9 @@ Tiers (D4RL, Fu et al. 2020):
 
 Each tier draws from its own ``np.random.default_rng`` seeded by ``(seed, tier)``, so the
 same seed gives the same arrays, byte for byte, and no two tiers share initial states (as
-D4RL collected them independently). :data:`GENERATOR_VERSION` is stored with every set; a
-cached set of another version is made again.
+D4RL collected them independently). :data:`GENERATOR_VERSION` and the fingerprint of the
+shipped policy a set is made from are stored with every set; a cached set of another version,
+or made by another expert than the one shipped now, is made again.
 
 Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3 (InvertedDoublePendulum).
 """
@@ -243,6 +244,7 @@ def make_episodes(
         "n_transitions": n_transitions,
         "action_noise": noise,
         "generator_version": GENERATOR_VERSION,
+        "policy_fingerprint": _policy_fingerprint(task, tier),
     }
     env = make_env(task)
     low = env.action_space.low.astype(np.float64)
@@ -407,6 +409,16 @@ def generate(
     return dataset_id
 
 
+def _policy_fingerprint(task: str, tier: str) -> str | None:
+    """The fingerprint of the shipped policy a set of ``task``/``tier`` is made from (``None``
+    for the random tier and the Maze2D planner, which use no shipped policy)."""
+    if tier == "random" or get_task(task).kind != "mujoco":
+        return None
+    from .experts import policy_fingerprint
+
+    return policy_fingerprint(task)
+
+
 def get_dataset(
     task: str,
     tier: str,
@@ -415,7 +427,8 @@ def get_dataset(
     n_transitions: int | None = None,
 ) -> OfflineDataset:
     """Load ``thesis/<task>/<tier>-v0``, generating it first if missing or of another
-    size, seed or :data:`GENERATOR_VERSION`.
+    size, seed, :data:`GENERATOR_VERSION` or shipped policy (a set made by an earlier expert
+    is made again from the one shipped now: :func:`~thesis_lib.data.experts.policy_fingerprint`).
 
     This is what chapter notebooks call: on a fresh machine the data set is made on first
     use at the chosen scale and cached under :func:`thesis_lib.data.storage.data_dir`.
@@ -430,6 +443,7 @@ def get_dataset(
             and ti.get("n_transitions") == n
             and ti.get("seed") == seed
             and ti.get("generator_version") == GENERATOR_VERSION
+            and ti.get("policy_fingerprint") == _policy_fingerprint(task, tier)
         ):
             return ds
     generate(task, tier, n_transitions=n, seed=seed)
