@@ -309,6 +309,35 @@ def test_missing_dataset_says_how_to_make_it():
         load("mujoco/hopper/expert-v0")
 
 
+def test_a_set_made_concurrently_by_another_process_is_replaced_not_an_error(monkeypatch):
+    """Two processes make the same new set at once: both found no folder, one renames its set
+    into place first; the other's rename onto it must not fail (a directory cannot be renamed
+    over a non-empty one), and the set left is complete."""
+    from thesis_lib.data import storage
+
+    def episodes(n: int) -> list[Episode]:
+        T = 6
+        return [Episode(i, np.zeros((T + 1, 3)), np.zeros((T, 2)), np.full(T, float(n)),
+                        np.r_[np.zeros(T - 1, bool), True], np.zeros(T, bool)) for i in range(n)]  # fmt: skip
+
+    real_replace, raced = storage.os.replace, []
+
+    def lose_the_race(src, dst):  # the other process renames its set in just before ours
+        if not raced and str(dst).endswith("random-v0"):
+            raced.append(1)
+            data.write_dataset("thesis/hopper/random-v0", episodes(2), "Hopper-v5")
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(storage.os, "replace", lose_the_race)
+    data.write_dataset("thesis/hopper/random-v0", episodes(3), "Hopper-v5")
+    assert raced
+    ds = load("thesis/hopper/random-v0")
+    assert len(ds) == 3 and float(ds[0].rewards[0]) == 3.0  # the last rename wins, whole
+    monkeypatch.setattr(storage.os, "replace", real_replace)
+    with pytest.raises(FileExistsError, match="exists"):
+        data.write_dataset("thesis/hopper/random-v0", episodes(1), "Hopper-v5", overwrite=False)
+
+
 def test_episode_with_wrong_observation_count_is_named():
     bad = Episode(
         7, np.zeros((5, 3)), np.zeros((5, 2)), np.zeros(5), np.zeros(5, bool), np.zeros(5, bool)

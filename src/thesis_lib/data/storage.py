@@ -367,13 +367,19 @@ def write_dataset(
             info,
         )
         path.parent.mkdir(parents=True, exist_ok=True)
-        if path.exists():
+        try:
+            os.replace(staging_root / dataset_id, path)  # no set there yet
+        except OSError:
+            if not path.exists():
+                raise
+            if not overwrite:  # another process made this id since the check above
+                raise FileExistsError(f"Data set '{dataset_id}' exists at {path}.") from None
+            # a set there (an older one, or the same one just made by a concurrent process):
+            # moved aside first, as a directory cannot be renamed over a non-empty one
             trash = Path(tempfile.mkdtemp(prefix=".trash-", dir=root))
             os.replace(path, trash / "old")
             os.replace(staging_root / dataset_id, path)
             shutil.rmtree(trash, ignore_errors=True)
-        else:
-            os.replace(staging_root / dataset_id, path)
     finally:
         shutil.rmtree(staging_root, ignore_errors=True)
     return path
