@@ -347,7 +347,7 @@ def _mlp_replay(
         pols.append(p.sample)
     info["algorithm"] = (
         f"training replay: {warm} warm-up steps of uniform random actions, then snapshots "
-        f"at steps {steps} sampling from the actor's Gaussian, {list(share)} transitions each"
+        f"at steps {steps} sampling from the actor's Gaussian, {share.tolist()} transitions each"
     )
     eps: list[Episode] = []
     for pol, n in zip(pols, share):
