@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     from . import Task, TaskFailed
 
 Failed = Callable[["TaskFailed", str], None]
+#: what the executors call on a failure: record it; ``True`` where the grid goes on
+Fail = Callable[["TaskFailed", str], bool]
 
 #: ``Task.resources`` keys that are Ray task options; any other key is a custom Ray resource.
 RAY_OPTION_KEYS = ("num_cpus", "num_gpus", "memory")
@@ -102,7 +104,7 @@ def run_pending(
     return failures
 
 
-def _run_inprocess(todo: list[Task], finished: Callable[..., None], fail: Any, bar: Any) -> None:
+def _run_inprocess(todo: list[Task], finished: Callable[..., None], fail: Fail, bar: Any) -> None:
     from . import TaskFailed, execute
 
     for t in todo:
@@ -153,7 +155,7 @@ THREAD_VARS = (
 
 
 def _run_joblib(
-    todo: list[Task], finished: Callable[..., None], fail: Any, bar: Any, n_jobs: int
+    todo: list[Task], finished: Callable[..., None], fail: Fail, bar: Any, n_jobs: int
 ) -> None:
     """``n_jobs`` local processes (joblib's loky executor, reused across grids).
 
@@ -258,7 +260,7 @@ def _ray_execute(task: Task) -> dict[str, Any]:
 def _run_ray(
     todo: list[Task],
     finished: Callable[..., None],
-    fail: Any,
+    fail: Fail,
     bar: Any,
     n_jobs: int,
     address: str | None,
