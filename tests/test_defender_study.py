@@ -117,6 +117,7 @@ def test_study_config_errors():
 
 def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
     monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))  # the pinned demos
     cfg = ex.Config(**{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {}})
     tasks = {t.config["label"]: t for t in ex.study_tasks(cfg) if t.config["seed"] == 0}
     plain = ex.study_run(tasks["SAC"].config)[0]
@@ -143,6 +144,43 @@ def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
     curves = ex.study_curves(rows, reps=50)
     assert set(curves.measure) == {"crash_rate", "filtered_rate", "return"}
     assert curves.groupby("method").span.nunique().tolist() == [ex.STUDY_CURVE_BINS] * 2
+
+
+def test_pinned_demonstrations_are_kept_with_the_study_and_read_back(tmp_path, monkeypatch):
+    """The study's demonstrations are made once, copied beside its rows, and read from there on
+    a machine that has none: the SAC run that makes them is not reproducible bit for bit."""
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))
+    cfg = ex.Config(**{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {}})
+    recipe = {f: getattr(cfg, f) for f in ex.DEMO_FIELDS}
+    task = "InvertedDoublePendulum-v5"
+    first = ex.pinned_demonstrations(task, recipe)
+    pinned = tmp_path / "project" / "studies" / "03_defender" / "demos"
+    (record,) = pinned.glob("*.json")
+    (pool_file,) = pinned.glob("*.npz")
+    assert json.loads(record.read_text())["rows"][0]["pool"] == pool_file.name
+    assert json.loads(record.read_text())["config"]["cfg"]["demo_timesteps"] == 300
+
+    # a new machine: nothing in results/, and making them again is not allowed
+    import shutil
+
+    shutil.rmtree(tmp_path / "results")
+
+    def no_remake(*a, **k):
+        raise AssertionError("made the demonstrations again")
+
+    monkeypatch.setattr(ex, "make_demonstrations", no_remake)
+    again = ex.pinned_demonstrations(task, recipe)
+    assert again.n_sac == first.n_sac and again.episodes == []
+    for n in (2, 3):
+        assert ex.demos_file(ex.demos_subset(again, n)) == ex.demos_file(ex.demos_subset(first, n))
+    assert ex.demos_file(again.demos) == ex.demos_file(first.demos)
+    # study_demonstrations reads them through the pin, top-up or not
+    demos, info = ex.study_demonstrations(task, recipe, 3, top_up=True)
+    assert info["demos_file"] == ex.demos_file(ex.demos_subset(first, 3))
+    # another recipe is another pin: it is made, not read from the first one's files
+    with pytest.raises(AssertionError, match="made the demonstrations again"):
+        ex.pinned_demonstrations(task, {**recipe, "seed": 1})
 
 
 def test_study_file_parses_and_names_methods_study_tasks_makes(monkeypatch):
@@ -284,6 +322,20 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     assert topup.set_index("method").loc["SAC+MeanDemoW5/MeanDemoW10 no top-up", "demos_safe"] == 5
     sources = ex.study_demo_sources(rows)
     assert set(sources.n_demos) == {10, 20, 50}
+    # one draw per setting and count here: every filtered run of it is listed against it
+    assert sources.groupby(["setting", "n_demos", "top_up"]).size().eq(1).all()
+    assert sources.runs.sum() == rows.demos_file.notna().sum()
+    # a second draw (another machine) for seeds 3-4 of one setting: listed apart
+    moved = rows.copy()
+    later = moved.demos_file.notna() & (moved.setting == "Hopper") & (moved.seed >= 3)
+    moved.loc[later, "demos_file"] = "Hopper-0000000000000000.npz"
+    two = ex.study_demo_sources(moved)
+    hop = two[(two.setting == "Hopper") & (two.n_demos == 50) & two.top_up.astype(bool)]
+    assert (
+        hop.seeds.tolist() == ["0,1,2", "3,4"]
+        and hop.runs.sum()
+        == (rows.demos_file.notna() & (rows.setting == "Hopper") & (rows.n_demos == 50)).sum()
+    )
     curves = ex.study_curves(rows, reps=50)
     sac_crash = curves[(curves.method == "SAC") & (curves.measure == "crash_rate")]
     assert (sac_crash.seeds == 5).all() and (sac_crash.ci_low <= sac_crash["mean"]).all()

@@ -20,7 +20,9 @@ their demonstrations from content-addressed files under ``results/03_defender/de
 
 The pre-registered study of claims C7-C9 (``params/03_defender.study.yml``, ``thesis study
 03_defender``) runs :func:`study_tasks`: one :func:`study_run` per training run, reduced to one
-row by :func:`training_run_numbers` and a final evaluation without the filter; the chapter's
+row by :func:`training_run_numbers` and a final evaluation without the filter. Its
+demonstrations are made once and kept beside its rows (:func:`pinned_demonstrations`), because
+the SAC run that makes them is not reproducible bit for bit on another machine. The chapter's
 "Evidence at study scale" reads the rows back (:func:`study_summary`, :func:`plot_study_curves`,
 :func:`study_topup_table`).
 
@@ -62,7 +64,7 @@ from thesis_lib.defender.ablation import (
     rank_strategies,
     strategy_ablation,
 )
-from thesis_lib.sweep import Task, run_tasks
+from thesis_lib.sweep import Task, TaskStore, run_tasks
 
 CHAPTER = "03_defender"
 
@@ -92,6 +94,7 @@ __all__ = [
     "plot_ablation_heatmap",
     "plot_curves",
     "plot_curves_table_4_5",
+    "pinned_demonstrations",
     "plot_study_curves",
     "rank_thesis_strategies",
     "run_ablation",
@@ -351,6 +354,24 @@ def demonstrations_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     return [row]
 
 
+def _demonstrations_tasks(cfg: Config) -> list[Task]:
+    fields = {f: getattr(cfg, f) for f in DEMO_FIELDS}
+    return [Task(demonstrations_task, {"task": t, "cfg": fields}) for t in cfg.tasks]
+
+
+def _demo_run_from_row(row: dict[str, Any], folder: Path, episodes: bool = True) -> DemoRun:
+    """The :class:`DemoRun` of one :func:`demonstrations_task` row, its files read from
+    ``folder``; ``episodes=False`` leaves the SAC run's training episodes out (empty)."""
+    pool = load_demonstrations(folder / row["pool"])
+    log = load_demonstrations(folder / row["episodes"]).safe if episodes else []
+    kept = {
+        g: [getattr(pool, g)[int(i)] for i in str(row[g]).split(",") if i != ""]
+        for g in ("safe", "unsafe")
+    }
+    n_sac = {g: int(row[f"n_sac_{g}"]) for g in ("safe", "unsafe") if int(row[f"n_sac_{g}"]) >= 0}
+    return DemoRun(DemoSet(kept["safe"], kept["unsafe"], row["task"]), pool, log, None, n_sac)
+
+
 def make_demonstrations(cfg: Config, progress: bool = True) -> dict[str, DemoRun]:
     """One SAC run per task, rolled out every ``demo_every`` episodes (thesis 4.3.3).
 
@@ -364,23 +385,14 @@ def make_demonstrations(cfg: Config, progress: bool = True) -> dict[str, DemoRun
 
     Used in: DEFENDER chapter (thesis 4.3).
     """
-    fields = {f: getattr(cfg, f) for f in DEMO_FIELDS}
-    tasks = [Task(demonstrations_task, {"task": t, "cfg": fields}) for t in cfg.tasks]
     rows = run_tasks(
-        tasks, store=results_dir(CHAPTER) / "tasks", desc="demonstrations", progress=progress
+        _demonstrations_tasks(cfg),
+        store=results_dir(CHAPTER) / "tasks",
+        desc="demonstrations",
+        progress=progress,
     )
-    out = {}
-    for r in rows.to_dict(orient="records"):
-        pool = load_demos_file(r["pool"])
-        episodes = load_demos_file(r["episodes"]).safe
-        kept = {
-            g: [getattr(pool, g)[int(i)] for i in str(r[g]).split(",") if i != ""]
-            for g in ("safe", "unsafe")
-        }
-        n_sac = {g: int(r[f"n_sac_{g}"]) for g in ("safe", "unsafe") if int(r[f"n_sac_{g}"]) >= 0}
-        demos = DemoSet(kept["safe"], kept["unsafe"], r["task"])
-        out[r["task"]] = DemoRun(demos, pool, episodes, None, n_sac)
-    return out
+    folder = results_dir(CHAPTER) / "demos"
+    return {r["task"]: _demo_run_from_row(r, folder) for r in rows.to_dict(orient="records")}
 
 
 def _rl_overrides(cfg: Config) -> dict[str, Any]:
@@ -1270,6 +1282,39 @@ def _demo_lock(task: str) -> Any:
     return lock()
 
 
+def pinned_demonstrations(
+    task: str, recipe: dict[str, Any], folder: str | Path | None = None
+) -> DemoRun:
+    """The study's demonstration run of ``task``: the same pool on every machine and in every
+    session.
+
+    The SAC run that makes the demonstrations (:func:`make_demonstrations`) is seeded, but not
+    reproducible bit for bit on another machine: on a new machine of the same kind, with the
+    same package versions, it gave another pool. So the first call makes them and copies the
+    sweep record and the pool file into ``folder`` (default ``studies/03_defender/demos/``,
+    committed with the study's rows); every later call, on any machine, reads them from there.
+    The run's training-episode log is not kept (the study does not use it; ``episodes`` is
+    empty).
+
+    Used in: DEFENDER chapter study, through :func:`study_demonstrations` (which holds the
+    task's lock).
+    """
+    from thesis_lib.book.study import studies_dir
+
+    pinned = TaskStore(Path(folder) if folder is not None else studies_dir(CHAPTER) / "demos")
+    (t,) = _demonstrations_tasks(Config(**recipe, tasks=[task]))
+    if not pinned.has(t.key):
+        make_demonstrations(Config(**recipe, tasks=[task]), progress=False)
+        record = TaskStore(results_dir(CHAPTER) / "tasks").read(t.key)
+        name = record["rows"][0]["pool"]
+        pinned.root.mkdir(parents=True, exist_ok=True)
+        data = (results_dir(CHAPTER) / "demos" / name).read_bytes()
+        atomic_write(pinned.root / name, lambda tmp: tmp.write_bytes(data))
+        pinned.write(record)  # last: a record in the folder means its pool is there too
+    row = pinned.read(t.key)["rows"][0]
+    return _demo_run_from_row(row, pinned.root, episodes=False)
+
+
 def study_demonstrations(
     task: str, recipe: dict[str, Any], n_demos: int, top_up: bool = True
 ) -> tuple[DemoSet, dict[str, Any]]:
@@ -1290,7 +1335,7 @@ def study_demonstrations(
     Used in: DEFENDER chapter study, through :func:`study_run`.
     """
     with _demo_lock(task):
-        run = make_demonstrations(Config(**recipe, tasks=[task]), progress=False)[task]
+        run = pinned_demonstrations(task, recipe)
     seen = {g: run.n_sac.get(g, len(getattr(run.pool, g))) for g in ("safe", "unsafe")}
     if top_up:
         demos = demos_subset(run, n_demos)
@@ -1650,20 +1695,35 @@ def study_topup_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def study_demo_sources(rows: pd.DataFrame) -> pd.DataFrame:
-    """Per setting and demonstration count: how many of the kept demonstrations came from the
-    SAC run and how many from the shipped expert (the top-up), and how many roll-outs of each
-    group the SAC run gave. Empty before the study ran.
+    """Per setting, demonstration count and draw: how many of the kept demonstrations came from
+    the SAC run and how many from the shipped expert (the top-up), how many roll-outs of each
+    group the SAC run gave, and which runs (``runs``, ``seeds``) used them. Empty before the
+    study ran.
+
+    A draw is one ``demos_file`` (its name is a hash of every array). The study's SAC run is
+    seeded but not reproducible bit for bit on another machine, so a study that moved machines
+    before its demonstrations were pinned (:func:`pinned_demonstrations`) has more than one draw
+    per setting; this table says which runs used which.
 
     Used in: DEFENDER chapter ("Evidence at study scale").
     """
     cols = [
-        "setting", "n_demos", "top_up", "sac_rollouts_safe", "sac_rollouts_unsafe",
-        "demos_safe", "demos_safe_expert", "demos_unsafe", "demos_unsafe_expert",
+        "setting", "n_demos", "top_up", "demos_file", "runs", "seeds", "sac_rollouts_safe",
+        "sac_rollouts_unsafe", "demos_safe", "demos_safe_expert", "demos_unsafe",
+        "demos_unsafe_expert",
     ]  # fmt: skip
     if rows.empty or "demos_file" not in rows:
         return pd.DataFrame(columns=cols)
     d = rows[rows["demos_file"].notna()]
-    return d[cols].drop_duplicates().sort_values(["setting", "n_demos"]).reset_index(drop=True)
+    keys = [c for c in cols if c not in ("runs", "seeds")]
+    out = (
+        d.groupby(keys, sort=False, dropna=False)["seed"]
+        .agg(runs="size", seeds=lambda s: ",".join(str(int(v)) for v in sorted(set(s))))
+        .reset_index()
+    )
+    out["_first"] = d.groupby(keys, sort=False, dropna=False)["seed"].min().to_numpy()
+    out = out.sort_values(["setting", "n_demos", "top_up", "_first"])
+    return out[cols].reset_index(drop=True)
 
 
 STUDY_DATA_NOTE = (
