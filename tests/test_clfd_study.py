@@ -74,7 +74,8 @@ def test_rl_success_curve_on_a_hand_made_run():
         ex.rl_success_curve(ep, 7, 0.03)
 
 
-def test_study_tasks_give_one_row_per_run_with_finite_numbers(clfd_tiny, tmp_path):
+def test_study_tasks_give_one_row_per_run_with_finite_numbers(clfd_tiny, tmp_path, monkeypatch):
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))  # the pinned encoders
     tiny = {
         **clfd_tiny,
         "rl_episodes": 4,
@@ -108,6 +109,57 @@ def test_study_tasks_give_one_row_per_run_with_finite_numbers(clfd_tiny, tmp_pat
     # the encoders were trained once and shared: two encoder tasks in the chapter's store
     store = tmp_path / "results" / "02_clfd" / "tasks"
     assert len(list(store.glob("*.json"))) == 2
+    # ... and kept beside the study's rows; every row names the weights and frames it used
+    pinned = tmp_path / "project" / "studies" / "02_clfd" / "encoders"
+    assert len(list(pinned.glob("*.json"))) == len(list(pinned.glob("*.pt"))) == 2
+    sha = dict(zip(c10.method, c10.encoder_sha))
+    assert sha["CLfD"] != sha["TCN"] and len(sha["CLfD"]) == 16
+    assert set(c11[c11.features == "CLfD"].encoder_sha) == {sha["CLfD"]}
+    assert c11[c11.features == "untrained"].encoder_sha.isna().all()
+    assert c12.loc["CLfD", "encoder_sha"] == sha["CLfD"]
+    assert df.data_sha.dropna().nunique() == 1 and df[df.claim != "C12"].data_sha.notna().all()
+    inputs = ex.study_inputs_table(df)
+    assert inputs.to_dict("records") == [{"seed": 3, "data_sets": 1, "encoder_matches": "5/5"}]
+    moved = df.copy()  # an RL row whose encoder is not the one its alignment task trained
+    moved.loc[(moved.claim == "C12") & moved.encoder_sha.notna(), "encoder_sha"] = "0" * 16
+    moved.loc[moved.claim == "C11", "data_sha"] = "1" * 16
+    assert ex.study_inputs_table(moved).iloc[0].tolist() == [3, 2, "4/5"]
+    assert ex.study_inputs_table(df.drop(columns="encoder_sha")).empty
+
+
+def test_pinned_encoder_is_read_back_on_a_new_machine_not_trained_again(
+    clfd_tiny, tmp_path, monkeypatch
+):
+    """A later session on a new machine (an empty encoder store) gets the weights the first
+    one trained, from the study's folder, without training."""
+    import shutil
+
+    from thesis_lib.clfd.train import CLfD
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))
+    cfg = ex.Config(**clfd_tiny)
+    first, rows = ex.pinned_encoder(cfg, "tcn", "clfd")
+    path = ex.model_path(dict(ex.encoder_task(cfg, "tcn", "clfd").config))
+    trained = path.read_bytes()
+    shutil.rmtree(tmp_path / "results")
+
+    def no_training(*a, **k):
+        raise AssertionError("trained the encoder again")
+
+    monkeypatch.setattr(CLfD, "fit", no_training)
+    again, rows_again = ex.pinned_encoder(cfg, "tcn", "clfd")
+    assert path.read_bytes() == trained
+    pd.testing.assert_frame_equal(
+        rows.drop(columns="task_key", errors="ignore"),
+        rows_again.drop(columns="task_key", errors="ignore"),
+    )
+    # a local encoder that differs from the pinned one is replaced by it
+    path.write_bytes(b"not these weights")
+    ex.pinned_encoder(cfg, "tcn", "clfd")
+    assert path.read_bytes() == trained
+    # another encoder is not in the folder: it would be trained
+    with pytest.raises(AssertionError, match="trained the encoder again"):
+        ex.pinned_encoder(cfg, "tcn", "tcn")
 
 
 def _fake_rows(tasks: list, rng: np.random.Generator) -> pd.DataFrame:

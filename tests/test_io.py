@@ -1,9 +1,11 @@
-"""``thesis_lib._io.atomic_write``: a reader never sees half a file, a failed write changes nothing."""
+"""``thesis_lib._io``: a reader never sees half a file, a failed write changes nothing, and a
+locked piece of work is done by one process at a time."""
 
 from __future__ import annotations
 
 import os
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -83,3 +85,34 @@ def test_concurrent_writers_of_one_file_each_rename_a_complete_copy(tmp_path):
     data = dest.read_bytes()
     assert len(data) == 100_000 and len(set(data)) == 1
     assert [p.name for p in tmp_path.iterdir()] == ["set.bin"]
+
+
+def _hold(path, held, log):
+    from thesis_lib._io import file_lock
+
+    with file_lock(path):
+        held.set()
+        time.sleep(0.3)
+        log.put(("released", time.monotonic()))
+
+
+def test_file_lock_makes_a_second_process_wait_for_the_first(tmp_path):
+    import multiprocessing as mp
+
+    from thesis_lib._io import file_lock
+
+    ctx = mp.get_context("fork")
+    held, log = ctx.Event(), ctx.Queue()
+    lock = tmp_path / "new" / ".task.lock"  # its folder is made
+    p = ctx.Process(target=_hold, args=(lock, held, log))
+    p.start()
+    assert held.wait(10)
+    with file_lock(lock):
+        got = time.monotonic()
+    p.join(10)
+    what, released = log.get(timeout=5)
+    assert what == "released" and got >= released
+    with pytest.raises(ValueError), file_lock(lock):  # the lock is let go on an error too
+        raise ValueError
+    with file_lock(lock):
+        pass

@@ -1,4 +1,5 @@
-"""One way to write a file so that no reader ever sees half of it.
+"""One way to write a file so that no reader ever sees half of it, and one lock for work that two
+processes must not do twice.
 
 Every file the library writes that another process may read at the same time (a study task's
 record, a training checkpoint, a cached feature array, a demonstration set, an exported expert)
@@ -6,16 +7,21 @@ goes through :func:`atomic_write`: the content is written to a temporary file of
 destination's folder, then renamed over the destination (``os.replace``, atomic on POSIX and on
 Windows within one volume). Two workers writing the same file each rename their own complete
 copy; a process killed mid-write leaves the previous file (or none), never a truncated one.
+
+:func:`file_lock` serialises work that two study workers could otherwise both start (making the
+same demonstrations, training the same encoder): the second waits, then finds the first's
+result.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-__all__ = ["atomic_write"]
+__all__ = ["atomic_write", "file_lock"]
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
@@ -51,3 +57,22 @@ def atomic_write(
         tmp.unlink(missing_ok=True)
         raise
     return dest
+
+
+@contextlib.contextmanager
+def file_lock(path: str | os.PathLike) -> Iterator[Path]:
+    """Hold an exclusive lock on ``path`` (created, with its folder, if needed) for the block.
+
+    An advisory ``fcntl.flock``: every process that takes the same path waits for the holder;
+    the lock goes with the process if it dies. POSIX only, as the study workers are.
+    """
+    import fcntl
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield path
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)

@@ -18,6 +18,7 @@ Used in: chapter 02_clfd.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from thesis_lib._io import atomic_write, file_lock
 from thesis_lib.book import compare_with_paper, results_dir
+from thesis_lib.book.study import studies_dir
 from thesis_lib.clfd.data import MultiViewVideos, make_pick_place_dataset
 from thesis_lib.clfd.env import CAMERAS, STAGES, MultiViewPickPlace, run_demonstration
 from thesis_lib.clfd.losses import nt_xent
@@ -45,7 +48,7 @@ from thesis_lib.clfd.train import (
     camera_pairs,
     mean_alignment_error,
 )
-from thesis_lib.sweep import Task, config_hash, run_tasks
+from thesis_lib.sweep import Task, TaskStore, config_hash, run_tasks
 
 CHAPTER = "02_clfd"
 
@@ -798,6 +801,66 @@ def _study_row(config: dict[str, Any], cfg: Config, claim: str, **row: Any) -> d
     }
 
 
+def data_fingerprint(data: dict[str, MultiViewVideos]) -> str:
+    """A short hash of every frame, camera name and stage label of a data set's splits.
+
+    The study's rows record it: a seed's data set is rendered anew on each machine, and this
+    says whether two machines rendered the same frames.
+    """
+    h = hashlib.sha256()
+    for split in sorted(data):
+        v = data[split]
+        h.update(f"{split}:{','.join(v.cameras)}".encode())
+        for arr in [*v.videos, *(v.stages or [])]:
+            a = np.ascontiguousarray(arr)
+            h.update(str((a.dtype.str, a.shape)).encode())
+            h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def _file_sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+
+
+def pinned_encoder(
+    cfg: Config, encoder: str, method: str, folder: str | Path | None = None
+) -> tuple[CLfD, pd.DataFrame]:
+    """A study encoder that later tasks read: trained once and kept beside the study's rows.
+
+    The stage (C11) and RL (C12) tasks use the encoders the alignment (C10) tasks trained. A
+    study runs across sessions, and a later session may run on a new machine whose encoder
+    store (``results/02_clfd``) is empty. So the first call trains the encoder through the
+    store (:func:`trained_encoder`) and copies its weights and sweep record into ``folder``
+    (default ``studies/02_clfd/encoders/``, committed with the rows: about 130 kB per
+    TCN-style encoder); every later call, on any machine, puts them back into the store and
+    reads them from there instead of training again. Two workers asking for the same encoder
+    at once: the second waits for the first (a file lock), then reads its result.
+
+    Returns:
+        ``(model, rows)`` as :func:`trained_encoder` and its task's rows.
+
+    Used in: CLfD chapter study, through :func:`study_alignment_task` and the stage and RL
+    tasks.
+    """
+    task = encoder_task(cfg, encoder, method)
+    pinned = TaskStore(Path(folder) if folder is not None else studies_dir(CHAPTER) / "encoders")
+    weights = pinned.root / f"{task.key}.pt"
+    store = TaskStore(results_dir(CHAPTER) / "tasks")
+    local = model_path(dict(task.config))
+    with file_lock(results_dir(CHAPTER) / "models" / f".{task.key}.lock"):
+        if pinned.has(task.key) and weights.is_file():
+            data = weights.read_bytes()
+            if not local.is_file() or local.read_bytes() != data:
+                atomic_write(local, lambda tmp: tmp.write_bytes(data))
+            store.write(pinned.read(task.key))
+        model, rows = _trained_encoder_rows(cfg, encoder, method, executor="inprocess")
+        if not pinned.has(task.key):
+            data = local.read_bytes()
+            atomic_write(weights, lambda tmp: tmp.write_bytes(data))
+            pinned.write(store.read(task.key))  # last: a record here means its weights are here
+    return model, rows
+
+
 def study_alignment_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One C10 study task: one encoder x method trained on one seed's data set (Table 4.1).
 
@@ -815,7 +878,12 @@ def study_alignment_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """
     cfg = _study_config(config)
     enc, m = config["encoder"], config["method"]
-    _, rows = _trained_encoder_rows(cfg, enc, m, executor="inprocess")
+    if enc == cfg.rl_encoder:  # the stage and RL tasks read these: kept with the study
+        _, rows = pinned_encoder(cfg, enc, m)
+        sha = _file_sha(model_path(dict(encoder_task(cfg, enc, m).config)))
+    else:
+        _, rows = _trained_encoder_rows(cfg, enc, m, executor="inprocess")
+        sha = None
     first = rows.iloc[0]
     return [
         _study_row(
@@ -831,16 +899,20 @@ def study_alignment_task(config: dict[str, Any]) -> list[dict[str, Any]]:
             neg_val_alignment_error=-float(first["val_best_pct"]),
             test_seen_unseen_pct=float(first["test_seen_unseen_pct"]),
             final_loss=float(rows["loss"].iloc[-1]),
+            encoder_sha=sha,
+            data_sha=data_fingerprint(load_data(cfg)),
         )
     ]
 
 
-def _study_encoder(cfg: Config, kind: str) -> CLfD:
-    """The study's encoder on ``cfg.rl_encoder``'s backbone trained with method ``kind``, or
-    an untrained one (``kind == UNTRAINED``, seeded by ``cfg.seed``)."""
+def _study_encoder(cfg: Config, kind: str) -> tuple[CLfD, str | None]:
+    """The study's encoder on ``cfg.rl_encoder``'s backbone trained with method ``kind``
+    (:func:`pinned_encoder`) and the hash of its weights file, or an untrained one
+    (``kind == UNTRAINED``, seeded by ``cfg.seed``) and None."""
     if kind == UNTRAINED:
-        return build_model(cfg, cfg.rl_encoder, "clfd")
-    return trained_encoder(cfg, cfg.rl_encoder, kind, executor="inprocess")
+        return build_model(cfg, cfg.rl_encoder, "clfd"), None
+    model, _ = pinned_encoder(cfg, cfg.rl_encoder, kind)
+    return model, _file_sha(model_path(dict(encoder_task(cfg, cfg.rl_encoder, kind).config)))
 
 
 def study_stage_task(config: dict[str, Any]) -> list[dict[str, Any]]:
@@ -858,7 +930,8 @@ def study_stage_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """
     cfg = _study_config(config)
     kind = config["features"]
-    model, data = _study_encoder(cfg, kind), load_data(cfg)
+    (model, sha), data = _study_encoder(cfg, kind), load_data(cfg)
+    data_sha = data_fingerprint(data)
     rng = np.random.default_rng(cfg.seed)
     seen, unseen = cfg.seen_cameras, cfg.unseen_cameras
     cams = {
@@ -883,6 +956,8 @@ def study_stage_task(config: dict[str, Any]) -> list[dict[str, Any]]:
                 stage_accuracy=acc["accuracy_pct"],
                 train_accuracy=acc["train_accuracy_pct"],
                 n_test=acc["n_test"],
+                encoder_sha=sha,
+                data_sha=data_sha,
             )
         )
     return rows
@@ -927,7 +1002,8 @@ def study_rl_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """
     cfg = _study_config(config)
     m = config["method"]
-    ep = rl_episodes(cfg, _study_encoder(cfg, m))
+    model, sha = _study_encoder(cfg, m)
+    ep = rl_episodes(cfg, model)
     curve = rl_success_curve(ep, cfg.rl_checkpoints, cfg.rl_success_m)
     last = ep.iloc[-max(1, int(np.ceil(RL_FINAL_SHARE * len(ep)))) :]
     return [
@@ -949,6 +1025,7 @@ def study_rl_task(config: dict[str, Any]) -> list[dict[str, Any]]:
             lifted_final=float(last["box_lifted"].astype(float).mean()),
             return_final=float(last["return"].mean()),
             expert_return=float(ep["expert_return"].iloc[0]),
+            encoder_sha=sha,
         )
     ]
 
@@ -1001,6 +1078,32 @@ def study_tables_vs_thesis(
         t42[["viewpoints", "ci_low", "ci_high", "seeds"]], on="viewpoints", how="left"
     )
     return cmp41, cmp42
+
+
+def study_inputs_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Whether the study's tasks saw the same inputs, per seed: ``data_sets`` (distinct
+    ``data_sha`` among its rows; each machine renders a seed's data set anew, so more than one
+    means two machines rendered different frames) and ``encoder_matches`` ("k/n": of the stage
+    and RL rows on a trained encoder, those whose ``encoder_sha`` is the one the seed's
+    alignment task trained; :func:`pinned_encoder` keeps them equal). Empty before the study
+    ran, and for rows made before the two hashes were recorded.
+
+    Used in: CLfD chapter ("Evidence at study scale").
+    """
+    cols = ["seed", "data_sets", "encoder_matches"]
+    if rows.empty or "encoder_sha" not in rows or "claim" not in rows:
+        return pd.DataFrame(columns=cols)
+    out = []
+    for seed, g in rows.groupby("seed"):
+        if "scale" in g:
+            g = g[g["scale"] == "study"]
+        trained = g[(g["claim"] == "C10") & g["encoder_sha"].notna()]
+        sha = dict(zip(trained["method"], trained["encoder_sha"]))
+        later = g[g["claim"].isin(["C11", "C12"]) & g["encoder_sha"].notna()]
+        label = later["method"].where(later["claim"] == "C12", "CLfD")  # C11: CLfD's features
+        match = sum(sha.get(m) == e for m, e in zip(label, later["encoder_sha"]))
+        out.append([int(seed), int(g["data_sha"].nunique()), f"{match}/{len(later)}"])
+    return pd.DataFrame(out, columns=cols)
 
 
 def study_rl_curves(rows: pd.DataFrame) -> pd.DataFrame:

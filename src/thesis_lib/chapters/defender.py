@@ -41,8 +41,9 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from thesis_lib._io import atomic_write
+from thesis_lib._io import atomic_write, file_lock
 from thesis_lib.book import results_dir
+from thesis_lib.book.study import studies_dir
 from thesis_lib.defender import (
     METHODS,
     THESIS_STATE_ACTION_STRATEGIES,
@@ -1265,21 +1266,7 @@ def training_run_numbers(
 def _demo_lock(task: str) -> Any:
     """An exclusive file lock per task, so that two study workers do not both make the same
     task's demonstrations (the second waits, then reads them from the sweep store)."""
-    import contextlib
-    import fcntl
-
-    @contextlib.contextmanager
-    def lock() -> Any:
-        folder = results_dir(CHAPTER) / "demos"
-        folder.mkdir(parents=True, exist_ok=True)
-        with open(folder / f".{thesis_env_name(task)}.lock", "w") as fh:
-            fcntl.flock(fh, fcntl.LOCK_EX)
-            try:
-                yield
-            finally:
-                fcntl.flock(fh, fcntl.LOCK_UN)
-
-    return lock()
+    return file_lock(results_dir(CHAPTER) / "demos" / f".{thesis_env_name(task)}.lock")
 
 
 def pinned_demonstrations(
@@ -1299,8 +1286,6 @@ def pinned_demonstrations(
     Used in: DEFENDER chapter study, through :func:`study_demonstrations` (which holds the
     task's lock).
     """
-    from thesis_lib.book.study import studies_dir
-
     pinned = TaskStore(Path(folder) if folder is not None else studies_dir(CHAPTER) / "demos")
     (t,) = _demonstrations_tasks(Config(**recipe, tasks=[task]))
     if not pinned.has(t.key):
