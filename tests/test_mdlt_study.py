@@ -102,6 +102,8 @@ def test_study_run_rows_on_a_tiny_config():
     for c in ("aje", "neg_aje", "aje_mean_pose", "gain_vs_mean_pose", "fid", "aje_windowed"):
         assert np.isfinite(r[c]), c
     assert r.neg_aje == -r.aje and r.mismatch_cost == pytest.approx(r.aje - r.aje_windowed)
+    # both tasks name the same numbers of the data set
+    assert len(r.data_sha) == 16 and set(base.data_sha) == {r.data_sha}
 
 
 def test_windowed_generation_restarts_the_state():
@@ -276,3 +278,20 @@ def test_teacher_forcing_runs_are_labelled_apart():
              and t.config["method"] == "transformer")  # fmt: skip
     rows = pd.DataFrame(t.fn(t.config))
     assert set(rows.method) == {"MDLT-T TF (all genres)"} and rows.setting.nunique() == 10
+
+
+def test_data_sha_names_the_numbers_of_the_data_set(monkeypatch):
+    from types import SimpleNamespace
+
+    def pieces(bump: float):
+        feats = np.zeros((5, 438), np.float32)
+        feats[2, 7] = bump
+        return (SimpleNamespace(name="a", features=feats, angles=np.ones((5, 4), np.float32)),)
+
+    shas = []
+    for bump in (0.0, 0.0, 1e-6):
+        monkeypatch.setattr(ex, "_cached_sequences", lambda *a, b=bump: pieces(b))
+        ex._data_sha.cache_clear()
+        shas.append(ex._data_sha("aist", None, "smoke", 0))
+    ex._data_sha.cache_clear()
+    assert shas[0] == shas[1] != shas[2]  # one feature changed by 1e-6: another data set

@@ -287,6 +287,25 @@ def test_evidence_section_before_during_and_after_the_study(project):
     evi.plot_per_setting(ev)
 
 
+def test_input_versions_counts_rows_and_seeds_per_hash(project):
+    from thesis_lib.book import evidence as evi
+
+    ev = evi.load_evidence("04_hdt", reps=200)
+    assert list(evi.input_versions(ev, "data_sha").columns) == ["data_sha", "rows", "seeds"]
+    assert evi.input_versions(ev, "data_sha").empty  # not run yet
+    st.run_study("04_hdt", progress=False)
+    ev = evi.load_evidence("04_hdt", reps=200)
+    assert evi.input_versions(ev, "data_sha").empty  # its rows do not record one
+    n = len(ev.rows)
+    ev.rows["data_sha"] = np.where(ev.rows["seed"] >= 3, "b", "a")
+    ev.rows.loc[ev.rows.index[ev.rows.seed == 1][0], "data_sha"] = None
+    got = evi.input_versions(ev, "data_sha")
+    a_rows = int((ev.rows.seed < 3).sum()) - 1
+    assert got.rows.sum() == n and got.data_sha.iloc[0] == "a" and got.rows.iloc[0] == a_rows
+    assert got.set_index("data_sha").loc["b", "seeds"] == "3,4"
+    assert got.set_index("data_sha").loc["not recorded"].tolist() == [1, "1"]
+
+
 def test_scale_check_table_ranks_both_scales(project):
     from thesis_lib.book import evidence as evi
 

@@ -41,6 +41,7 @@ __all__ = [
     "claim_readings",
     "code_changes_since",
     "comparisons_table",
+    "input_versions",
     "load_evidence",
     "per_setting_table",
     "plot_comparisons",
@@ -238,6 +239,30 @@ def _mean_ci(values: np.ndarray, reps: int, seed: int = 0) -> tuple[float, float
         m = float(v.mean()) if len(v) else np.nan
         return m, np.nan, np.nan
     return bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps, seed=seed)
+
+
+def input_versions(ev: Evidence, column: str) -> pd.DataFrame:
+    """The versions of one input the study's rows record (``column``: a hash such as
+    ``data_sha``), with how many rows and which seeds saw each, the most used first.
+
+    A study runs across sessions, on whichever machine each gets; an input a task makes anew
+    (a synthesised or rendered data set) should come out the same on each. One row here: it
+    did. Empty when the rows do not record ``column`` (not run yet, or made before it was
+    recorded); rows without it are counted as ``not recorded``.
+    """
+    cols = [column, "rows", "seeds"]
+    if ev.rows.empty or column not in ev.rows:
+        return pd.DataFrame(columns=cols)
+    values = ev.rows[column].fillna("not recorded").astype(str)
+    out = [
+        [v, len(g), ",".join(str(int(x)) for x in sorted(set(g["seed"])))]
+        for v, g in ev.rows.groupby(values, sort=False)
+    ]
+    return (
+        pd.DataFrame(out, columns=cols)
+        .sort_values("rows", ascending=False, kind="stable")
+        .reset_index(drop=True)
+    )
 
 
 def per_setting_table(

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import io
 import time
 from collections.abc import Sequence
@@ -684,6 +685,23 @@ def _cached_sequences(
     return tuple(load_sequences(layout, root, size, seed, fps))  # type: ignore[arg-type]
 
 
+@functools.lru_cache(maxsize=4)
+def _data_sha(layout: str, root: str | None, size: str, seed: int, fps: int | None = None) -> str:
+    """A short hash of every piece's name, features and angles (:func:`_cached_sequences`).
+
+    The study's rows record it: each machine synthesises and featurises the data set anew, and
+    this says whether two machines made the same numbers.
+    """
+    h = hashlib.sha256()
+    for s in _cached_sequences(layout, root, size, seed, fps):
+        h.update(str(s.name).encode())
+        for arr in (s.features, s.angles):
+            a = np.ascontiguousarray(arr)
+            h.update(str((a.dtype.str, a.shape)).encode())
+            h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
 def _split(data: dict[str, Any], genre: str | None, fold: int) -> tuple[list, list]:
     seqs = _cached_sequences(
         data["layout"], data["root"], data["size"], data["seed"], data.get("fps")
@@ -1233,7 +1251,8 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         training pose on the same songs), ``gain_vs_mean_pose`` (:func:`gain_vs_mean_pose`,
         secondary, higher is better), ``fid``, ``beat_align``, ``train_s``, and for MDLT-M
         ``aje_windowed`` and ``mismatch_cost`` (``aje - aje_windowed``: what the whole-song
-        recurrence costs against restarting every ``K_mamba`` frames; > 0 = it costs).
+        recurrence costs against restarting every ``K_mamba`` frames; > 0 = it costs), and
+        ``data_sha`` (:func:`_data_sha`: which numbers the data set held on this machine).
 
     Used in: ``thesis study 06_mdlt`` (C13).
     """
@@ -1251,6 +1270,8 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     else:
         variants, labels = [method], [VARIANT_LABELS[method]]
     genre = config["genre"] if scope == PER_GENRE else None
+    d = config["data"]
+    data_sha = _data_sha(d["layout"], d["root"], d["size"], d["seed"], d.get("fps"))
     out: list[dict[str, Any]] = []
     for variant, label in zip(variants, labels):
         songs: list[dict[str, Any]] = []
@@ -1276,6 +1297,7 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
                 "fid": float(grp["fid"].mean()),
                 "beat_align": float(grp["beat_align"].mean()),
                 "train_s": float(grp["train_s"].drop_duplicates().sum()),
+                "data_sha": data_sha,
             }
             if "aje_windowed" in grp and grp["aje_windowed"].notna().all():
                 w = float(grp["aje_windowed"].mean())
