@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import re
 import types
@@ -370,6 +371,55 @@ def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsy
     capsys.readouterr()
     main(["study", "04_hdt", "--status"])
     assert "tasks_failed" not in json.loads(capsys.readouterr().out)
+
+
+def test_thesis_study_commit_every_commits_the_studies_and_nothing_else(project, capsys):
+    """--commit-every: finished tasks are committed as the run goes and at its end, as commits
+    of studies/<chapter>/ and studies/claims.csv only; a user's own staged change stays staged."""
+    import subprocess
+
+    from thesis_lib.book import study_cli
+    from thesis_lib.cli import main
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=project, check=True, capture_output=True, text=True
+        ).stdout
+
+    with pytest.raises(SystemExit):  # not a checkout yet: said before any task runs
+        main(["study", "04_hdt", "--commit-every", "600"])
+    assert CALLS == []
+    git("init", "-q")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "--allow-empty", "-m", "0")
+    git("config", "user.name", "t")
+    git("config", "user.email", "t@t")
+    (project / "mine.txt").write_text("work in progress")
+    git("add", "mine.txt")
+    FAIL.add("HDT/b/4")
+    assert main(["study", "04_hdt", "--commit-every", "3600", "--keep-going"]) == 1
+    log = git("log", "--format=%s").splitlines()
+    assert log[0] == "studies: 19 finished task(s) landed (fake-v1 19/20)"
+    committed = set(git("show", "--name-only", "--format=", "HEAD").split())
+    assert len([f for f in committed if "/tasks/" in f]) == 19
+    assert "studies/claims.csv" in committed and "studies/04_hdt/run.json" in committed
+    assert not any("failed" in f or f.endswith(".tmp") for f in committed)
+    assert git("diff", "--cached", "--name-only").split() == ["mine.txt"]  # still only staged
+    # the rerun that completes the study commits its last task and the verdicts it decides
+    FAIL.clear()
+    assert main(["study", "04_hdt", "--commit-every", "3600"]) == 0
+    assert git("log", "-1", "--format=%s").strip() == (
+        "studies: 1 finished task(s) landed (fake-v1 20/20)"
+    )
+    claims = pd.read_csv(io.StringIO(git("show", "HEAD:studies/claims.csv")))
+    assert claims.set_index("claim").loc["C3", "verdict"] == "holds"
+    # nothing new: no commit; a refused commit is reported, not raised
+    assert study_cli.commit_studies(["04_hdt"]) is None
+    (project / ".git" / "index.lock").write_text("")
+    (project / "studies" / "04_hdt" / "note.txt").write_text("x")
+    study_cli._Committer(["04_hdt"], 3600).commit()
+    assert "commit skipped: git add failed" in capsys.readouterr().err
+    with pytest.raises(SystemExit, match="positive"):
+        main(["study", "04_hdt", "--commit-every", "0"])
 
 
 def test_status_line_says_what_changed_in_the_library_since_the_study(project, monkeypatch):

@@ -5,6 +5,7 @@ thesis study 04_hdt --executor local -j 2
 thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate)
 thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
 thesis study 03_defender 02_clfd -j 2 --keep-going   # unattended: a failed task stops nothing
+thesis study 03_defender -j 2 --commit-every 600      # and commit finished tasks every 10 min
 thesis claims                         # studies/claims.csv from every committed study
 """
 
@@ -12,7 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
+import threading
+from pathlib import Path
 
 
 def _status(chapter: str) -> dict:
@@ -37,6 +41,91 @@ def _status(chapter: str) -> dict:
     return out
 
 
+#: what :func:`commit_studies` leaves out (git pathspec globs).
+NOT_COMMITTED = ("studies/*/tasks/failed/**", "**/.*.tmp", "**/.*.tmp.*")
+
+
+def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+
+
+def _checkout(root: Path | None) -> Path:
+    from thesis_lib.book.paths import project_root
+
+    root = Path(root) if root is not None else project_root()
+    if _git(root, "rev-parse", "--is-inside-work-tree").returncode != 0:
+        raise RuntimeError(f"{root} is not a git checkout: nothing to commit the studies to.")
+    return root
+
+
+def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
+    """Commit what the studies of ``chapters`` stored, and nothing else.
+
+    Refreshes each study's ``rows.csv`` / ``run.json`` (:func:`_status`), then commits
+    ``studies/<chapter>/`` and ``studies/claims.csv`` as one commit of those paths only: other
+    changes in the checkout, staged or not, stay as they are. Returns the commit message, or
+    None when nothing changed.
+
+    Raises:
+        RuntimeError: ``root`` (default: the project) is not a git checkout, or git refused
+            (another git command holding the index lock, say); the message has git's words.
+    """
+    root = _checkout(root)
+    summary = []
+    for chapter in chapters:
+        s = _status(chapter)
+        summary.append(f"{s['study']} {s['tasks_done']}/{s['tasks_total']}")
+    paths = [*(f"studies/{c}" for c in chapters), "studies/claims.csv"]
+    paths = [p for p in paths if (root / p).exists()]
+    if not paths:
+        return None
+    # never a failed task's traceback or a temporary file, whatever .gitignore says
+    r = _git(root, "add", "--", *paths, *(f":(exclude,glob){g}" for g in NOT_COMMITTED))
+    if r.returncode != 0:
+        raise RuntimeError(f"git add failed: {r.stderr.strip()}")
+    if _git(root, "diff", "--cached", "--quiet", "--", *paths).returncode == 0:
+        return None
+    added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", *paths).stdout
+    n = sum("/tasks/" in line and line.endswith(".json") for line in added.splitlines())
+    msg = f"studies: {n} finished task(s) landed ({'; '.join(summary)})"
+    r = _git(root, "commit", "-q", "-m", msg, "--", *paths)
+    if r.returncode != 0:
+        raise RuntimeError(f"git commit failed: {r.stderr.strip() or r.stdout.strip()}")
+    return msg
+
+
+class _Committer:
+    """Calls :func:`commit_studies` every ``every`` seconds in a thread, and once at
+    :meth:`stop`; a refused commit is reported and retried next time."""
+
+    def __init__(self, chapters: list[str], every: float) -> None:
+        self.chapters, self.every = list(chapters), float(every)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def start(self) -> _Committer:
+        self._thread.start()
+        return self
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.every):
+            self.commit()
+
+    def commit(self) -> None:
+        try:
+            msg = commit_studies(self.chapters)
+        except Exception as e:  # a commit refused now is retried at the next interval
+            print(f"commit skipped: {e}", file=sys.stderr)
+        else:
+            if msg:
+                print(msg, file=sys.stderr)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.commit()
+
+
 def _cmd_study(args: argparse.Namespace) -> int:
     from thesis_lib.book import study as st
 
@@ -46,6 +135,31 @@ def _cmd_study(args: argparse.Namespace) -> int:
         for chapter in args.chapter:
             print(json.dumps(_status(chapter), indent=1))
         return 0
+    committer = None
+    if args.commit_every is not None:
+        if args.commit_every <= 0:
+            raise SystemExit(f"--commit-every must be positive seconds, not {args.commit_every}.")
+        try:
+            _checkout(None)  # not a git checkout: say so before hours of work
+        except RuntimeError as e:
+            raise SystemExit(str(e)) from e
+        committer = _Committer(args.chapter, args.commit_every).start()
+    try:
+        failed = _run_studies(args)
+    finally:
+        if committer is not None:
+            from thesis_lib.book.study import write_claims
+
+            write_claims()  # a study that just completed gets its verdicts in this commit
+            committer.stop()
+    if failed:
+        print(f"Failed tasks in: {', '.join(failed)}; rerun to retry them.", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _run_studies(args: argparse.Namespace) -> list[str]:
+    from thesis_lib.book import study as st
     from thesis_lib.sweep import GridFailed
 
     failed = []
@@ -64,10 +178,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
             failed.append(f"{chapter} ({len(e.failures)} task(s))")
             continue
         print(f"{chapter}: {len(rows)} rows in {st.studies_dir(chapter)}")
-    if failed:
-        print(f"Failed tasks in: {', '.join(failed)}; rerun to retry them.", file=sys.stderr)
-        return 1
-    return 0
+    return failed
 
 
 def _cmd_claims(args: argparse.Namespace) -> int:
@@ -103,6 +214,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="a failed task stops nothing: run the others (and the next studies), keep its "
         "traceback in studies/<chapter>/tasks/failed/, exit 1 at the end",
+    )
+    p.add_argument(
+        "--commit-every",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="commit studies/<chapter>/ (and studies/claims.csv) every SECONDS and at the end, "
+        "as commits of those paths only, so that a run cut off loses at most SECONDS of tasks",
     )
     p.set_defaults(func=_cmd_study)
     c = subparsers.add_parser("claims", help="write studies/claims.csv from the studies")
