@@ -61,7 +61,9 @@ def _checkout(root: Path | None) -> Path:
 def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
     """Commit what the studies of ``chapters`` stored, and nothing else.
 
-    Refreshes each study's ``rows.csv`` / ``run.json`` (:func:`_status`), then commits
+    Refreshes each study's ``rows.csv`` / ``run.json`` (:func:`_status`) and
+    ``studies/claims.csv`` (:func:`~thesis_lib.book.study.write_claims`: the verdicts of a
+    study that just completed, the progress of the others), then commits
     ``studies/<chapter>/`` and ``studies/claims.csv`` as one commit of those paths only: other
     changes in the checkout, staged or not, stay as they are. Returns the commit message, or
     None when nothing changed.
@@ -75,6 +77,10 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
     for chapter in chapters:
         s = _status(chapter)
         summary.append(f"{s['study']} {s['tasks_done']}/{s['tasks_total']}")
+    if chapters:
+        from thesis_lib.book.study import write_claims
+
+        write_claims()
     paths = [*(f"studies/{c}" for c in chapters), "studies/claims.csv"]
     paths = [p for p in paths if (root / p).exists()]
     if not paths:
@@ -148,10 +154,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         failed = _run_studies(args)
     finally:
         if committer is not None:
-            from thesis_lib.book.study import write_claims
-
-            write_claims()  # a study that just completed gets its verdicts in this commit
-            committer.stop()
+            committer.stop()  # a last commit: a study that just completed lands with its verdicts
     if failed:
         print(f"Failed tasks in: {', '.join(failed)}; rerun to retry them.", file=sys.stderr)
         return 1
