@@ -22,7 +22,7 @@ The pre-registered study of claims C7-C9 (``params/03_defender.study.yml``, ``th
 03_defender``) runs :func:`study_tasks`: one :func:`study_run` per training run, reduced to one
 row by :func:`training_run_numbers` and a final evaluation without the filter. Its
 demonstrations are made once and kept beside its rows (:func:`pinned_demonstrations`), because
-the SAC run that makes them is not reproducible bit for bit on another machine. The chapter's
+a later session on a new machine made other ones for one task. The chapter's
 "Evidence at study scale" reads the rows back (:func:`study_summary`, :func:`plot_study_curves`,
 :func:`study_topup_table`).
 
@@ -1275,9 +1275,12 @@ def pinned_demonstrations(
     """The study's demonstration run of ``task``: the same pool on every machine and in every
     session.
 
-    The SAC run that makes the demonstrations (:func:`make_demonstrations`) is seeded, but not
-    reproducible bit for bit on another machine: on a new machine of the same kind, with the
-    same package versions, it gave another pool. So the first call makes them and copies the
+    The SAC run that makes the demonstrations (:func:`make_demonstrations`) is seeded, yet a
+    later session on a new machine of the same kind, with the same package versions, made
+    another pool for InvertedDoublePendulum (the same numbers of safe and unsafe roll-outs, but
+    other ones; Hopper's and Walker2d's came out the same, bit for bit). The first pool was made
+    from a working tree with uncommitted changes, so whether the machine or those changes made
+    the difference cannot be told now. Either way: the first call makes them and copies the
     sweep record and the pool file into ``folder`` (default ``studies/03_defender/demos/``,
     committed with the study's rows); every later call, on any machine, reads them from there.
     The run's training-episode log is not kept (the study does not use it; ``episodes`` is
@@ -1685,10 +1688,9 @@ def study_demo_sources(rows: pd.DataFrame) -> pd.DataFrame:
     group the SAC run gave, and which runs (``runs``, ``seeds``) used them. Empty before the
     study ran.
 
-    A draw is one ``demos_file`` (its name is a hash of every array). The study's SAC run is
-    seeded but not reproducible bit for bit on another machine, so a study that moved machines
-    before its demonstrations were pinned (:func:`pinned_demonstrations`) has more than one draw
-    per setting; this table says which runs used which.
+    A draw is one ``demos_file`` (its name is a hash of every array). A study that moved
+    machines before its demonstrations were pinned (:func:`pinned_demonstrations`) can have
+    more than one draw per setting; this table says which runs used which.
 
     Used in: DEFENDER chapter ("Evidence at study scale").
     """
