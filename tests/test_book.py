@@ -224,3 +224,34 @@ def test_a_table_and_a_figure_may_not_share_a_name(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="'scores' is already a table of demo"):
         res.figure("scores", fig)
     res.figure("scores_plot", fig)
+
+
+def test_git_commit_is_dirty_for_code_changes_not_for_the_studies_own_files(tmp_path):
+    import subprocess
+
+    from thesis_lib.book.results import git_commit
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", "-c", "user.name=t", "-c", "user.email=t@t", *args],
+            cwd=tmp_path,
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+
+    assert git_commit(tmp_path) == "unknown"  # not a checkout
+    (tmp_path / "studies" / "04_hdt").mkdir(parents=True)
+    (tmp_path / "studies" / "04_hdt" / "rows.csv").write_text("a\n1\n")
+    (tmp_path / "code.py").write_text("x = 1\n")
+    git("init", "-q")
+    git("add", ".")
+    git("commit", "-q", "-m", "0")
+    sha = git("rev-parse", "HEAD")
+    assert git_commit(tmp_path) == sha
+    (tmp_path / "studies" / "04_hdt" / "rows.csv").write_text("a\n1\n2\n")  # a running study
+    (tmp_path / "new.py").write_text("untracked\n")
+    assert git_commit(tmp_path) == sha
+    (tmp_path / "code.py").write_text("x = 2\n")
+    assert git_commit(tmp_path) == f"{sha}-dirty"
+    assert git_commit(tmp_path / "studies") == f"{sha}-dirty"  # from a sub-folder too

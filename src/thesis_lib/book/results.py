@@ -60,12 +60,17 @@ def git_output(args: list[str], path: str | Path | None = None) -> str | None:
 
 
 def git_commit(path: str | Path | None = None) -> str:
-    """The checkout's commit hash, suffixed ``-dirty`` when there are uncommitted changes.
+    """The checkout's commit hash, suffixed ``-dirty`` when tracked files have uncommitted
+    changes, other than the committed evidence under ``studies/`` (a running study rewrites its
+    own ``rows.csv`` and ``run.json``; that is not a change of the code that ran).
 
     Returns ``"unknown"`` outside a git checkout.
     """
     sha = git_output(["rev-parse", "HEAD"], path)
-    dirty = git_output(["status", "--porcelain", "--untracked-files=no"], path)
+    dirty = git_output(
+        ["status", "--porcelain", "--untracked-files=no", "--", ":(top)", ":(top,exclude)studies"],
+        path,
+    )
     if sha is None or dirty is None:
         return "unknown"
     return f"{sha.strip()}-dirty" if dirty.strip() else sha.strip()
