@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from thesis_lib._io import atomic_write, file_lock
+from thesis_lib._io import atomic_write, file_lock, hash_arrays
 from thesis_lib.book import compare_with_paper, results_dir
 from thesis_lib.book.study import studies_dir
 from thesis_lib.clfd.data import MultiViewVideos, make_pick_place_dataset
@@ -811,10 +811,7 @@ def data_fingerprint(data: dict[str, MultiViewVideos]) -> str:
     for split in sorted(data):
         v = data[split]
         h.update(f"{split}:{','.join(v.cameras)}".encode())
-        for arr in [*v.videos, *(v.stages or [])]:
-            a = np.ascontiguousarray(arr)
-            h.update(str((a.dtype.str, a.shape)).encode())
-            h.update(a.tobytes())
+        hash_arrays(h, [*v.videos, *(v.stages or [])])
     return h.hexdigest()[:16]
 
 

@@ -41,7 +41,7 @@ import gymnasium as gym
 import numpy as np
 import pandas as pd
 
-from thesis_lib._io import atomic_write, file_lock
+from thesis_lib._io import atomic_write, file_lock, hash_arrays
 from thesis_lib.book import results_dir
 from thesis_lib.book.study import studies_dir
 from thesis_lib.defender import (
@@ -491,10 +491,7 @@ def demos_file(demos: DemoSet, label: str = "") -> str:
     for group in ("safe", "unsafe"):
         h.update(group.encode())
         for d in getattr(demos, group):
-            for a in (d.observations, d.actions, d.rewards):
-                arr = np.ascontiguousarray(a)
-                h.update(str((arr.dtype.str, arr.shape)).encode())
-                h.update(arr.tobytes())
+            hash_arrays(h, (d.observations, d.actions, d.rewards))
             h.update(bytes([bool(d.terminated), bool(d.truncated)]))
     name = f"{label or thesis_env_name(str(demos.env_id))}-{h.hexdigest()[:16]}.npz"
     path = results_dir(CHAPTER) / "demos" / name

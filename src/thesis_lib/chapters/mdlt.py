@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from thesis_lib._io import hash_arrays
 from thesis_lib.book import compare_with_paper, results_dir
 from thesis_lib.mdlt.metrics import BASELINES, aje, evaluate_songs, mean_pose_baseline
 from thesis_lib.mdlt.models import (
@@ -695,10 +696,7 @@ def _data_sha(layout: str, root: str | None, size: str, seed: int, fps: int | No
     h = hashlib.sha256()
     for s in _cached_sequences(layout, root, size, seed, fps):
         h.update(str(s.name).encode())
-        for arr in (s.features, s.angles):
-            a = np.ascontiguousarray(arr)
-            h.update(str((a.dtype.str, a.shape)).encode())
-            h.update(a.tobytes())
+        hash_arrays(h, (s.features, s.angles))
     return h.hexdigest()[:16]
 
 
