@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import re
 import types
 from dataclasses import dataclass, field
@@ -338,6 +339,22 @@ def test_thesis_study_runs_several_in_order_and_status_writes_nothing_before_a_r
         assert json.loads((project / "studies" / ch / "run.json").read_text())["complete"]
     main(["study", "04_hdt", "--status"])
     assert '"tasks_done": 20' in capsys.readouterr().out
+
+
+def test_thesis_study_chooses_mujocos_headless_back_end_before_any_study_imports_it(
+    project, monkeypatch
+):
+    """One `thesis study` process runs 03 (simulation only) and then 02 (rendered frames): MuJoCo
+    reads MUJOCO_GL once, at its first import, so the command sets it first, as a chapter's
+    kernel gets it; a value the user chose stays."""
+    from thesis_lib.cli import main
+
+    monkeypatch.delenv("MUJOCO_GL", raising=False)
+    assert main(["study", "04_hdt", "--status"]) == 0
+    assert os.environ["MUJOCO_GL"] == "egl"
+    monkeypatch.setenv("MUJOCO_GL", "osmesa")
+    assert main(["study", "04_hdt", "--status"]) == 0
+    assert os.environ["MUJOCO_GL"] == "osmesa"
 
 
 def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsys):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -133,6 +134,13 @@ class _Committer:
 
 
 def _cmd_study(args: argparse.Namespace) -> int:
+    from thesis_lib.book.runner import KERNEL_ENV_DEFAULTS
+
+    # MuJoCo picks its OpenGL back end once, at its first import. One process runs the studies
+    # one after another (and its in-process tasks), so a study that renders (02's CLfD frames)
+    # after one that only simulates (03's locomotion) must find the headless back end already
+    # chosen, as a chapter's kernel does.
+    os.environ.setdefault("MUJOCO_GL", KERNEL_ENV_DEFAULTS["MUJOCO_GL"])
     from thesis_lib.book import study as st
 
     for chapter in args.chapter:  # every study file first: a typo fails before hours of work
