@@ -141,8 +141,12 @@ def slow_square(config: dict) -> list[dict]:
 
 
 INTERRUPTED_RUN = """
+import signal
 import sys
 from test_sweep import Task, run_tasks, slow_square
+# Ctrl-C must raise KeyboardInterrupt even where the test runner was started in the background
+# of a non-interactive shell (nohup ... &), which starts its children with SIGINT ignored.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 tasks = [Task(slow_square, {"x": x, "wait": 0.2, "log": sys.argv[2]}) for x in range(8)]
 run_tasks(tasks, store=sys.argv[1], executor=sys.argv[3], n_jobs=2, progress=False)
 """
