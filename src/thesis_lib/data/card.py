@@ -220,11 +220,11 @@ RECIPE = """\
 Data sets are made here by D4RL's recipe (Fu et al. 2020) and stored in the Minari format
 (HDF5), ids `thesis/<task>/<tier>-v0`:
 
-- **expert** / **medium**: the shipped policies, trained here. HalfCheetah (and Walker2d and
-  Ant once their runs ship): TQC (Kuznetsov et al. 2020; SAC's distributional successor, D4RL
-  used SAC) with 256x256 MLPs, `thesis data train-expert --task halfcheetah`, exported to
+- **expert** / **medium**: the shipped policies, trained here. Walker2d and HalfCheetah (and
+  Ant once its run ships): TQC (Kuznetsov et al. 2020; SAC's distributional successor, D4RL
+  used SAC) with 256x256 MLPs, `thesis data train-expert --task walker2d`, exported to
   NumPy; medium is a snapshot of the same run at about a third of the expert's return.
-  Hopper, InvertedDoublePendulum and, until then, Walker2d and Ant: ARS linear policies
+  Hopper, InvertedDoublePendulum and, until then, Ant: ARS linear policies
   (sb3-contrib, observation normalisation), `thesis data train-experts`, medium the
   checkpoint of the same seeded training closest to a third of the expert's return. They act deterministically (`action_noise=` adds noise);
   episodes differ through the environments' reset noise.
