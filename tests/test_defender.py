@@ -424,6 +424,21 @@ def test_expert_demonstrations_make_both_groups(tmp_path):
         expert_demonstrations("Pendulum-v1", n_safe=1, n_unsafe=1)
 
 
+def test_shipped_expert_label_names_the_kind_of_the_shipped_policy():
+    """The demonstrations table says which expert topped a group up: TQC where one has
+    shipped (Walker2d, HalfCheetah), linear ARS elsewhere; read from the training records."""
+    from thesis_lib.data.experts import load_policy_record
+    from thesis_lib.defender import shipped_expert_label
+
+    assert shipped_expert_label("InvertedDoublePendulum-v5") == "ARS expert"
+    for env_id, task in (("Walker2d-v5", "walker2d"), ("Hopper-v5", "hopper")):
+        kind = load_policy_record(task).algorithm.split()[0]
+        assert kind in ("ARS", "TQC") and shipped_expert_label(env_id) == f"{kind} expert"
+    assert shipped_expert_label("Walker2d-v5") == "TQC expert"  # shipped with #15's recipe
+    with pytest.raises(ValueError, match="No shipped expert policy for 'Pendulum-v1'"):
+        shipped_expert_label("Pendulum-v1")
+
+
 def test_make_demonstrations_tops_up_a_missing_group(tmp_path, monkeypatch):
     """200 SAC steps on InvertedDoublePendulum: no roll-out balances 20 steps, so "auto" takes the safe
     group from the expert and the thesis's recipe alone ("sac") fails with a clear message."""

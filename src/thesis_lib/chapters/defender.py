@@ -4,7 +4,7 @@
 
 1. :func:`make_demonstrations` one SAC run per task; its roll-outs become the demonstrations and
    its training episodes the ablation's log. A group the short run gives too few roll-outs of is
-   topped up from the shipped ARS expert (``demo_source="auto"``); :func:`describe_demonstrations`
+   topped up from the shipped expert (``demo_source="auto"``); :func:`describe_demonstrations`
    says which recipe each task used.
 2. :func:`run_ablation` the 576-strategy ablation for state and state-action trajectories.
 3. :func:`run_tables_4_3_4_4` SAC and TD3 with and without DEFENDER; :func:`run_table_4_5`
@@ -59,6 +59,7 @@ from thesis_lib.defender import (
     save_demonstrations,
     save_demonstrations_minari,
     select_diverse,
+    shipped_expert_label,
 )
 from thesis_lib.defender.ablation import (
     plot_strategy_heatmap,
@@ -125,8 +126,8 @@ __all__ = [
 
 DEMO_SOURCES: tuple[str, ...] = ("sac", "expert", "auto")
 """Where :func:`make_demonstrations` takes demonstrations from: ``"sac"`` the thesis's recipe only
-(SAC roll-outs during training; fails when a group gets none), ``"expert"`` the shipped ARS expert
-with action noise (:func:`~thesis_lib.defender.expert_demonstrations`) only, ``"auto"`` SAC
+(SAC roll-outs during training; fails when a group gets none), ``"expert"`` the shipped expert
+(TQC or ARS, :func:`~thesis_lib.defender.shipped_expert_label`) with action noise (:func:`~thesis_lib.defender.expert_demonstrations`) only, ``"auto"`` SAC
 roll-outs, and a group with fewer than needed topped up from the expert."""
 
 RUN_COLUMNS: tuple[str, ...] = (
@@ -163,7 +164,7 @@ class Config:
     """Roll out the policy's mean action (True) or sample it."""
     demo_source: str = "auto"
     """Where demonstrations come from, one of :data:`DEMO_SOURCES` ("sac" = the thesis's recipe
-    only; "auto" = SAC roll-outs, a short group topped up from the shipped ARS expert)."""
+    only; "auto" = SAC roll-outs, a short group topped up from the shipped expert)."""
     n_demos: int = 10
     """Demonstrations per group in Tables 4.3-4.4 (the thesis: 50)."""
     n_demos_list: list[int] = field(default_factory=lambda: [3, 6, 10])
@@ -422,8 +423,9 @@ def demo_table(demo_runs: dict[str, DemoRun], cfg: Config) -> pd.DataFrame:
                     "SAC roll-outs seen": n_seen,
                     "kept": len(kept),
                     "kept from SAC roll-outs": src[group][0],
-                    "kept from ARS expert": src[group][1],
-                    "recipe": _recipe(src[group]),
+                    "kept from the expert": src[group][1],
+                    "expert": shipped_expert_label(task) if src[group][1] else "",
+                    "recipe": _recipe(src[group], task),
                     "mean length": float(np.mean([d.length for d in kept])) if kept else np.nan,
                     "lowest step reward": min(float(d.rewards.min()) for d in kept)
                     if kept
@@ -433,13 +435,13 @@ def demo_table(demo_runs: dict[str, DemoRun], cfg: Config) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _recipe(counts: tuple[int, int]) -> str:
+def _recipe(counts: tuple[int, int], task: str) -> str:
     n_sac, n_expert = counts
     if n_expert == 0:
         return "SAC roll-outs (thesis)"
     if n_sac == 0:
-        return "ARS expert + noise"
-    return "SAC roll-outs, topped up from ARS expert"
+        return f"{shipped_expert_label(task)} + noise"
+    return f"SAC roll-outs, topped up from {shipped_expert_label(task)}"
 
 
 def describe_demonstrations(demo_runs: dict[str, DemoRun], cfg: Config) -> list[str]:
@@ -461,13 +463,15 @@ def describe_demonstrations(demo_runs: dict[str, DemoRun], cfg: Config) -> list[
                 )
             elif cfg.demo_source == "expert":
                 parts.append(
-                    f"{group}: {n_exp} from the ARS expert with noise (demo_source='expert')"
+                    f"{group}: {n_exp} from the {shipped_expert_label(task)} with noise "
+                    "(demo_source='expert')"
                 )
             else:
                 got = f"only {seen} SAC roll-out(s) {what}" if seen else f"no SAC roll-out {what}"
                 parts.append(
                     f"{group}: {got} in {cfg.demo_timesteps} training steps, "
-                    f"fewer than the {n} needed, so {n_exp} came from the shipped ARS expert "
+                    f"fewer than the {n} needed, so {n_exp} came from the shipped "
+                    f"{shipped_expert_label(task)} "
                     f"({'small' if group == 'safe' else 'heavy'} action noise)"
                 )
         lines.append(f"{thesis_env_name(task)}: " + "; ".join(parts) + ".")
@@ -1713,6 +1717,6 @@ def study_demo_sources(rows: pd.DataFrame) -> pd.DataFrame:
 STUDY_DATA_NOTE = (
     "the setting (SB3's SAC v2 and TD3 with 64-64 networks for 30,000 steps per run, not the "
     "authors' SAC v1 for 5,000 episodes; demonstrations from a 30,000-step SAC run, a group "
-    "with too few roll-outs topped up from the shipped ARS expert)"
+    "with too few roll-outs topped up from the ARS expert then shipped)"
 )
 """What may make the study's answer differ from the thesis's (the readings' last reason)."""

@@ -19,7 +19,7 @@ updated every step). By default the dynamics model is updated every 4th real ste
 (:data:`DYNAMICS_TRAIN_EVERY`; ``dynamics_train_every=1`` is Algorithm 2's line 11 to the letter):
 a filtered step is terminal, so SB3's agents never bootstrap from its predicted next state.
 Demonstrations: SAC roll-outs as the authors made them (:func:`collect_demonstrations`), or from
-the shipped ARS experts (:func:`expert_demonstrations`) where a short run gives too few of a group;
+the shipped experts (:func:`expert_demonstrations`) where a short run gives too few of a group;
 stored as one ``.npz`` with Minari's field names (:func:`save_demonstrations`) or as Minari data
 sets (:func:`save_demonstrations_minari`).
 
@@ -59,6 +59,7 @@ from thesis_lib.defender.demos import (
     save_demonstrations,
     save_demonstrations_minari,
     select_diverse,
+    shipped_expert_label,
     trajectory_features,
 )
 from thesis_lib.defender.dynamics import DynamicsModel
@@ -120,5 +121,6 @@ __all__ = [
     "save_demonstrations",
     "save_demonstrations_minari",
     "select_diverse",
+    "shipped_expert_label",
     "trajectory_features",
 ]

@@ -9,7 +9,7 @@ than ``actions`` and ``rewards``). Anything with those three attributes is accep
 horizon is *safe*, one that terminates earlier is *unsafe*. :func:`select_diverse` then keeps
 a subset that is spread out under DTW (greedy farthest-point selection).
 :func:`policy_demonstrations` / :func:`expert_demonstrations` make both groups from a fixed
-policy instead (the ARS experts shipped in :mod:`thesis_lib.data`), for a group a short SAC run
+policy instead (the experts shipped in :mod:`thesis_lib.data`), for a group a short SAC run
 does not give. :func:`save_demonstrations` /
 :func:`load_demonstrations` store them in one ``.npz``
 (a documented, dependency-free layout; see :func:`save_demonstrations`);
@@ -47,6 +47,7 @@ __all__ = [
     "save_demonstrations",
     "save_demonstrations_minari",
     "select_diverse",
+    "shipped_expert_label",
     "trajectory_features",
 ]
 
@@ -428,7 +429,7 @@ def policy_demonstrations(
 
     Used where the thesis's recipe gives no roll-outs of a group in a short run, e.g. no SAC
     roll-out of InvertedDoublePendulum balances for the whole horizon after a few thousand steps
-    (see :func:`expert_demonstrations` for the shipped ARS experts).
+    (see :func:`expert_demonstrations` for the shipped experts).
 
     Args:
         env_id: gymnasium task.
@@ -499,28 +500,22 @@ def expert_demonstrations(
     max_episode_steps: int | None = None,
     **kwargs: Any,
 ) -> DemoSet:
-    """:func:`policy_demonstrations` with the ARS expert shipped in :mod:`thesis_lib.data`.
+    """:func:`policy_demonstrations` with the expert shipped in :mod:`thesis_lib.data`.
 
-    Experts ship for Hopper, Walker2d, HalfCheetah, Ant and InvertedDoublePendulum (v5); their
-    training records are in ``thesis_lib/data/policies/<task>.json``.
+    Experts ship for Hopper, Walker2d, HalfCheetah, Ant and InvertedDoublePendulum (v5): TQC
+    MLPs or linear ARS policies (:func:`shipped_expert_label` says which); their training
+    records are in ``thesis_lib/data/policies/<task>.json``.
 
     Raises:
         ValueError: no shipped expert for ``env_id`` (the message lists the tasks that have one).
 
     Used in: DEFENDER (thesis 4.3).
     """
-    from thesis_lib.data.experts import has_policies, load_policy
-    from thesis_lib.data.tasks import TASKS
+    from thesis_lib.data.experts import load_policy
 
-    names = [name for name, spec in TASKS.items() if spec.env_id == env_id and has_policies(name)]
-    if not names:
-        have = sorted(spec.env_id for name, spec in TASKS.items() if has_policies(name))
-        raise ValueError(
-            f"No shipped expert policy for {env_id!r}; experts ship for: {', '.join(have)}."
-        )
     return policy_demonstrations(
         env_id,
-        load_policy(names[0], "expert"),
+        load_policy(_expert_task(env_id), "expert"),
         n_safe=n_safe,
         n_unsafe=n_unsafe,
         seed=seed,
@@ -690,3 +685,29 @@ def _features_list(demos: Sequence[Any], trajectory: Trajectory, group: str) -> 
         trajectory_features(as_demonstration(d, f"{group} demonstration {i}"), trajectory)
         for i, d in enumerate(demos)
     ]
+
+
+def _expert_task(env_id: str) -> str:
+    """The :mod:`thesis_lib.data` task whose shipped expert plays ``env_id``."""
+    from thesis_lib.data.experts import has_policies
+    from thesis_lib.data.tasks import TASKS
+
+    names = [name for name, spec in TASKS.items() if spec.env_id == env_id and has_policies(name)]
+    if not names:
+        have = sorted(spec.env_id for name, spec in TASKS.items() if has_policies(name))
+        raise ValueError(
+            f"No shipped expert policy for {env_id!r}; experts ship for: {', '.join(have)}."
+        )
+    return names[0]
+
+
+def shipped_expert_label(env_id: str) -> str:
+    """What the shipped expert of ``env_id`` is, for tables and prose: ``"TQC expert"`` or
+    ``"ARS expert"`` (the first word of its training record's algorithm).
+
+    Raises:
+        ValueError: no shipped expert for ``env_id``.
+    """
+    from thesis_lib.data.experts import load_policy_record
+
+    return f"{load_policy_record(_expert_task(env_id)).algorithm.split()[0]} expert"
