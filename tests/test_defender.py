@@ -432,7 +432,7 @@ def test_shipped_expert_label_names_the_kind_of_the_shipped_policy():
 
     assert shipped_expert_label("InvertedDoublePendulum-v5") == "ARS expert"
     for env_id, task in (("Walker2d-v5", "walker2d"), ("Hopper-v5", "hopper")):
-        kind = load_policy_record(task).algorithm.split()[0]
+        kind = load_policy_record(task).algorithm_name
         assert kind in ("ARS", "TQC") and shipped_expert_label(env_id) == f"{kind} expert"
     assert shipped_expert_label("Walker2d-v5") == "TQC expert"  # shipped with #15's recipe
     with pytest.raises(ValueError, match="No shipped expert policy for 'Pendulum-v1'"):

@@ -127,7 +127,8 @@ __all__ = [
 DEMO_SOURCES: tuple[str, ...] = ("sac", "expert", "auto")
 """Where :func:`make_demonstrations` takes demonstrations from: ``"sac"`` the thesis's recipe only
 (SAC roll-outs during training; fails when a group gets none), ``"expert"`` the shipped expert
-(TQC or ARS, :func:`~thesis_lib.defender.shipped_expert_label`) with action noise (:func:`~thesis_lib.defender.expert_demonstrations`) only, ``"auto"`` SAC
+(TQC or ARS, :func:`~thesis_lib.defender.shipped_expert_label`) with action noise
+(:func:`~thesis_lib.defender.expert_demonstrations`) only, ``"auto"`` SAC
 roll-outs, and a group with fewer than needed topped up from the expert."""
 
 RUN_COLUMNS: tuple[str, ...] = (
@@ -424,7 +425,6 @@ def demo_table(demo_runs: dict[str, DemoRun], cfg: Config) -> pd.DataFrame:
                     "kept": len(kept),
                     "kept from SAC roll-outs": src[group][0],
                     "kept from the expert": src[group][1],
-                    "expert": shipped_expert_label(task) if src[group][1] else "",
                     "recipe": _recipe(src[group], task),
                     "mean length": float(np.mean([d.length for d in kept])) if kept else np.nan,
                     "lowest step reward": min(float(d.rewards.min()) for d in kept)

@@ -179,7 +179,7 @@ def expert_quality() -> Any:
         rows.append(
             {
                 "task": task,
-                "algorithm": rec.algorithm.split(" (")[0].split(",")[0],
+                "algorithm": rec.algorithm_name,
                 "steps_trained": rec.steps_trained,
                 "expert_return": rec.expert_return_mean,
                 "expert_normalized": en,

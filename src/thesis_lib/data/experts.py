@@ -133,6 +133,12 @@ class PolicyRecord:
     snapshot_returns: dict[str, float] | None = None
     """Quick return of every snapshot of the training run, by step (``mlp`` policies)."""
 
+    @property
+    def algorithm_name(self) -> str:
+        """The algorithm's short name, ``"ARS"`` or ``"TQC"``: :attr:`algorithm` up to its
+        first parenthesis or comma."""
+        return self.algorithm.split(" (")[0].split(",")[0]
+
 
 def _silent_logger() -> Any:
     """An SB3 logger that writes no file (see :func:`thesis_lib.rl.silent_logger`)."""

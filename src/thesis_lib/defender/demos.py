@@ -703,11 +703,11 @@ def _expert_task(env_id: str) -> str:
 
 def shipped_expert_label(env_id: str) -> str:
     """What the shipped expert of ``env_id`` is, for tables and prose: ``"TQC expert"`` or
-    ``"ARS expert"`` (the first word of its training record's algorithm).
+    ``"ARS expert"`` (its training record's :attr:`~thesis_lib.data.experts.PolicyRecord.algorithm_name`).
 
     Raises:
         ValueError: no shipped expert for ``env_id``.
     """
     from thesis_lib.data.experts import load_policy_record
 
-    return f"{load_policy_record(_expert_task(env_id)).algorithm.split()[0]} expert"
+    return f"{load_policy_record(_expert_task(env_id)).algorithm_name} expert"
