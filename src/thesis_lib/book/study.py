@@ -25,6 +25,7 @@ from typing import Any
 
 import pandas as pd
 
+from thesis_lib._io import atomic_write
 from thesis_lib.book.paths import project_root
 
 STUDY_KEYS = {
@@ -288,7 +289,7 @@ def write_study_summary(study: Study, keys: list[str]) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     recs = _records(study, keys)
     rows = study_rows(study, keys)
-    rows.to_csv(out / "rows.csv", index=False)
+    atomic_write(out / "rows.csv", lambda tmp: rows.to_csv(tmp, index=False))
     info = {
         "study": study.study,
         "chapter": study.chapter,
@@ -303,7 +304,7 @@ def write_study_summary(study: Study, keys: list[str]) -> dict[str, Any]:
         "versions": package_versions(),
         "budget_cpu_hours": study.budget_cpu_hours,
     }
-    (out / "run.json").write_text(json.dumps(info, indent=1) + "\n")
+    atomic_write(out / "run.json", lambda tmp: tmp.write_text(json.dumps(info, indent=1) + "\n"))
     return info
 
 
@@ -397,7 +398,8 @@ def write_claims(reps: int = 10_000) -> pd.DataFrame:
     df = pd.DataFrame(table, columns=CLAIMS_COLUMNS)
     out = studies_dir()
     out.mkdir(parents=True, exist_ok=True)
-    df.to_csv(out / "claims.csv", index=False)
+    # two study processes may rewrite this at once: a reader never sees half of it
+    atomic_write(out / "claims.csv", lambda tmp: df.to_csv(tmp, index=False))
     return df
 
 
