@@ -642,3 +642,28 @@ def test_aggregate_table_and_performance_profiles(project):
     assert (t.iqm_low <= t.iqm).all() and (t.iqm <= t.iqm_high).all()
     fig = evi.plot_performance_profiles(ev, reps=100)
     assert len(fig.axes[0].lines) == 2
+
+
+def test_the_estimate_of_cpu_hours_left_prices_each_task_like_its_finished_kin(project):
+    """A grid's tasks differ in cost: an unfinished task is priced at the mean of the finished
+    ones of its method (and scale), not at the mean of all of them."""
+    st.run_study("04_hdt", progress=False)
+    study = st.load_study("04_hdt")
+    tasks = st.study_tasks(study)
+    store = project / "studies" / "04_hdt" / "tasks"
+    for t in tasks:  # HDT runs took 360 s, DT runs 36 s
+        p = store / f"{t.key}.json"
+        rec = json.loads(p.read_text())
+        p.write_text(json.dumps({**rec, "cpu_s": 360.0 if t.config["method"] == "HDT" else 36.0}))
+    assert st.cpu_hours_left(study, tasks) == 0.0
+    hdt = [t for t in tasks if t.config["method"] == "HDT"]
+    dt = [t for t in tasks if t.config["method"] == "DT"]
+    for t in hdt[:2] + dt[:3]:
+        (store / f"{t.key}.json").unlink()
+    assert st.cpu_hours_left(study, tasks) == pytest.approx((2 * 360 + 3 * 36) / 3600)
+    for t in dt:  # no DT run finished: DT is priced at what the function's runs cost
+        (store / f"{t.key}.json").unlink(missing_ok=True)
+    assert st.cpu_hours_left(study, tasks) == pytest.approx((2 * 360 + 10 * 360) / 3600)
+    for t in hdt:
+        (store / f"{t.key}.json").unlink(missing_ok=True)
+    assert st.cpu_hours_left(study, tasks) == 0.0  # nothing finished: no basis for a price

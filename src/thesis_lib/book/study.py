@@ -266,6 +266,39 @@ def _records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]
     return recs
 
 
+def cpu_hours_left(study: Study, tasks: list[Any]) -> float:
+    """CPU-hours the study's unfinished ``tasks`` should take, from the cost of its finished ones.
+
+    Tasks of a grid differ (the scale check's run longer; a baseline costs next to nothing), so
+    each unfinished task is priced at the mean CPU time of the finished tasks most like it: the
+    same function, scale (``check`` or the study's own) and ``method``; failing that, the same
+    function and scale; failing that, the same function; failing that, all of them. ``0.0``
+    when nothing has finished.
+    """
+    from thesis_lib.sweep import _fn_path
+
+    recs = _records(study, [t.key for t in tasks])
+    if not recs:
+        return 0.0
+    done = {r["key"] for r in recs}
+
+    def levels(fn: str, config: Mapping[str, Any]) -> list[tuple[Any, ...]]:
+        scale = config.get("scale", "study")
+        return [(fn, scale, str(config.get("method"))), (fn, scale), (fn,), ()]
+
+    costs: dict[tuple[Any, ...], list[float]] = {}
+    for r in recs:
+        for level in levels(str(r.get("fn", "")), r.get("config", {})):
+            costs.setdefault(level, []).append(float(r.get("cpu_s", 0.0)))
+    left = 0.0
+    for t in tasks:
+        if t.key in done:
+            continue
+        level = next(lv for lv in levels(_fn_path(t.fn), t.config) if lv in costs)
+        left += sum(costs[level]) / len(costs[level])
+    return left / 3600
+
+
 def study_task_functions(study: Study) -> set[str]:
     """The task functions (``module:qualname``) that a study's stored tasks ran."""
     return {str(r["fn"]) for r in _records(study) if r.get("fn")}
@@ -417,6 +450,7 @@ __all__ = [
     "study_task_functions",
     "reuse_tasks",
     "study_tasks",
+    "cpu_hours_left",
     "write_claims",
     "write_study_summary",
 ]

@@ -27,7 +27,8 @@ def _status(chapter: str) -> dict:
     from thesis_lib.sweep import TaskStore
 
     s = st.load_study(chapter)
-    keys = [t.key for t in st.study_tasks(s)]
+    tasks = st.study_tasks(s)
+    keys = [t.key for t in tasks]
     failed = [k for k in TaskStore(st.studies_dir(chapter) / "tasks").failures() if k in keys]
     if st.study_rows(s, keys).empty:
         out = {"study": s.study, "tasks_done": 0, "tasks_total": len(keys), "cpu_hours": 0.0}
@@ -35,8 +36,8 @@ def _status(chapter: str) -> dict:
         info = st.write_study_summary(s, keys)
         out = {k: info[k] for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")}
         left = info["tasks_total"] - info["tasks_done"]
-        if left:  # at the mean cost of the tasks done so far (tasks of a grid differ)
-            out["cpu_hours_left_estimate"] = round(info["cpu_hours"] / info["tasks_done"] * left, 1)
+        if left:  # each at the mean cost of the finished tasks most like it
+            out["cpu_hours_left_estimate"] = round(st.cpu_hours_left(s, tasks), 1)
     if failed:  # the last run of these tasks raised: tasks/failed/<key>.txt says why
         out["tasks_failed"] = failed
     return out
