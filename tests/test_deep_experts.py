@@ -76,6 +76,56 @@ def test_training_resumes_from_its_checkpoint_and_export_equals_the_model(tmp_pa
     np.testing.assert_allclose(pol(obs), model.predict(obs, deterministic=True)[0], atol=1e-5)
 
 
+def test_train_freq_batches_updates_and_old_runs_resume_under_the_default(tmp_path):
+    """``train_freq`` N collects N steps, then takes N gradient steps (ratio 1); a run whose
+    state predates the field resumes as a run of its default, 1."""
+    from dataclasses import replace
+
+    run = tmp_path / "run"
+    cfg = replace(TINY, total_steps=400, train_freq=50)
+    st = deep_experts.train_deep_expert(
+        "walker2d", cfg, run_dir=run, backend="sb3", max_wall_s=0.0, log=lambda s: None
+    )
+    assert st.config["train_freq"] == 50
+    from sb3_contrib import TQC
+
+    model = TQC.load(run / "model.zip")
+    assert (model.train_freq.frequency, model.gradient_steps) == (50, 50)
+    assert model._n_updates == 200 - TINY.learning_starts  # one gradient step per env step
+
+    old = tmp_path / "old"
+    deep_experts.train_deep_expert(
+        "walker2d", TINY, run_dir=old, backend="sb3", max_wall_s=0.0, log=lambda s: None
+    )
+    state = json.loads((old / "state.json").read_text())
+    del state["config"]["train_freq"]  # as written before the field existed
+    (old / "state.json").write_text(json.dumps(state))
+    st = deep_experts.train_deep_expert(
+        "walker2d", TINY, run_dir=old, backend="sb3", max_wall_s=0.0, log=lambda s: None
+    )
+    assert st.steps == 400  # resumed at 200, not refused
+    with pytest.raises(ValueError, match="another config"):
+        deep_experts.train_deep_expert("walker2d", cfg, run_dir=old, backend="sb3")
+
+
+def test_shipping_a_run_whose_first_snapshot_is_best_says_it_has_not_learned(tmp_path, monkeypatch):
+    """Ant's untrained start earns the healthy bonus: if no later snapshot beats it, there is
+    no earlier one to be the medium policy, and the error says so (not an empty ``min``)."""
+    run = tmp_path / "run"
+    deep_experts.train_deep_expert("walker2d", TINY, run_dir=run, backend="sb3", log=lambda s: None)
+    monkeypatch.setattr(
+        deep_experts, "_load_snapshot", lambda folder, snap, low, high: snap["step"]
+    )
+    monkeypatch.setattr(  # the 'policy' is its step: the first scores best
+        deep_experts, "evaluate", lambda pol, task, n, seed=0: np.full(n, 1_000.0 - pol)
+    )
+    with pytest.raises(ValueError, match=r"is its first \(step 200.*has not learned yet"):
+        deep_experts.ship_deep_expert(
+            "walker2d", run_dir=run, out_dir=tmp_path / "out", log=lambda s: None
+        )
+    assert not (tmp_path / "out" / "walker2d.npz").exists()
+
+
 def test_shipped_run_makes_every_tier_with_independent_halves(tmp_path, monkeypatch):
     run = tmp_path / "run"
     deep_experts.train_deep_expert("walker2d", TINY, run_dir=run, backend="sb3", log=lambda s: None)

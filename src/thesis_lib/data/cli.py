@@ -129,6 +129,11 @@ def _train_expert(args: argparse.Namespace) -> int:
         cfg = replace(cfg, total_steps=args.steps)
     if args.seed is not None:
         cfg = replace(cfg, seed=args.seed)
+    if args.train_freq is not None:
+        if args.train_freq < 1:
+            print(f"--train-freq must be ≥ 1, got {args.train_freq}.", file=sys.stderr)
+            return 2
+        cfg = replace(cfg, train_freq=args.train_freq)
     if not args.ship_only:
         st = train_deep_expert(
             args.task,
@@ -223,6 +228,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     te.add_argument("--steps", type=int, default=None, help="override the recipe's step cap")
     te.add_argument("--seed", type=int, default=None)
+    te.add_argument(
+        "--train-freq",
+        type=int,
+        default=None,
+        help="collect N steps, then take N gradient steps in one compiled loop (same "
+        "update-to-data ratio; the recipe's 1 suits a CPU, 32 a GPU with sbx)",
+    )
     te.add_argument(
         "--max-wall-s",
         type=float,

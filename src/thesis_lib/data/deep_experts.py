@@ -126,6 +126,11 @@ class DeepExpertConfig:
     learning_rate: float = 3e-4
     batch_size: int = 256
     buffer_size: int = 1_000_000
+    train_freq: int = 1
+    """Environment steps between updates; each update then takes as many gradient steps (the
+    update-to-data ratio stays 1, as rl-zoo's). ``1`` is D4RL's and rl-zoo's; a larger value
+    (``--train-freq 32``) runs the gradient steps as one compiled loop, which is what makes a
+    GPU pay (sbx)."""
     snapshot_every: int = 10_000
     """Steps between exported + evaluated actor snapshots."""
     snapshot_eval_episodes: int = 5
@@ -284,7 +289,9 @@ def train_deep_expert(
     env = make_env(task)
     if state_path.exists():
         st = RunState(**json.loads(state_path.read_text()))
-        if st.config != _jsonable(asdict(cfg)) or st.backend != backend:
+        # a run started before a field existed ran with that field's default
+        saved = {**_jsonable(asdict(DeepExpertConfig())), **st.config}
+        if saved != _jsonable(asdict(cfg)) or st.backend != backend:
             raise ValueError(
                 f"{folder} holds a run with another config/backend ({st.backend}); "
                 "pass another run_dir, or delete the folder to start over."
@@ -307,6 +314,8 @@ def train_deep_expert(
             learning_rate=cfg.learning_rate,
             batch_size=cfg.batch_size,
             buffer_size=cfg.buffer_size,
+            train_freq=cfg.train_freq,
+            gradient_steps=cfg.train_freq,
             policy_kwargs={"net_arch": list(cfg.net_arch)},
             seed=cfg.seed,
             verbose=0,
@@ -440,6 +449,13 @@ def ship_deep_expert(
     exp_r = evaluate(pol[exp_step], task, n_eval_episodes, eval_seed)
     target = medium_target(task, float(exp_r.mean()), medium_fraction)
     before = [s for s in snaps if s["step"] < exp_step]
+    if not before:  # Ant's first snapshot can win: its random walk earns the healthy bonus
+        raise ValueError(
+            f"The best snapshot of the run in {folder} is its first (step {exp_step}, return "
+            f"{sel[exp_step]:.0f} over {n_select_episodes} episodes), so no earlier snapshot "
+            f"can be the medium policy: the run has not learned yet. Train longer "
+            f"('thesis data train-expert --task {task}')."
+        )
     near = sorted(before, key=lambda s: abs(s["return"] - target))[:3]
     msel = {
         s["step"]: float(evaluate(pol[s["step"]], task, n_select_episodes, 100).mean())
