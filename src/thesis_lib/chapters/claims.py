@@ -129,7 +129,7 @@ def plot_claims(claims: pd.DataFrame) -> Any:
         ax.text(0.5, 0.5, "no claim judged yet", ha="center", va="center")
         ax.set_axis_off()
         return fig
-    fig, axes = plt.subplots(len(judged), 1, figsize=(6.5, 0.75 * len(judged) + 0.6), squeeze=False)
+    fig, axes = plt.subplots(len(judged), 1, figsize=(6.5, 1.2 * len(judged) + 0.6), squeeze=False)
     for ax, r in zip(axes[:, 0], judged.itertuples()):
         c = VERDICT_COLOURS.get(r.verdict, "k")
         ax.plot([r.ci_low, r.ci_high], [0, 0], color=c, lw=2)
