@@ -446,8 +446,6 @@ def ship_deep_expert(
     }
     log(f"{task}: expert candidates (step: return over {n_select_episodes}) {sel}")
     exp_step = max(sel, key=lambda k: sel[k])
-    exp_r = evaluate(pol[exp_step], task, n_eval_episodes, eval_seed)
-    target = medium_target(task, float(exp_r.mean()), medium_fraction)
     before = [s for s in snaps if s["step"] < exp_step]
     if not before:  # Ant's first snapshot can win: its random walk earns the healthy bonus
         raise ValueError(
@@ -456,6 +454,8 @@ def ship_deep_expert(
             f"can be the medium policy: the run has not learned yet. Train longer "
             f"('thesis data train-expert --task {task}')."
         )
+    exp_r = evaluate(pol[exp_step], task, n_eval_episodes, eval_seed)
+    target = medium_target(task, float(exp_r.mean()), medium_fraction)
     near = sorted(before, key=lambda s: abs(s["return"] - target))[:3]
     msel = {
         s["step"]: float(evaluate(pol[s["step"]], task, n_select_episodes, 100).mean())
