@@ -32,6 +32,22 @@ TINY = DeepExpertConfig(
 )
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"train_freq": 0},
+        {"total_steps": -5},
+        {"batch_size": 2.5},
+        {"learning_starts": -1},
+        {"learning_rate": 0.0},
+        {"algorithm": "ppo"},
+    ],
+)
+def test_deep_expert_config_rejects_bad_values_by_name(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        DeepExpertConfig(**bad)
+
+
 def test_mlp_policy_matches_a_hand_computed_squashed_gaussian():
     rng = np.random.default_rng(0)
     w = [rng.standard_normal((3, 4)), rng.standard_normal((4, 2)), rng.standard_normal((4, 2))]

@@ -224,6 +224,24 @@ def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
         main(["mdlt", "train", "--out", str(out), "--variant", "gru"])
 
 
+def test_thesis_mdlt_train_probe_mutes_the_tempogram_in_the_checkpoint(tmp_path):
+    from thesis_lib.cli import main
+    from thesis_lib.mdlt.train import load_checkpoint
+
+    out = tmp_path / "probe.pt"
+    rc = main(
+        ["mdlt", "train", "--out", str(out), "--recipe", "defaults", "--data-size", "smoke",
+         "--probe", "--iterations", "2", "--d-model", "16", "--n-layers", "1", "-q"]
+    )  # fmt: skip
+    assert rc == 0
+    model, scaler, meta = load_checkpoint(out)
+    assert meta["variant"] == "mamba_audio" and meta["iterations"] == 2
+    assert meta["recipe"]["mute_features"] == ["tempogram"] and scaler.mute == ("tempogram",)
+    assert meta["recipe"]["batch_size"] == ex.Config().probe_batch_size
+    assert meta["recipe"]["grad_clip"] == ex.Config().probe_grad_clip
+    assert main(["mdlt", "train", "--out", str(out), "--probe", "--variant", "transformer"]) == 2
+
+
 @pytest.mark.skipif(
     not (REPO / "src/thesis_lib/mdlt/assets/mdlt_packaged.pt").is_file(),
     reason="no packaged checkpoint in this checkout",

@@ -142,6 +142,27 @@ class DeepExpertConfig:
     confirm_episodes: int = 20
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        if str(self.algorithm).lower() not in ("tqc", "sac"):
+            raise ValueError(f"algorithm must be 'tqc' or 'sac', got {self.algorithm!r}.")
+        for name in (
+            "total_steps",
+            "batch_size",
+            "buffer_size",
+            "train_freq",
+            "snapshot_every",
+            "snapshot_eval_episodes",
+            "checkpoint_every",
+            "confirm_episodes",
+        ):
+            v = getattr(self, name)
+            if int(v) != v or v < 1:
+                raise ValueError(f"{name} must be a whole number ≥ 1, got {v!r}.")
+        if self.learning_starts < 0:
+            raise ValueError(f"learning_starts must be ≥ 0, got {self.learning_starts!r}.")
+        if not self.learning_rate > 0:
+            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}.")
+
 
 #: the recipes: D4RL-normalised targets of the issue are Walker2d ≥ 90, HalfCheetah ≥ 85,
 #: Ant ≥ 90; training stops a little above (confirmed on 20 episodes, final on 100).

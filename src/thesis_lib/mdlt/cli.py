@@ -73,11 +73,17 @@ def _cmd_train(args: argparse.Namespace) -> int:
         "batch_size": args.batch_size,
         "progress": not args.quiet,
     }
+    variant = args.variant
+    if args.probe:  # the chapter's probe: MDLT-M, audio only, probe_mute muted, its batch/clip
+        if variant not in ("mamba", "mamba_audio"):
+            print(f"--probe trains MDLT-M (audio only); not --variant {variant}.", file=sys.stderr)
+            return 2
+        cfg, variant = ch.probe_config(cfg), "mamba_audio"
     cfg = dataclasses.replace(cfg, **{k: v for k, v in over.items() if v is not None})
-    path, history = ch.train_translator(cfg, args.variant, args.out, half=not args.full_precision)
+    path, history = ch.train_translator(cfg, variant, args.out, half=not args.full_precision)
     loss = history["loss"].iloc[-20:].mean() if "loss" in history and len(history) else float("nan")
     print(
-        f"{ch.VARIANT_LABELS[args.variant]}: {cfg.iterations} updates of batch {cfg.batch_size} on "
+        f"{ch.VARIANT_LABELS[variant]}{' probe' if args.probe else ''}: {cfg.iterations} updates of batch {cfg.batch_size} on "
         f"the {cfg.aist_root or cfg.data_size} AIST++-layout data (final loss {loss:.4f}) -> {path} "
         f"({path.stat().st_size / 1024:.0f} KB)"
     )
@@ -128,6 +134,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="study",
         help="'study' (params/06_mdlt.study.yml's config, default), 'defaults' (the chapter's "
         "smoke defaults) or a path to a study file",
+    )
+    t.add_argument(
+        "--probe",
+        action="store_true",
+        help="the chapter's probe: MDLT-M on the audio only with the recipe's probe_mute "
+        "feature groups muted (the tempogram), probe_batch_size, probe_iterations and "
+        "probe_grad_clip",
     )
     t.add_argument("--iterations", type=int, help="updates (default: the recipe's)")
     t.add_argument("--batch-size", type=int, help="windows per batch (default: the recipe's)")
