@@ -13,6 +13,7 @@ Used in: MDLT chapter (thesis 6.5).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 
@@ -46,13 +47,27 @@ def _cmd_dance(args: argparse.Namespace) -> int:
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
-    import dataclasses
-
     import torch
+
+    torch.set_num_threads(max(1, args.threads))
+    if not args.quiet:
+        return _train(args)
+    before = os.environ.get("TQDM_DISABLE")
+    os.environ["TQDM_DISABLE"] = "1"  # the data set's reader and synthesis have bars of their own
+    try:
+        return _train(args)
+    finally:
+        if before is None:
+            del os.environ["TQDM_DISABLE"]
+        else:
+            os.environ["TQDM_DISABLE"] = before
+
+
+def _train(args: argparse.Namespace) -> int:
+    import dataclasses
 
     from thesis_lib.chapters import mdlt as ch
 
-    torch.set_num_threads(max(1, args.threads))
     values = {}
     if args.recipe != "defaults":
         from thesis_lib.book.study import load_study
