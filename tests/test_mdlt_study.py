@@ -13,9 +13,11 @@ import pandas as pd
 import pytest
 
 from thesis_lib.chapters import mdlt as ex
+from thesis_lib.mdlt.train import load_checkpoint
 from thesis_lib.mdlt.translate import (
     PACKAGED_RECORDING,
     PACKAGED_RECORDING_CREDIT,
+    packaged_checkpoint,
     packaged_recording,
 )
 
@@ -266,6 +268,10 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
     assert first["file"] == PACKAGED_RECORDING and first["licence"] == "CC BY-SA 3.0"
     assert first["sample_rate"] == 44100 and first["seconds"] > 60
     assert bool(first["inside_ur3_limits"]) and first["beats"] > 60  # ~140 bpm for 62 s
+    # the README's claim for the packaged model (the study's probe): it follows the beat
+    assert bool(first["beat_above_control"]), first.to_dict()
+    _, scaler, meta = load_checkpoint(packaged_checkpoint())
+    assert meta["variant"] == "mamba_audio" and scaler.mute == ("tempogram",)
 
 
 def test_packaged_recording_is_recorded_music_with_its_credit():
