@@ -84,9 +84,22 @@ def test_training_resumes_from_its_checkpoint_and_export_equals_the_model(tmp_pa
         deep_experts.train_deep_expert(
             "walker2d", DeepExpertConfig(total_steps=10), run_dir=run, backend="sb3"
         )
+    # a larger step cap continues the finished run from its last checkpoint; a smaller is refused
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="another config"):
+        deep_experts.train_deep_expert(
+            "walker2d", replace(TINY, total_steps=400), run_dir=run, backend="sb3"
+        )
+    st = deep_experts.train_deep_expert(
+        "walker2d", replace(TINY, total_steps=800), run_dir=run, backend="sb3", log=lambda s: None
+    )
+    assert st.done and st.stopped_by == "steps" and st.config["total_steps"] == 800
+    assert [s["step"] for s in st.snapshots] == [200, 400, 600, 800]
     from sb3_contrib import TQC
 
     model = TQC.load(run / "model.zip")
+    assert model.num_timesteps == 800
     pol = export_actor(model, "sb3")
     obs = np.random.default_rng(0).standard_normal((4, 17)).astype(np.float32)
     np.testing.assert_allclose(pol(obs), model.predict(obs, deterministic=True)[0], atol=1e-5)

@@ -226,7 +226,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         choices=["auto", "sbx", "sb3"],
         help="sbx (JAX, faster; pip install '.[experts]') or sb3 (PyTorch)",
     )
-    te.add_argument("--steps", type=int, default=None, help="override the recipe's step cap")
+    te.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="override the recipe's step cap; a larger cap continues a finished run",
+    )
     te.add_argument("--seed", type=int, default=None)
     te.add_argument(
         "--train-freq",

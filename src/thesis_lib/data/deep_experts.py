@@ -312,11 +312,23 @@ def train_deep_expert(
         st = RunState(**json.loads(state_path.read_text()))
         # a run started before a field existed ran with that field's default
         saved = {**_jsonable(asdict(DeepExpertConfig())), **st.config}
-        if saved != _jsonable(asdict(cfg)) or st.backend != backend:
+        want = _jsonable(asdict(cfg))
+        differ = {k for k in want if saved.get(k) != want[k]}
+        # a larger step cap continues the same run (``--steps``): nothing else may change
+        extend = differ == {"total_steps"} and want["total_steps"] > saved["total_steps"]
+        if (differ and not extend) or st.backend != backend:
             raise ValueError(
                 f"{folder} holds a run with another config/backend ({st.backend}); "
                 "pass another run_dir, or delete the folder to start over."
             )
+        if extend:
+            log(
+                f"{task}: step cap raised from {saved['total_steps']:,} to "
+                f"{cfg.total_steps:,}; the run continues."
+            )
+            st.config = want
+            if st.done and st.stopped_by == "steps":
+                st.done, st.stopped_by = False, ""
         if st.done:
             log(f"{task}: run already finished at {st.steps} steps ({st.stopped_by}).")
             return st
