@@ -210,7 +210,6 @@ def test_thesis_mdlt_dance_without_checkpoint(tmp_path):
 
 def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
     from thesis_lib.cli import main
-    from thesis_lib.mdlt.train import load_checkpoint
 
     out = tmp_path / "ckpt.pt"
     rc = main(
@@ -228,7 +227,6 @@ def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
 
 def test_thesis_mdlt_train_probe_mutes_the_tempogram_in_the_checkpoint(tmp_path):
     from thesis_lib.cli import main
-    from thesis_lib.mdlt.train import load_checkpoint
 
     out = tmp_path / "probe.pt"
     rc = main(

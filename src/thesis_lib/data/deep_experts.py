@@ -198,9 +198,7 @@ def _backend(name: str) -> str:
 
 
 def _algo_class(algorithm: str, backend: str) -> Any:
-    algorithm = algorithm.lower()
-    if algorithm not in ("tqc", "sac"):
-        raise ValueError(f"algorithm must be 'tqc' or 'sac', got {algorithm!r}")
+    algorithm = algorithm.lower()  # DeepExpertConfig has checked it is tqc or sac
     if backend == "sbx":
         import sbx
 
