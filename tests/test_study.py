@@ -357,7 +357,7 @@ def test_thesis_study_chooses_mujocos_headless_back_end_before_any_study_imports
     assert os.environ["MUJOCO_GL"] == "osmesa"
 
 
-def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsys):
+def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsys, monkeypatch):
     from thesis_lib.cli import main
 
     other = {**STUDY, "study": "fake-05-v1", "chapter": "05_decision_mamba"}
@@ -376,7 +376,11 @@ def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsy
     assert "Failed tasks in: 04_hdt (2 task(s)), 05_decision_mamba (2 task(s))" in err
     info = json.loads((project / "studies" / "04_hdt" / "run.json").read_text())
     assert info["tasks_done"] == 18 and not info["complete"]
+    reads = []
+    real_records = st._records
+    monkeypatch.setattr(st, "_records", lambda *a, **k: reads.append(1) or real_records(*a, **k))
     assert main(["study", "04_hdt", "--status"]) == 0
+    assert len(reads) == 1  # the task files are read once, however many numbers use them
     status = json.loads(capsys.readouterr().out)
     assert len(status["tasks_failed"]) == 2
     left = status["cpu_hours"] / 18 * 2  # two tasks left, at the mean cost of the 18 done

@@ -266,18 +266,21 @@ def _records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]
     return recs
 
 
-def cpu_hours_left(study: Study, tasks: list[Any]) -> float:
+def cpu_hours_left(
+    study: Study, tasks: list[Any], records: list[dict[str, Any]] | None = None
+) -> float:
     """CPU-hours the study's unfinished ``tasks`` should take, from the cost of its finished ones.
 
     Tasks of a grid differ (the scale check's run longer; a baseline costs next to nothing), so
     each unfinished task is priced at the mean CPU time of the finished tasks most like it: the
     same function, scale (``check`` or the study's own) and ``method``; failing that, the same
     function and scale; failing that, the same function; failing that, all of them. ``0.0``
-    when nothing has finished.
+    when nothing has finished. ``records``: the study's task records, when the caller has
+    already read them (:func:`task_records`).
     """
     from thesis_lib.sweep import _fn_path
 
-    recs = _records(study, [t.key for t in tasks])
+    recs = records if records is not None else _records(study, [t.key for t in tasks])
     if not recs:
         return 0.0
     done = {r["key"] for r in recs}
@@ -304,24 +307,36 @@ def study_task_functions(study: Study) -> set[str]:
     return {str(r["fn"]) for r in _records(study) if r.get("fn")}
 
 
-def study_rows(study: Study, keys: list[str] | None = None) -> pd.DataFrame:
+def task_records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]]:
+    """The stored records of a study's finished tasks (those written under this study's hash),
+    restricted to ``keys`` when given; read once, pass them to the functions that take
+    ``records=``."""
+    return _records(study, keys)
+
+
+def study_rows(
+    study: Study, keys: list[str] | None = None, records: list[dict[str, Any]] | None = None
+) -> pd.DataFrame:
     """Tidy rows of a study's finished tasks (those written under this study's hash)."""
     frames = []
-    for rec in _records(study, keys):
+    for rec in records if records is not None else _records(study, keys):
         df = pd.DataFrame(rec["rows"])
         df["task_key"] = rec["key"]
         frames.append(df)
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
-def write_study_summary(study: Study, keys: list[str]) -> dict[str, Any]:
-    """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks."""
+def write_study_summary(
+    study: Study, keys: list[str], records: list[dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks
+    (``records``, when the caller has read them already)."""
     from thesis_lib.book.results import package_versions
 
     out = studies_dir(study.chapter)
     out.mkdir(parents=True, exist_ok=True)
-    recs = _records(study, keys)
-    rows = study_rows(study, keys)
+    recs = records if records is not None else _records(study, keys)
+    rows = study_rows(study, keys, records=recs)
     atomic_write(out / "rows.csv", lambda tmp: rows.to_csv(tmp, index=False))
     info = {
         "study": study.study,
@@ -447,6 +462,7 @@ __all__ = [
     "study_config",
     "study_path",
     "study_rows",
+    "task_records",
     "study_task_functions",
     "reuse_tasks",
     "study_tasks",

@@ -30,14 +30,15 @@ def _status(chapter: str) -> dict:
     tasks = st.study_tasks(s)
     keys = [t.key for t in tasks]
     failed = [k for k in TaskStore(st.studies_dir(chapter) / "tasks").failures() if k in keys]
-    if st.study_rows(s, keys).empty:
+    recs = st.task_records(s, keys)  # read once: a large study has thousands of files
+    if st.study_rows(s, keys, records=recs).empty:
         out = {"study": s.study, "tasks_done": 0, "tasks_total": len(keys), "cpu_hours": 0.0}
     else:
-        info = st.write_study_summary(s, keys)
+        info = st.write_study_summary(s, keys, records=recs)
         out = {k: info[k] for k in ("study", "tasks_done", "tasks_total", "cpu_hours", "commits")}
         left = info["tasks_total"] - info["tasks_done"]
         if left:  # each at the mean cost of the finished tasks most like it
-            out["cpu_hours_left_estimate"] = round(st.cpu_hours_left(s, tasks), 1)
+            out["cpu_hours_left_estimate"] = round(st.cpu_hours_left(s, tasks, records=recs), 1)
     if failed:  # the last run of these tasks raised: tasks/failed/<key>.txt says why
         out["tasks_failed"] = failed
     return out
