@@ -41,6 +41,8 @@ TINY = DeepExpertConfig(
         {"learning_starts": -1},
         {"learning_rate": 0.0},
         {"algorithm": "ppo"},
+        {"critic_arch": ()},
+        {"critic_arch": (64, 0)},
     ],
 )
 def test_deep_expert_config_rejects_bad_values_by_name(bad):
@@ -103,6 +105,67 @@ def test_training_resumes_from_its_checkpoint_and_export_equals_the_model(tmp_pa
     pol = export_actor(model, "sb3")
     obs = np.random.default_rng(0).standard_normal((4, 17)).astype(np.float32)
     np.testing.assert_allclose(pol(obs), model.predict(obs, deterministic=True)[0], atol=1e-5)
+
+
+@pytest.mark.parametrize("backend", ["sb3", "sbx"])
+def test_a_crossq_actor_exports_with_its_batch_renorm_folded_in(tmp_path, backend):
+    """CrossQ normalises the actor's input and hidden layers with batch renormalisation; the
+    export folds each into the next linear layer, so the NumPy policy is the same function
+    (after training has moved the running statistics off 0 and 1)."""
+    if backend == "sbx":
+        pytest.importorskip("sbx")
+    from dataclasses import replace
+
+    cfg = replace(TINY, algorithm="crossq", total_steps=400, critic_arch=(64, 64))
+    run = tmp_path / "run"
+    st = deep_experts.train_deep_expert(
+        "walker2d", cfg, run_dir=run, backend=backend, log=lambda s: None
+    )
+    assert st.done and st.config["critic_arch"] == [64, 64]
+    model = deep_experts._algo_class("crossq", backend).load(run / "model.zip")
+    if backend == "sb3":
+        qf = [m.out_features for m in model.policy.critic.qf0 if hasattr(m, "out_features")]
+        assert qf[:2] == [64, 64]  # the critics are as wide as critic_arch, not the actor
+        norms = [m for m in model.policy.actor.latent_pi if hasattr(m, "ra_var")]
+        assert len(norms) == 3 and not np.allclose(norms[0].ra_mean.numpy(), 0)
+    pol = export_actor(model, backend)
+    assert [w.shape for w in pol.weights] == [(17, 32), (32, 32), (32, 6), (32, 6)]
+    obs = np.random.default_rng(0).standard_normal((5, 17)).astype(np.float32) * 3
+    np.testing.assert_allclose(pol(obs), model.predict(obs, deterministic=True)[0], atol=1e-5)
+    snap = MLPPolicy.from_arrays(
+        np.load(run / "snapshots" / st.snapshots[-1]["file"]), pol.low, pol.high
+    )
+    np.testing.assert_allclose(snap(obs), pol(obs), atol=1e-6)  # snapshots are the folded actor
+
+
+def test_folding_a_normalisation_into_a_linear_layer_is_exact():
+    rng = np.random.default_rng(0)
+    mean, var, g, beta = rng.standard_normal(3), rng.random(3) + 0.1, rng.random(3), rng.random(3)
+    w, b, x = rng.standard_normal((3, 2)), rng.standard_normal(2), rng.standard_normal((4, 3))
+    scale, shift = deep_experts._bn_affine(mean, var, g, beta, 1e-3)
+    w2, b2 = deep_experts._fold_affine(scale, shift, w, b)
+    expected = ((x - mean) / np.sqrt(var + 1e-3) * g + beta) @ w + b
+    np.testing.assert_allclose(x @ w2 + b2, expected, rtol=1e-12)
+
+
+def test_train_expert_cli_switches_algorithm_with_its_learning_rate(monkeypatch, capsys):
+    from thesis_lib.cli import main
+
+    seen = {}
+
+    def fake_train(task, cfg, **kw):
+        seen["cfg"] = cfg
+        return deep_experts.RunState(task=task, config={}, backend="sb3")
+
+    monkeypatch.setattr(deep_experts, "train_deep_expert", fake_train)
+    argv = ["data", "train-expert", "--task", "ant", "--algorithm", "crossq"]
+    assert main([*argv, "--critic-arch", "512,512"]) == 0
+    cfg = seen["cfg"]
+    assert (cfg.algorithm, cfg.learning_rate, cfg.critic_arch) == ("crossq", 1e-3, (512, 512))
+    assert main([*argv, "--learning-rate", "3e-4"]) == 0
+    assert seen["cfg"].learning_rate == 3e-4 and seen["cfg"].critic_arch is None
+    assert main([*argv, "--critic-arch", "512,0"]) == 2
+    assert "critic_arch must be whole numbers" in capsys.readouterr().err
 
 
 def test_train_freq_batches_updates_and_old_runs_resume_under_the_default(tmp_path):

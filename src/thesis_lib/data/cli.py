@@ -116,7 +116,12 @@ def _train(args: argparse.Namespace) -> int:
 def _train_expert(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from .deep_experts import DEEP_EXPERT_CONFIGS, ship_deep_expert, train_deep_expert
+    from .deep_experts import (
+        ALGORITHM_LEARNING_RATES,
+        DEEP_EXPERT_CONFIGS,
+        ship_deep_expert,
+        train_deep_expert,
+    )
 
     if args.task not in DEEP_EXPERT_CONFIGS:
         print(
@@ -129,6 +134,19 @@ def _train_expert(args: argparse.Namespace) -> int:
         cfg = replace(cfg, total_steps=args.steps)
     if args.seed is not None:
         cfg = replace(cfg, seed=args.seed)
+    try:
+        if args.algorithm is not None and args.algorithm != cfg.algorithm:
+            # another algorithm brings its own learning rate (CrossQ's paper: 1e-3)
+            lr = ALGORITHM_LEARNING_RATES.get(args.algorithm, cfg.learning_rate)
+            cfg = replace(cfg, algorithm=args.algorithm, learning_rate=lr)
+        if args.learning_rate is not None:
+            cfg = replace(cfg, learning_rate=args.learning_rate)
+        if args.critic_arch is not None:
+            arch = tuple(int(n) for n in args.critic_arch.split(","))
+            cfg = replace(cfg, critic_arch=arch)
+    except ValueError as e:
+        print(f"thesis data train-expert: {e}", file=sys.stderr)
+        return 2
     if args.train_freq is not None:
         if args.train_freq < 1:
             print(f"--train-freq must be ≥ 1, got {args.train_freq}.", file=sys.stderr)
@@ -233,6 +251,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="override the recipe's step cap; a larger cap continues a finished run",
     )
     te.add_argument("--seed", type=int, default=None)
+    te.add_argument(
+        "--algorithm",
+        default=None,
+        choices=["tqc", "sac", "crossq"],
+        help="override the recipe's algorithm (with that algorithm's own learning rate)",
+    )
+    te.add_argument("--learning-rate", type=float, default=None)
+    te.add_argument(
+        "--critic-arch",
+        default=None,
+        help="the critics' hidden layers, comma-separated (e.g. 1024,1024; default: the actor's)",
+    )
     te.add_argument(
         "--train-freq",
         type=int,

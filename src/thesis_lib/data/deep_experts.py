@@ -24,6 +24,11 @@ The recipe (``thesis data train-expert --task walker2d``):
   The medium-replay tier rolls those snapshots out with the actor's own Gaussian
   exploration, in training order: the experience the run had up to medium.
 
+``--algorithm crossq`` trains CrossQ (Bhatt et al. 2024) instead: SAC without target
+networks, with batch renormalisation in critics and actor, which learns in fewer steps. Its
+actor's normalisation layers are folded into the linear layers at export
+(:func:`export_actor`), so its snapshots are plain MLPs too.
+
 Loading a shipped policy needs NumPy only.
 
 Used to make the D4RL-recipe data sets of HDT 5.2 and Decision Mamba 5.3.
@@ -111,18 +116,29 @@ class MLPPolicy:
         return cls(ws, bs, np.asarray(low, np.float64), np.asarray(high, np.float64))
 
 
+#: the off-policy algorithms a recipe may name.
+ALGORITHMS = ("tqc", "sac", "crossq")
+ALGORITHM_NAMES = {"tqc": "TQC", "sac": "SAC", "crossq": "CrossQ"}
+#: learning rates of the algorithms' own papers, where they differ from rl-zoo's 3e-4.
+ALGORITHM_LEARNING_RATES = {"crossq": 1e-3}
+
+
 @dataclass
 class DeepExpertConfig:
     """One expert-training recipe (rl-zoo's TQC/SAC MuJoCo settings unless noted)."""
 
     algorithm: str = "tqc"
-    """``tqc`` (sb3-contrib / sbx) or ``sac``."""
+    """``tqc`` (sb3-contrib / sbx), ``sac``, or ``crossq`` (Bhatt et al. 2024: SAC without
+    target networks, batch-renormalised critics and actor; sb3-contrib / sbx)."""
     total_steps: int = 1_000_000
     """Environment steps at most."""
     learning_starts: int = 10_000
     """Uniform-random steps before the first update (rl-zoo)."""
     net_arch: tuple[int, ...] = (256, 256)
-    """Hidden layers of actor and critics."""
+    """Hidden layers of the actor, and of the critics unless ``critic_arch`` is set."""
+    critic_arch: tuple[int, ...] | None = None
+    """Hidden layers of the critics when they differ from the actor's (CrossQ's are wider:
+    2048 in its paper, 1024 in sbx's default)."""
     learning_rate: float = 3e-4
     batch_size: int = 256
     buffer_size: int = 1_000_000
@@ -143,8 +159,10 @@ class DeepExpertConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if str(self.algorithm).lower() not in ("tqc", "sac"):
-            raise ValueError(f"algorithm must be 'tqc' or 'sac', got {self.algorithm!r}.")
+        if str(self.algorithm).lower() not in ALGORITHMS:
+            raise ValueError(
+                f"algorithm must be one of {', '.join(ALGORITHMS)}, got {self.algorithm!r}."
+            )
         for name in (
             "total_steps",
             "batch_size",
@@ -160,6 +178,10 @@ class DeepExpertConfig:
                 raise ValueError(f"{name} must be a whole number ≥ 1, got {v!r}.")
         if self.learning_starts < 0:
             raise ValueError(f"learning_starts must be ≥ 0, got {self.learning_starts!r}.")
+        if self.critic_arch is not None and (
+            not self.critic_arch or any(int(n) != n or n < 1 for n in self.critic_arch)
+        ):
+            raise ValueError(f"critic_arch must be whole numbers ≥ 1, got {self.critic_arch!r}.")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}.")
 
@@ -198,32 +220,65 @@ def _backend(name: str) -> str:
 
 
 def _algo_class(algorithm: str, backend: str) -> Any:
-    algorithm = algorithm.lower()  # DeepExpertConfig has checked it is tqc or sac
+    algorithm = algorithm.lower()  # DeepExpertConfig has checked it is one of ALGORITHMS
     if backend == "sbx":
         import sbx
 
-        return sbx.TQC if algorithm == "tqc" else sbx.SAC
-    if algorithm == "tqc":
-        from sb3_contrib import TQC
+        return {"tqc": sbx.TQC, "sac": sbx.SAC, "crossq": sbx.CrossQ}[algorithm]
+    if algorithm == "sac":
+        from stable_baselines3 import SAC
 
-        return TQC
-    from stable_baselines3 import SAC
+        return SAC
+    import sb3_contrib
 
-    return SAC
+    return sb3_contrib.TQC if algorithm == "tqc" else sb3_contrib.CrossQ
+
+
+def _fold_affine(
+    scale: np.ndarray, shift: np.ndarray, w: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(x * scale + shift) @ w + b`` as one layer ``x @ w' + b'``."""
+    return scale[:, None] * w, b + shift @ w
+
+
+def _bn_affine(
+    mean: Any, var: Any, gamma: Any, beta: Any, eps: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """A batch (re)norm layer at inference, ``(x - mean) / sqrt(var + eps) * gamma + beta``,
+    as ``x * scale + shift``."""
+    scale = np.asarray(gamma, np.float64) / np.sqrt(np.asarray(var, np.float64) + eps)
+    return scale, np.asarray(beta, np.float64) - np.asarray(mean, np.float64) * scale
 
 
 def export_actor(model: Any, backend: str) -> MLPPolicy:
-    """The model's actor as an :class:`MLPPolicy` (exactly the same function)."""
+    """The model's actor as an :class:`MLPPolicy` (exactly the same function).
+
+    A CrossQ actor normalises its input and each hidden layer's output with batch
+    renormalisation; at inference each such layer is an affine map with its running
+    statistics, so it is folded into the linear layer that follows it (the last one into both
+    heads), and the actor stays a plain MLP.
+    """
     space = model.action_space
     low, high = space.low.astype(np.float64), space.high.astype(np.float64)
     ws: list[np.ndarray] = []
     bs: list[np.ndarray] = []
+    norms: list[tuple[np.ndarray, np.ndarray]] = []  # before each hidden layer, then the heads
     if backend == "sbx":
-        params = model.policy.actor_state.params["params"]
-        names = sorted((k for k in params if k.startswith("Dense_")), key=lambda k: int(k[6:]))
-        for k in names:
+        state = model.policy.actor_state
+        params = state.params.get("params", state.params)  # CrossQ's state has no "params" level
+
+        def numbered(prefix: str) -> list[str]:
+            keys = (k for k in params if k.startswith(prefix))
+            return sorted(keys, key=lambda k: int(k[len(prefix) :]))
+
+        for k in numbered("Dense_"):
             ws.append(np.asarray(params[k]["kernel"], dtype=np.float64))
             bs.append(np.asarray(params[k]["bias"], dtype=np.float64))
+        if getattr(model.policy, "batch_norm_actor", False):
+            stats = state.batch_stats
+            for k in numbered("BatchRenorm_"):  # flax's default epsilon: the actor sets none
+                st, p = stats[k], params[k]
+                norms.append(_bn_affine(st["mean"], st["var"], p["scale"], p["bias"], 1e-3))
     else:
         import torch
 
@@ -232,6 +287,23 @@ def export_actor(model: Any, backend: str) -> MLPPolicy:
         for lin in [*layers, actor.mu, actor.log_std]:
             ws.append(lin.weight.detach().cpu().numpy().T.astype(np.float64))
             bs.append(lin.bias.detach().cpu().numpy().astype(np.float64))
+        for m in actor.latent_pi:
+            if hasattr(m, "ra_var"):  # sb3-contrib's BatchRenorm1d (CrossQ)
+                mean, var, g, bt = (
+                    x.detach().cpu().numpy() for x in (m.ra_mean, m.ra_var, m.scale, m.bias)
+                )
+                if not m.affine:
+                    g, bt = np.ones_like(g), np.zeros_like(bt)
+                norms.append(_bn_affine(mean, var, g, bt, float(m.eps)))
+    if norms:
+        n_hidden = len(ws) - 2
+        if len(norms) != n_hidden + 1:
+            raise ValueError(
+                f"Cannot export an actor with {len(norms)} normalisation layers and "
+                f"{n_hidden} hidden layers (expected one before each, and one before the heads)."
+            )
+        for i in range(len(ws)):
+            ws[i], bs[i] = _fold_affine(*norms[min(i, n_hidden)], ws[i], bs[i])
     return MLPPolicy(ws, bs, low, high)
 
 
@@ -347,7 +419,11 @@ def train_deep_expert(
             buffer_size=cfg.buffer_size,
             train_freq=cfg.train_freq,
             gradient_steps=cfg.train_freq,
-            policy_kwargs={"net_arch": list(cfg.net_arch)},
+            policy_kwargs={
+                "net_arch": list(cfg.net_arch)
+                if cfg.critic_arch is None
+                else {"pi": list(cfg.net_arch), "qf": list(cfg.critic_arch)}
+            },
             seed=cfg.seed,
             verbose=0,
         )
@@ -514,7 +590,7 @@ def ship_deep_expert(
     rec = PolicyRecord(
         task=task,
         env_id=get_task(task).env_id,
-        algorithm=f"{cfg['algorithm'].upper()} ({st.backend}), MLP "
+        algorithm=f"{ALGORITHM_NAMES[cfg['algorithm']]} ({st.backend}), MLP "
         f"{'x'.join(str(n) for n in cfg['net_arch'])}, exported to NumPy",
         config={**cfg, "backend": st.backend},
         steps_trained=int(st.steps),
