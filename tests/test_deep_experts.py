@@ -158,7 +158,7 @@ def test_train_expert_cli_switches_algorithm_with_its_learning_rate(monkeypatch,
         return deep_experts.RunState(task=task, config={}, backend="sb3")
 
     monkeypatch.setattr(deep_experts, "train_deep_expert", fake_train)
-    argv = ["data", "train-expert", "--task", "ant", "--algorithm", "crossq"]
+    argv = ["data", "train-expert", "--task", "walker2d", "--algorithm", "crossq"]
     assert main([*argv, "--critic-arch", "512,512"]) == 0
     cfg = seen["cfg"]
     assert (cfg.algorithm, cfg.learning_rate, cfg.critic_arch) == ("crossq", 1e-3, (512, 512))

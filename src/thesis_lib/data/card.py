@@ -220,15 +220,17 @@ RECIPE = """\
 Data sets are made here by D4RL's recipe (Fu et al. 2020) and stored in the Minari format
 (HDF5), ids `thesis/<task>/<tier>-v0`:
 
-- **expert** / **medium**: the shipped policies, trained here. Walker2d and HalfCheetah (and
-  Ant once its run ships): TQC (Kuznetsov et al. 2020; SAC's distributional successor, D4RL
-  used SAC) with 256x256 MLPs, `thesis data train-expert --task walker2d`, exported to
-  NumPy; medium is a snapshot of the same run at about a third of the expert's return.
-  Hopper, InvertedDoublePendulum and, until then, Ant: ARS linear policies
+- **expert** / **medium**: the shipped policies, trained here. Walker2d and HalfCheetah:
+  TQC (Kuznetsov et al. 2020; SAC's distributional successor, D4RL used SAC) with 256x256
+  MLPs, `thesis data train-expert --task walker2d`, exported to NumPy. Ant: CrossQ (Bhatt et
+  al. 2024; SAC without target networks, batch-renormalised), a 256x256 actor with its
+  normalisation folded in at export, `thesis data train-expert --task ant`. Medium is a
+  snapshot of the same run at about a third of the expert's return.
+  Hopper and InvertedDoublePendulum: ARS linear policies
   (sb3-contrib, observation normalisation), `thesis data train-experts`, medium the
   checkpoint of the same seeded training closest to a third of the expert's return. They act deterministically (`action_noise=` adds noise);
   episodes differ through the environments' reset noise.
-- **medium-replay**: the experience of training up to medium. TQC: the run's uniform-random
+- **medium-replay**: the experience of training up to medium. TQC / CrossQ: the run's uniform-random
   warm-up steps, then its snapshots up to medium, each sampling from its own Gaussian, for as
   many transitions as the training steps it stands for. ARS: the zero policy and every
   checkpoint up to medium, each with ARS's ± weight perturbations, in training order.
@@ -246,8 +248,8 @@ Data sets are made here by D4RL's recipe (Fu et al. 2020) and stored in the Mina
 
 SHORTFALL_NOTES = """\
 Where a target is missed (see `shortfall`): linear ARS reached D4RL's expert level on Hopper
-only (the ARS paper needs 10-75M steps for Walker2d and Ant). The TQC recipe
-(`thesis data train-expert --task walker2d`, about 3 CPU-hours per task here) trains in the
+only (the ARS paper needs 10-75M steps for Walker2d and Ant). The TQC / CrossQ recipe
+(`thesis data train-expert --task walker2d`, 0.6-3 CPU-hours per task here) trains in the
 background, checkpoints itself and resumes where it stopped; a task still showing ARS has
 not been shipped from it yet. A weak expert also squeezes the medium tier: its target is
 raised to 25 D4RL-normalised, which can bring it close to the expert's return.

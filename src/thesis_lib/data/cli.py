@@ -234,8 +234,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     te = sub.add_parser(
         "train-expert",
-        help="train (or resume) a D4RL-grade TQC expert for walker2d, halfcheetah or ant, "
-        "then ship it (policies/<task>.npz)",
+        help="train (or resume) a D4RL-grade expert (TQC; Ant: CrossQ) for walker2d, halfcheetah "
+        "or ant, then ship it (policies/<task>.npz)",
     )
     te.add_argument("--task", required=True, help="walker2d, halfcheetah or ant")
     te.add_argument(

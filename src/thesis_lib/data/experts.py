@@ -126,7 +126,7 @@ class PolicyRecord:
     medium_normalized: float | None = None
     versions: dict[str, str] = field(default_factory=dict)
     policy_kind: str = "linear"
-    """``linear`` (ARS, :class:`LinearPolicy`) or ``mlp`` (TQC/SAC,
+    """``linear`` (ARS, :class:`LinearPolicy`) or ``mlp`` (TQC/SAC/CrossQ,
     :class:`thesis_lib.data.deep_experts.MLPPolicy`)."""
     expert_step: int | None = None
     """Training step of the expert snapshot (``mlp`` policies)."""
@@ -135,7 +135,7 @@ class PolicyRecord:
 
     @property
     def algorithm_name(self) -> str:
-        """The algorithm's short name, ``"ARS"`` or ``"TQC"``: :attr:`algorithm` up to its
+        """The algorithm's short name, ``"ARS"``, ``"TQC"`` or ``"CrossQ"``: :attr:`algorithm` up to its
         first parenthesis or comma."""
         return self.algorithm.split(" (")[0].split(",")[0]
 

@@ -502,8 +502,8 @@ def expert_demonstrations(
 ) -> DemoSet:
     """:func:`policy_demonstrations` with the expert shipped in :mod:`thesis_lib.data`.
 
-    Experts ship for Hopper, Walker2d, HalfCheetah, Ant and InvertedDoublePendulum (v5): TQC
-    MLPs or linear ARS policies (:func:`shipped_expert_label` says which); their training
+    Experts ship for Hopper, Walker2d, HalfCheetah, Ant and InvertedDoublePendulum (v5): TQC or
+    CrossQ MLPs, or linear ARS policies (:func:`shipped_expert_label` says which); their training
     records are in ``thesis_lib/data/policies/<task>.json``.
 
     Raises:
