@@ -377,8 +377,10 @@ def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsy
     info = json.loads((project / "studies" / "04_hdt" / "run.json").read_text())
     assert info["tasks_done"] == 18 and not info["complete"]
     reads = []
-    real_records = st._records
-    monkeypatch.setattr(st, "_records", lambda *a, **k: reads.append(1) or real_records(*a, **k))
+    real_records = st.task_records
+    monkeypatch.setattr(
+        st, "task_records", lambda *a, **k: reads.append(1) or real_records(*a, **k)
+    )
     assert main(["study", "04_hdt", "--status"]) == 0
     assert len(reads) == 1  # the task files are read once, however many numbers use them
     status = json.loads(capsys.readouterr().out)

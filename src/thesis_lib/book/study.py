@@ -251,12 +251,15 @@ def run_study(
             keep_going=keep_going,
         )
     finally:
-        if _records(study):
+        if task_records(study):
             write_study_summary(study, [t.key for t in tasks])
     return rows
 
 
-def _records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]]:
+def task_records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]]:
+    """The stored records of a study's finished tasks (those written under this study's hash),
+    restricted to ``keys`` when given; read once, pass them to the functions that take
+    ``records=``."""
     root = studies_dir(study.chapter) / "tasks"
     recs = []
     for p in sorted(root.glob("*.json")) if root.is_dir() else []:
@@ -280,7 +283,7 @@ def cpu_hours_left(
     """
     from thesis_lib.sweep import _fn_path
 
-    recs = records if records is not None else _records(study, [t.key for t in tasks])
+    recs = records if records is not None else task_records(study, [t.key for t in tasks])
     if not recs:
         return 0.0
     done = {r["key"] for r in recs}
@@ -304,14 +307,7 @@ def cpu_hours_left(
 
 def study_task_functions(study: Study) -> set[str]:
     """The task functions (``module:qualname``) that a study's stored tasks ran."""
-    return {str(r["fn"]) for r in _records(study) if r.get("fn")}
-
-
-def task_records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]]:
-    """The stored records of a study's finished tasks (those written under this study's hash),
-    restricted to ``keys`` when given; read once, pass them to the functions that take
-    ``records=``."""
-    return _records(study, keys)
+    return {str(r["fn"]) for r in task_records(study) if r.get("fn")}
 
 
 def study_rows(
@@ -319,7 +315,7 @@ def study_rows(
 ) -> pd.DataFrame:
     """Tidy rows of a study's finished tasks (those written under this study's hash)."""
     frames = []
-    for rec in records if records is not None else _records(study, keys):
+    for rec in records if records is not None else task_records(study, keys):
         df = pd.DataFrame(rec["rows"])
         df["task_key"] = rec["key"]
         frames.append(df)
@@ -335,7 +331,7 @@ def write_study_summary(
 
     out = studies_dir(study.chapter)
     out.mkdir(parents=True, exist_ok=True)
-    recs = records if records is not None else _records(study, keys)
+    recs = records if records is not None else task_records(study, keys)
     rows = study_rows(study, keys, records=recs)
     atomic_write(out / "rows.csv", lambda tmp: rows.to_csv(tmp, index=False))
     info = {
