@@ -164,6 +164,9 @@ def test_train_expert_cli_switches_algorithm_with_its_learning_rate(monkeypatch,
     assert (cfg.algorithm, cfg.learning_rate, cfg.critic_arch) == ("crossq", 1e-3, (512, 512))
     assert main([*argv, "--learning-rate", "3e-4"]) == 0
     assert seen["cfg"].learning_rate == 3e-4 and seen["cfg"].critic_arch is None
+    # leaving Ant's CrossQ recipe for TQC takes TQC's rate and plain critics, as TQC's run had
+    assert main(["data", "train-expert", "--task", "ant", "--algorithm", "tqc"]) == 0
+    assert (seen["cfg"].learning_rate, seen["cfg"].critic_arch) == (3e-4, None)
     assert main([*argv, "--critic-arch", "512,0"]) == 2
     assert "critic_arch must be whole numbers" in capsys.readouterr().err
 
@@ -296,7 +299,7 @@ def test_each_shipped_expert_was_trained_by_its_recipe(task):
     assert rec.policy_kind == "mlp" and rec.n_eval_episodes == 100
     shipped = {k: v for k, v in rec.config.items() if k != "backend"}
     want = deep_experts._jsonable(asdict(deep_experts.DEEP_EXPERT_CONFIGS[task]))
-    assert {**deep_experts._jsonable(asdict(DeepExpertConfig())), **shipped} == want
+    assert deep_experts.recorded_config(shipped) == want
     target = {"walker2d": 90.0, "halfcheetah": 85.0, "ant": 90.0}[task]
     assert rec.expert_normalized >= target
     assert rec.expert_normalized == pytest.approx(

@@ -119,6 +119,7 @@ def _train_expert(args: argparse.Namespace) -> int:
     from .deep_experts import (
         ALGORITHM_LEARNING_RATES,
         DEEP_EXPERT_CONFIGS,
+        DeepExpertConfig,
         ship_deep_expert,
         train_deep_expert,
     )
@@ -136,9 +137,13 @@ def _train_expert(args: argparse.Namespace) -> int:
         cfg = replace(cfg, seed=args.seed)
     try:
         if args.algorithm is not None and args.algorithm != cfg.algorithm:
-            # another algorithm brings its own learning rate (CrossQ's paper: 1e-3)
-            lr = ALGORITHM_LEARNING_RATES.get(args.algorithm, cfg.learning_rate)
-            cfg = replace(cfg, algorithm=args.algorithm, learning_rate=lr)
+            # another algorithm brings its own learning rate (CrossQ's paper: 1e-3, else
+            # rl-zoo's) and critics as wide as the actor, unless told otherwise below
+            default = DeepExpertConfig()
+            lr = ALGORITHM_LEARNING_RATES.get(args.algorithm, default.learning_rate)
+            cfg = replace(
+                cfg, algorithm=args.algorithm, learning_rate=lr, critic_arch=default.critic_arch
+            )
         if args.learning_rate is not None:
             cfg = replace(cfg, learning_rate=args.learning_rate)
         if args.critic_arch is not None:
@@ -186,6 +191,8 @@ def _train_expert(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` sub-command (``generate``, ``list``, ``card``, ``train-experts``,
     ``train-expert``)."""
+    from .deep_experts import ALGORITHMS  # loaded with thesis_lib.data already
+
     p = subparsers.add_parser("data", help="demonstration data sets (Minari format)")
     sub = p.add_subparsers(dest="data_command", required=True)
 
@@ -254,7 +261,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     te.add_argument(
         "--algorithm",
         default=None,
-        choices=["tqc", "sac", "crossq"],
+        choices=ALGORITHMS,
         help="override the recipe's algorithm (with that algorithm's own learning rate)",
     )
     te.add_argument("--learning-rate", type=float, default=None)

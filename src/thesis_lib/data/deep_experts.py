@@ -116,10 +116,9 @@ class MLPPolicy:
         return cls(ws, bs, np.asarray(low, np.float64), np.asarray(high, np.float64))
 
 
-#: the off-policy algorithms a recipe may name.
-ALGORITHMS = ("tqc", "sac", "crossq")
-#: how records spell them.
+#: the off-policy algorithms a recipe may name, and how records spell them.
 ALGORITHM_NAMES = {"tqc": "TQC", "sac": "SAC", "crossq": "CrossQ"}
+ALGORITHMS = tuple(ALGORITHM_NAMES)
 #: learning rates of the algorithms' own papers, where they differ from rl-zoo's 3e-4.
 ALGORITHM_LEARNING_RATES = {"crossq": 1e-3}
 
@@ -201,6 +200,12 @@ DEEP_EXPERT_CONFIGS: dict[str, DeepExpertConfig] = {
         target_normalized=100.0,
     ),
 }
+
+
+def recorded_config(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's stored config as a recipe compares with it: fields added since the run was
+    written take their defaults, which is what the run trained with."""
+    return {**_jsonable(asdict(DeepExpertConfig())), **config}
 
 
 def runs_dir() -> Path:
@@ -388,8 +393,7 @@ def train_deep_expert(
     env = make_env(task)
     if state_path.exists():
         st = RunState(**json.loads(state_path.read_text()))
-        # a run started before a field existed ran with that field's default
-        saved = {**_jsonable(asdict(DeepExpertConfig())), **st.config}
+        saved = recorded_config(st.config)
         want = _jsonable(asdict(cfg))
         differ = {k for k in want if saved.get(k) != want[k]}
         # a larger step cap continues the same run (``--steps``): nothing else may change
