@@ -10,6 +10,7 @@ The CLI and the notebooks are the only code that imports ``thesis_lib.chapters``
     thesis params --check                               # parameters cells/params files vs Config
     thesis data generate --task hopper --tier medium    # see 'thesis data --help'
     thesis bench dtw                                    # benchmarks/bench_dtw.py
+    thesis parity                                       # our DT/BC against d3rlpy's, see --help
 
 Errors in what you typed are reported in one line; THESIS_DEBUG=1 shows the traceback.
 """
@@ -284,6 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
         "thesis_lib.mdlt.cli",
         "thesis_lib.ur3.cli",
         "thesis_lib.book.study_cli",
+        "thesis_lib.parity.cli",
     ):
         mod = importlib.import_module(module)
         mod.register(sub)

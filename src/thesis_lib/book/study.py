@@ -155,11 +155,17 @@ def chapter_module(chapter: str) -> Any:
 
 def study_config(study: Study, scale: str = "study") -> Any:
     """The chapter's ``Config`` with the study's overrides (an unknown field is an error);
-    ``scale="check"``: with the scale check's overrides on top."""
+    ``scale="check"``: with the scale check's overrides on top.
+
+    Under the study file's values lie the chapter's ``STUDY_FILE_DEFAULTS`` (where it has
+    them): fields added after the v1 studies were registered, at the value those studies ran
+    with (``init: torch``), so an older file keeps its meaning and its task keys. A new study
+    file names such fields itself."""
     from thesis_lib.book.params import config_from_namespace
 
     mod = chapter_module(study.chapter)
-    values = dict(study.config)
+    # a field added after a study file was written takes the value that study ran with
+    values = {**getattr(mod, "STUDY_FILE_DEFAULTS", {}), **study.config}
     if scale == "check":
         if not study.scale_check or not study.scale_check.get("config"):
             raise ValueError(f"study {study.study} has no scale_check config")

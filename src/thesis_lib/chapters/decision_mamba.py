@@ -126,6 +126,11 @@ def parse_arch(text: str | Arch) -> Arch:
     return Arch(*values)
 
 
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": "torch"}
+"""What a study file that does not name these fields ran with (the v1 studies, registered
+before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
+
+
 @dataclass
 class Config:
     """Parameters of the Decision Mamba chapter; defaults are the smoke scale.
@@ -202,6 +207,11 @@ class Config:
     paper_compat: bool = False
     """The authors' behaviours (a_{t-1} tokens, left-padded time-steps, last sub-goal = state 0,
     HDM Tanh sub-goal head); with ``eval_mode`` ``window`` that is the authors' code."""
+    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
+    ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
+    Hugging Face's DT) or ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
+    names no ``init`` ran with it)."""
     device: str = "cpu"
     """Training device (``cpu``, ``cuda``, ``auto``)."""
     progress: bool = False
@@ -254,6 +264,7 @@ class Config:
             gated_mlp=self.gated_mlp,
             eval_mode=self.eval_mode,
             paper_compat=self.paper_compat,
+            init=self.init,
         )
 
     def train_spec(self, seed: int) -> TrainSpec:
@@ -332,7 +343,7 @@ def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     rows = run_offline(
         config["method"],
         data,
-        ArchSpec(**config["arch"]),
+        ArchSpec.from_task(config["arch"]),
         TrainSpec(**config["train"]),
         EvalSpec(**ev),
         task=env_name(config["dataset"]),
@@ -351,7 +362,7 @@ def _task(cfg: Config, method: str, dataset: str, seed: int, arch: Any, ev: Eval
             "dataset": dataset,
             "dataset_size": cfg.dataset_size,
             "n_transitions": cfg.n_transitions,
-            "arch": asdict(cfg.arch_spec(arch)),
+            "arch": cfg.arch_spec(arch).task_dict(),
             "train": asdict(cfg.train_spec(seed)),
             "eval": asdict(ev),
         },

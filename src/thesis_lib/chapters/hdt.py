@@ -89,6 +89,11 @@ _EXTRA_SEED_DEFAULT = ("hopper/medium", "maze2d-umaze/expert")
 _COMPAT_DEFAULT = "hopper/medium"
 
 
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": "torch"}
+"""What a study file that does not name these fields ran with (the v1 studies, registered
+before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
+
+
 @dataclass
 class Config:
     """Every setting of the HDT chapter (thesis 5.2.5); the notebook's parameters.
@@ -166,6 +171,11 @@ class Config:
     paper_compat: bool = False
     """Run everything with the authors' behaviours: a_{t-1} tokens, left-padded time-steps,
     last sub-goal = state 0 (``compat_dataset`` measures them beside the default instead)."""
+    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
+    ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
+    Hugging Face's DT) or ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
+    names no ``init`` ran with it)."""
     device: str = "cpu"
     """Training device (``cpu``, ``cuda``, ``auto``)."""
     progress: bool = False
@@ -243,6 +253,7 @@ class Config:
             dropout=self.dropout,
             bc_hidden_dim=self.bc_hidden_dim,
             paper_compat=self.paper_compat if paper_compat is None else bool(paper_compat),
+            init=self.init,
         )
 
     def train_spec(self, seed: int) -> TrainSpec:
@@ -423,7 +434,7 @@ def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     rows = run_offline(
         config["method"],
         data,
-        ArchSpec(**config["arch"]),
+        ArchSpec.from_task(config["arch"]),
         TrainSpec(**config["train"]),
         EvalSpec(**ev),
         task=env_name(config["dataset"]),
@@ -437,7 +448,7 @@ def offline_task(config: dict[str, Any]) -> list[dict[str, Any]]:
 def _tasks(cfg: Config, datasets: list[str], methods: list[str], compat: bool) -> list[Any]:
     from thesis_lib.sweep import Task
 
-    arch, ev = asdict(cfg.arch(compat)), asdict(cfg.eval_spec())
+    arch, ev = cfg.arch(compat).task_dict(), asdict(cfg.eval_spec())
     return [
         Task(
             offline_task,
@@ -958,7 +969,7 @@ STUDY_COLUMNS = [
 #: same run asked for by two chapters (DT in 04 and 05) has one key.
 _ARCH_FIELDS = {
     "BC": ("K", "dropout", "bc_hidden_dim", "paper_compat"),
-    "transformer": ("d_model", "n_layers", "n_heads", "K", "dropout", "max_timestep", "paper_compat"),
+    "transformer": ("d_model", "n_layers", "n_heads", "K", "dropout", "max_timestep", "paper_compat", "init"),
     "mamba": ("d_model", "n_layers", "K", "gated_mlp", "eval_mode", "paper_compat"),
 }  # fmt: skip
 
@@ -973,8 +984,8 @@ def arch_fields(method: str, arch: ArchSpec) -> dict[str, Any]:
     from thesis_lib.seq.registry import MAMBA_METHODS
 
     kind = "BC" if method == "BC" else "mamba" if method in MAMBA_METHODS else "transformer"
-    d = asdict(arch)
-    return {k: d[k] for k in _ARCH_FIELDS[kind]}
+    d = arch.task_dict()  # ``init`` resolved, absent where ``torch`` (the v1 tasks' keys)
+    return {k: d[k] for k in _ARCH_FIELDS[kind] if k in d}
 
 
 def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:

@@ -69,6 +69,11 @@ RUN_COLUMNS = [
 ]
 
 
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": "torch"}
+"""What a study file that does not name these fields ran with (the v1 studies, registered
+before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
+
+
 @dataclass
 class Config:
     """The notebook's parameters (``params/07_ur3_deployment.*.yml``); defaults are the smoke scale.
@@ -116,6 +121,11 @@ class Config:
     """Limits: clip (clamp and rate-limit) or reject."""
     viewer_frames: int = 180
     """Frames stored in the 3-D viewer (subsampled)."""
+    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
+    ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
+    Hugging Face's DT) or ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
+    names no ``init`` ran with it)."""
     device: str = "cpu"
     """Training device."""
     progress: bool = False
@@ -149,6 +159,7 @@ class Config:
             dropout=self.dropout,
             max_timestep=max(256, self.max_eval_steps + 1),
             paper_compat=self.paper_compat,
+            init=self.init,
         )
 
     def train_spec(self, seed: int) -> TrainSpec:
@@ -285,7 +296,7 @@ def reach_task(config: dict[str, Any]) -> list[dict[str, Any]]:
         config["method"],
         demos.train[: config["train_demos"]],
         demos.test_starts,
-        ArchSpec(**config["arch"]),
+        ArchSpec.from_task(config["arch"]),
         TrainSpec(**config["train"]),
         config["max_eval_steps"],
     )
@@ -303,7 +314,7 @@ def run_table_5_4(cfg: Config) -> pd.DataFrame:
     from thesis_lib.book.paths import results_dir
     from thesis_lib.sweep import Task, run_tasks
 
-    arch = asdict(cfg.arch())
+    arch = cfg.arch().task_dict()
     tasks = [
         Task(
             reach_task,
@@ -622,7 +633,7 @@ def study_tasks(cfg: Config) -> list[Any]:
     """
     from thesis_lib.sweep import Task
 
-    arch = asdict(cfg.arch())
+    arch = cfg.arch().task_dict()
     return [
         Task(
             study_run,

@@ -25,6 +25,14 @@ for the last step of each history, for evaluation.
   action slot of step ``t``, after ``s_t``; the action ``a_t`` is read at ``s_t``, which then
   sees actions up to ``a_{t-2}`` only. The default puts ``a_t`` there, as the DT paper: the
   ``s_t`` token sees ``a_{t-1}`` in the previous step's slot, and ``a_t`` only after it.
+* initialisation (``init="auto"`` resolves to ``"original"``): the authors' DT and HDT built
+  their trunk from Hugging Face's ``GPT2Model``, which draws its weights from N(0, 0.02) (the
+  residual projections from N(0, 0.02 / sqrt(2 n_layers))), and left their own embeddings,
+  time-step table and heads at PyTorch's defaults. The default (``"normal"``) draws every
+  Linear and Embedding from N(0, 0.02) with zero biases, as CORL's DT and the transformers
+  library's ``DecisionTransformerModel``: with PyTorch's defaults everywhere (``"torch"``, the
+  v1 studies) the DT learned to half of a peer DT's score on the same data (issue #33; the
+  reproduction report's parity section);
 * (in the data) time-steps left-padded: :class:`thesis_lib.data.SequenceDataset`;
   the last state's sub-goal is state 0: :func:`thesis_lib.seq.subgoals.subgoal_fn`.
 
@@ -50,8 +58,10 @@ __all__ = [
     "DecisionTransformer",
     "HDT",
     "HDTConfig",
+    "INIT_SCHEMES",
     "SeqOutput",
     "TokenTransformer",
+    "init_transformer",
     "masked_mse",
 ]
 
@@ -123,7 +133,7 @@ class _ModelConfig:
             >>> from types import SimpleNamespace
             >>> seq = SimpleNamespace(states=torch.zeros(10, 11), actions=torch.zeros(10, 3), K=20)
             >>> DTConfig.for_data(seq, n_layers=2)
-            DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layers=2, n_heads=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, use_rtg=True)
+            DTConfig(state_dim=11, act_dim=3, max_action=1.0, K=20, d_model=128, n_layers=2, n_heads=1, dropout=0.1, activation='relu', max_timestep=4096, paper_compat=False, init='auto', use_rtg=True)
         """
         sizes: dict[str, Any] = dict(
             state_dim=int(seq.states.shape[-1]), act_dim=int(seq.actions.shape[-1]), K=int(seq.K)
@@ -178,10 +188,18 @@ class _TransformerConfig(_ModelConfig):
     max_timestep: int = 4096
     """Size of the learned time-step embedding table (time steps ``0 .. max_timestep-1``)."""
     paper_compat: bool = False
-    """Action token ``a_{t-1}`` as in the authors' code (see the module docstring)."""
+    """Action token ``a_{t-1}`` and the initialisation as in the authors' code (see the module
+    docstring)."""
+    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    """Weight initialisation, of :data:`INIT_SCHEMES`: ``"normal"`` (every Linear and Embedding
+    N(0, 0.02), zero biases: CORL, Hugging Face), ``"original"`` (the authors' code: GPT-2's
+    init in the trunk only), ``"torch"`` (PyTorch's defaults: the v1 studies), ``"auto"``
+    (``"original"`` with ``paper_compat``, else ``"normal"``)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.init not in INIT_SCHEMES:
+            raise ValueError(f"Unknown init {self.init!r}. Valid: {', '.join(INIT_SCHEMES)}.")
         if not isinstance(self.n_layers, int) or self.n_layers <= 0:
             raise ValueError(
                 f"Expect `n_layers` to be a positive int, actually: {self.n_layers!r}."
@@ -195,6 +213,11 @@ class _TransformerConfig(_ModelConfig):
                 f"Unknown activation {self.activation!r}. Valid: {', '.join(ACTIVATIONS)}."
             )
         self.block_config()  # validates d_model, n_heads, dropout
+
+    @property
+    def resolved_init(self) -> str:
+        """``"normal"``, ``"original"`` or ``"torch"`` (``"auto"`` resolved)."""
+        return resolve_init(self.init, self.paper_compat)
 
     def block_config(self) -> GPTBlockConfig:
         """The :class:`GPTBlockConfig` of each block."""
@@ -309,6 +332,85 @@ def _action_output(actions: torch.Tensor, batch: Tensors, targets: Tensors | Non
 
 
 # ----------------------------------------------------------------------------------------------
+# Initialisation
+
+INIT_SCHEMES: tuple[str, ...] = ("auto", "normal", "original", "torch")
+"""Weight initialisations of the transformers (:attr:`DTConfig.init`)."""
+
+
+def resolve_init(init: str, paper_compat: bool) -> str:
+    """``init`` with ``"auto"`` resolved: ``"original"`` with ``paper_compat``, else ``"normal"``.
+
+    Example:
+        >>> resolve_init("auto", False), resolve_init("auto", True), resolve_init("torch", True)
+        ('normal', 'original', 'torch')
+    """
+    if init not in INIT_SCHEMES:
+        raise ValueError(f"Unknown init {init!r}. Valid: {', '.join(INIT_SCHEMES)}.")
+    if init == "auto":
+        return "original" if paper_compat else "normal"
+    return init
+
+
+@torch.no_grad()
+def _normal_(module: nn.Module, std: float = 0.02) -> None:
+    """Every Linear and Embedding of ``module``: weights N(0, std), biases zero; LayerNorms (1, 0)."""
+    for m in module.modules():
+        if isinstance(m, (nn.Linear, nn.Embedding)):
+            m.weight.normal_(0.0, std)
+        if isinstance(m, nn.Linear) and m.bias is not None:
+            m.bias.zero_()
+        if isinstance(m, nn.LayerNorm):
+            if m.weight is not None:
+                m.weight.fill_(1.0)
+            if m.bias is not None:
+                m.bias.zero_()
+
+
+@torch.no_grad()
+def init_transformer(model: nn.Module, scheme: str, n_layers: int) -> nn.Module:
+    """Initialise a DT-style ``model`` in place by ``scheme`` (resolved: not ``"auto"``).
+
+    * ``"normal"``: every Linear and Embedding N(0, 0.02), zero biases, LayerNorms (1, 0), in
+      module order: CORL's ``DecisionTransformer._init_weights`` and Hugging Face's
+      ``DecisionTransformerModel``.
+    * ``"original"``: only the GPT blocks of every :class:`TokenTransformer`, as Hugging Face's
+      ``GPT2Model`` initialises itself: N(0, 0.02), the residual projections (``c_proj``)
+      N(0, 0.02 / sqrt(2 n_layers)), zero biases; the time-step table, the token embeddings,
+      ``embed_ln`` and the heads keep PyTorch's defaults, as in the authors' code, which made
+      them outside the GPT-2 model.
+    * ``"torch"``: nothing (PyTorch's defaults: Linear Kaiming-uniform, Embedding N(0, 1)).
+
+    Returns:
+        ``model``.
+
+    Example:
+        >>> m = DecisionTransformer(DTConfig(state_dim=3, act_dim=2, d_model=16, n_layers=1))
+        >>> round(m.transformer.embed_timestep.weight.std().item(), 2)  # "auto" = "normal"
+        0.02
+    """
+    if scheme == "normal":
+        _normal_(model)
+    elif scheme == "original":
+        resid_std = 0.02 / (2 * n_layers) ** 0.5
+        for trunk in (m for m in model.modules() if isinstance(m, TokenTransformer)):
+            for name, p in trunk.blocks.named_parameters():
+                if name.endswith("c_proj.weight"):
+                    p.normal_(0.0, resid_std)
+                elif p.ndim >= 2:
+                    p.normal_(0.0, 0.02)
+                elif name.endswith("bias"):
+                    p.zero_()
+                else:  # LayerNorm weights
+                    p.fill_(1.0)
+    elif scheme != "torch":
+        raise ValueError(
+            f"Unknown init {scheme!r}. Valid: normal, original, torch (or auto, resolved first)."
+        )
+    return model
+
+
+# ----------------------------------------------------------------------------------------------
 # The shared transformer trunk
 
 
@@ -411,6 +513,7 @@ class DecisionTransformer(nn.Module):
         self.embed_action = nn.Linear(config.act_dim, d)
         self.transformer = TokenTransformer(config)
         self.predict_action = _action_head(d, config.act_dim)
+        init_transformer(self, config.resolved_init, config.n_layers)
 
     def _keys(self) -> tuple[str, ...]:
         action_key = _action_key(self.config.paper_compat)
@@ -523,6 +626,7 @@ class HDT(_TwoLevel):
         self.low_embed_action = nn.Linear(config.act_dim, d)
         self.low = TokenTransformer(config)
         self.predict_action = _action_head(d, config.act_dim)
+        init_transformer(self, config.resolved_init, config.n_layers)
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
         """Sub-goal predictions ``g_t`` ``(B, T, state_dim)`` from ``(s_t, g_{t-1})`` tokens."""

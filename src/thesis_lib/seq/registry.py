@@ -26,20 +26,29 @@ UR3 deployment chapter (Table 5.4).
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
 
 from thesis_lib.seq.dm import HDM, DecisionMamba, DMConfig, HDMConfig
-from thesis_lib.seq.models import BC, HDT, BCConfig, DecisionTransformer, DTConfig, HDTConfig
+from thesis_lib.seq.models import (
+    BC,
+    HDT,
+    BCConfig,
+    DecisionTransformer,
+    DTConfig,
+    HDTConfig,
+    resolve_init,
+)
 
 __all__ = [
     "HIERARCHICAL_METHODS",
     "MAMBA_METHODS",
     "METHODS",
     "RTG_METHODS",
+    "LEGACY_INIT",
     "ArchSpec",
     "build_model",
     "check_methods",
@@ -113,12 +122,55 @@ class ArchSpec:
     """Size of the transformers' time-step embedding."""
     paper_compat: bool = False
     """The authors' behaviours (a_{t-1} tokens, left-padded time-steps, last sub-goal = state 0,
-    HDM Tanh sub-goal head)."""
+    HDM Tanh sub-goal head, GPT-2's initialisation in the transformers' trunks only)."""
+    init: str = "auto"
+    """Initialisation of the transformers (DT, HDT), of
+    :data:`~thesis_lib.seq.models.INIT_SCHEMES`: ``auto`` = ``original`` with ``paper_compat``,
+    else ``normal`` (every Linear and Embedding N(0, 0.02), as CORL's and Hugging Face's DT);
+    ``torch`` = PyTorch's defaults, what the v1 studies ran with."""
+
+    def __post_init__(self) -> None:
+        resolve_init(self.init, self.paper_compat)  # validates
 
     @property
     def label(self) -> str:
         """``"L6 D128 K20"``, as the thesis's figure legends."""
         return f"L{self.n_layers} D{self.d_model} K{self.K}"
+
+    @property
+    def resolved_init(self) -> str:
+        """``normal``, ``original`` or ``torch`` (``auto`` resolved)."""
+        return resolve_init(self.init, self.paper_compat)
+
+    def task_dict(self) -> dict[str, Any]:
+        """The spec as a sweep task's JSON: every field, ``init`` resolved, and left out where
+        it is ``torch``, the scheme of every task stored before the field existed (so their
+        keys stay valid; :meth:`from_task` reads a missing ``init`` as ``torch``).
+
+        Example:
+            >>> ArchSpec().task_dict()["init"], "init" in ArchSpec(init="torch").task_dict()
+            ('normal', False)
+        """
+        d = asdict(self)
+        d["init"] = self.resolved_init
+        if d["init"] == LEGACY_INIT:
+            del d["init"]
+        return d
+
+    @classmethod
+    def from_task(cls, d: Mapping[str, Any]) -> ArchSpec:
+        """The spec of a task's ``arch`` dict (:meth:`task_dict`, or any subset of the fields);
+        a missing ``init`` is ``torch``, as every task stored before the field existed ran.
+
+        Example:
+            >>> ArchSpec.from_task({"d_model": 32}).init
+            'torch'
+        """
+        return cls(**{"init": LEGACY_INIT, **d})
+
+
+LEGACY_INIT = "torch"
+"""The initialisation of every stored task and study file that names none (the v1 studies)."""
 
 
 def build_model(method: str, seq: Any, arch: ArchSpec, max_action: float = 1.0) -> torch.nn.Module:
@@ -146,7 +198,11 @@ def build_model(method: str, seq: Any, arch: ArchSpec, max_action: float = 1.0) 
     )
     if method in ("DT", "DT-noRTG", "HDT", "HDT-RTG"):
         tf: dict[str, Any] = dict(
-            n_heads=arch.n_heads, dropout=arch.dropout, max_timestep=arch.max_timestep, **common
+            n_heads=arch.n_heads,
+            dropout=arch.dropout,
+            max_timestep=arch.max_timestep,
+            init=arch.init,
+            **common,
         )
         if method.startswith("DT"):
             return DecisionTransformer(DTConfig(**sizes, use_rtg=method == "DT", **tf))

@@ -1,0 +1,451 @@
+"""Peer parity: one of our methods and a peer library's, trained at equal config on the same
+data, and the difference of their scores with a 95% interval over seeds.
+
+``thesis parity`` (or ``make parity``) reads ``params/parity.yml``: a list of comparisons,
+each a method (``DT``, ``BC``), a data set, a size (the architecture and training) and seeds.
+Every (side, seed) run is one :class:`~thesis_lib.sweep.Task`, stored at once under
+``studies/parity/tasks/`` (resumable, committed), and the table of
+:func:`parity_table` is written to ``studies/parity/parity.csv``.
+
+* **ours** (:func:`ours_run`): :func:`~thesis_lib.seq.runner.run_offline` with the
+  comparison's ``init`` (``auto``, or ``torch`` for the v1 code's scheme);
+* **peer** (:func:`peer_run`): d3rlpy 2.8.1 (``DecisionTransformer``, ``BC``) in its own venv
+  (``$THESIS_CACHE_DIR/peer-venv``, made by ``thesis parity --setup``: d3rlpy pins gymnasium
+  1.0.0), on the same episodes exported to ``.npz``, evaluated on the same Hopper-v5 (MuJoCo
+  3.11, gymnasium 1.0.0's copy of the environment) from the same reset seeds.
+
+Both sides report the D4RL-normalised score of the final model, mean over the evaluation
+episodes, at the data set's best return as the DT's target. The difference ours - peer gets a
+Welch t interval over seeds (the seeds of the two sides are unpaired).
+
+Methods without a package to compare against, and what stands in for them, are listed in
+:data:`NO_PEER` (the reproduction report shows both tables).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "KNOWN_DIFFERENCES",
+    "NO_PEER",
+    "PEER_REQUIREMENTS",
+    "Comparison",
+    "export_npz",
+    "load_parity_file",
+    "ours_run",
+    "parity_table",
+    "parity_tasks",
+    "peer_python",
+    "peer_run",
+    "setup_peer",
+    "unique_tasks",
+    "welch_interval",
+]
+
+PEER_REQUIREMENTS: tuple[str, ...] = (
+    "d3rlpy==2.8.1",
+    "torch==2.13.0",
+    "mujoco==3.11.0",
+    "imageio==2.38.1",
+)
+"""What the peer venv holds (d3rlpy brings its pinned gymnasium 1.0.0)."""
+
+KNOWN_DIFFERENCES: dict[str, str] = {
+    "loss": "d3rlpy sums the squared error over action dimensions and averages over all "
+    "window positions (padding counted as zero); ours averages over real steps and dimensions",
+    "init": "d3rlpy draws the trunk and the time-step table from N(0, 0.02) and leaves the "
+    "state, action and return embeddings and the head at PyTorch's defaults",
+    "timesteps": "d3rlpy counts time steps from 1, ours from 0",
+    "windows": "d3rlpy samples a window ending at a uniformly drawn step (left-padded); ours "
+    "starts a window at a uniformly drawn step (right-padded)",
+    "environment": "gymnasium 1.0.0's Hopper-v5 against 1.4.0's, both on MuJoCo 3.11",
+}
+"""What the harness cannot make equal between the two sides."""
+
+NO_PEER: dict[str, str] = {
+    "HDT": "no package; its low level is our DT (parity above) with a sub-goal token, and its "
+    "high level the same trunk regressing states. The thesis reports HDT above DT on 7 of 9 "
+    "locomotion sets (Table 5.3).",
+    "DM / HDM": "no package; the DM swaps the DT's trunk for our Mamba, whose kernel matches "
+    "the selective-scan reference (tests/test_mamba.py). The thesis reports DM above DT "
+    "(Table 5.5).",
+    "SAC / TD3 (DEFENDER)": "SB3 itself is the implementation (thesis_lib.rl wraps it), so "
+    "the peer is the method; DEFENDER's filter and dynamics model have no package.",
+    "CLfD encoders": "no maintained TCN or CMC package; the closed-form checks are the "
+    "losses' tests (tests/test_clfd.py) and the untrained-encoder control of the study.",
+    "MDLT": "no package; the mean training pose is the baseline it must beat (chapter 06).",
+}
+"""Methods the claims rest on that have no peer package, and what stands in for one."""
+
+
+# ----------------------------------------------------------------------------------------------
+# The parity file
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One row of ``params/parity.yml``: a method at one size, on one data set, over seeds."""
+
+    name: str
+    method: str
+    dataset: str = "hopper/medium"
+    dataset_size: str = "smoke"
+    seeds: tuple[int, ...] = (0, 1, 2)
+    init: str = "auto"
+    arch: dict[str, Any] = field(default_factory=dict)
+    train: dict[str, Any] = field(default_factory=dict)
+    episodes: int = 10
+    peer: bool = True
+
+    def __post_init__(self) -> None:
+        if self.method not in ("DT", "BC"):
+            raise ValueError(f"Unknown parity method {self.method!r}. Valid: DT, BC.")
+        if isinstance(self.seeds, str) or not self.seeds:
+            raise ValueError(f"Expect `seeds` as a non-empty list, got {self.seeds!r}.")
+
+
+def load_parity_file(path: str | Path) -> list[Comparison]:
+    """The comparisons of a parity file (unknown keys are errors, naming the comparison)."""
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"No parity file {p}.")
+    data = yaml.safe_load(p.read_text()) or {}
+    common = data.get("common", {})
+    out = []
+    valid = set(Comparison.__dataclass_fields__)
+    for c in data.get("comparisons", []):
+        merged = {**common, **c}
+        for k in ("arch", "train"):
+            merged[k] = {**common.get(k, {}), **c.get(k, {})}
+        bad = set(merged) - valid
+        if bad:
+            raise ValueError(
+                f"Unknown key(s) {sorted(bad)} in parity comparison {c.get('name')!r} of {p}; "
+                f"valid: {sorted(valid)}."
+            )
+        merged["seeds"] = tuple(merged.get("seeds", (0, 1, 2)))
+        out.append(Comparison(**merged))
+    if not out:
+        raise ValueError(f"{p} lists no comparison.")
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# One run of each side
+
+
+def _load(dataset: str, size: str) -> Any:
+    from thesis_lib.data import get_dataset
+
+    task, tier = dataset.split("/")
+    return get_dataset(task, tier, size=size)  # type: ignore[arg-type]
+
+
+def _data_sha(ds: Any) -> str:
+    import hashlib
+
+    from thesis_lib._io import hash_arrays
+
+    h = hashlib.sha256()
+    for ep in ds.episodes:
+        hash_arrays(h, (ep.observations, ep.actions, ep.rewards))
+    return h.hexdigest()[:16]
+
+
+def _row(config: dict[str, Any], side: str, returns: Any, lengths: Any, ds: Any, **extra: Any):
+    from thesis_lib.data import normalized_score
+
+    task = config["dataset"].split("/")[0]
+    r = float(np.mean(returns))
+    return {
+        "side": side,
+        "method": config["method"],
+        "dataset": config["dataset"],
+        "seed": int(config["train"]["seed"]),
+        "init": config.get("init", ""),
+        "score": float(normalized_score(task, r)),
+        "return_mean": r,
+        "length_mean": float(np.mean(lengths)),
+        "data_score_mean": float(np.mean(ds.normalized_scores())),
+        "data_sha": _data_sha(ds),
+        **extra,
+    }
+
+
+def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """Our side of one parity run (a sweep task): train and evaluate with
+    :func:`~thesis_lib.seq.runner.run_offline`; one row."""
+    import time
+
+    import torch
+
+    from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
+
+    torch.set_num_threads(1)
+    ds = _load(config["dataset"], config["dataset_size"])
+    arch = ArchSpec(**config["arch"], init=config["init"])
+    train = TrainSpec(**config["train"], eval_every=0)
+    ev = EvalSpec(episodes=config["episodes"], targets=("max",), episode_seed="run")
+    t0 = time.process_time()
+    rows = run_offline(config["method"], ds, arch, train, ev, task=config["dataset"].split("/")[0])
+    last = rows[-1]
+    n = config["episodes"]
+    return [
+        _row(
+            config,
+            "ours",
+            [last["return_mean"]] * n,
+            [last["length_mean"]] * n,
+            ds,
+            peer="thesis_lib",
+            train_s=round(time.process_time() - t0, 1),
+        )
+    ]
+
+
+def peer_python() -> Path:
+    """The peer venv's python (``$THESIS_CACHE_DIR/peer-venv``)."""
+    from thesis_lib.book.paths import cache_dir
+
+    return cache_dir() / "peer-venv" / "bin" / "python"
+
+
+def setup_peer() -> Path:
+    """Make the peer venv (d3rlpy 2.8.1 and its gymnasium 1.0.0) if it is missing; its python."""
+    py = peer_python()
+    if not py.exists():
+        venv = py.parent.parent
+        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+        subprocess.run([str(py), "-m", "pip", "install", *PEER_REQUIREMENTS], check=True)
+    return py
+
+
+def export_npz(ds: Any, path: str | Path) -> Path:
+    """The episodes of ``ds`` flattened for d3rlpy's ``MDPDataset``: ``observations`` (the
+    states the actions were taken in, not the final one), ``actions``, ``rewards``,
+    ``terminals``, ``timeouts`` (the last step of an episode that did not terminate)."""
+    obs, act, rew, term, tout = [], [], [], [], []
+    for ep in ds.episodes:
+        n = len(ep.actions)
+        obs.append(ep.observations[:n])
+        act.append(ep.actions)
+        rew.append(ep.rewards)
+        t = np.asarray(ep.terminations, dtype=bool)
+        term.append(t)
+        to = np.zeros(n, dtype=bool)
+        if not t[-1]:
+            to[-1] = True
+        tout.append(to)
+    path = Path(path)
+    np.savez(
+        path,
+        observations=np.concatenate(obs),
+        actions=np.concatenate(act),
+        rewards=np.concatenate(rew),
+        terminals=np.concatenate(term),
+        timeouts=np.concatenate(tout),
+    )
+    return path
+
+
+def peer_config(config: dict[str, Any], ds: Any) -> dict[str, Any]:
+    """The JSON the peer script reads: the run's settings in plain numbers."""
+    from thesis_lib.seq import ArchSpec
+    from thesis_lib.seq.evaluation import target_returns
+    from thesis_lib.seq.trainer import TrainConfig
+
+    arch = ArchSpec(**config["arch"])
+    tr = config["train"]
+    defaults = TrainConfig()
+    return {
+        "method": config["method"],
+        "seed": int(tr["seed"]),
+        "iterations": int(tr["iterations"]),
+        "batch_size": int(tr.get("batch_size", 64)),
+        "lr": float(tr.get("lr", 1e-4)),
+        "warmup_steps": int(tr.get("warmup_steps", 10_000)),
+        "weight_decay": defaults.weight_decay,
+        "grad_clip": defaults.grad_clip,
+        "d_model": arch.d_model,
+        "n_layers": arch.n_layers,
+        "n_heads": arch.n_heads,
+        "K": arch.K,
+        "dropout": arch.dropout,
+        "bc_hidden_dim": arch.bc_hidden_dim,
+        "max_timestep": arch.max_timestep,
+        "rtg_scale": float(tr.get("rtg_scale") or 1000.0),
+        "target_return": float(target_returns(ds)["max"]),
+        "env_id": ds.env_id if hasattr(ds, "env_id") else ds.metadata["thesis_info"]["env_id"],
+        "episodes": int(config["episodes"]),
+        "episode_seed": int(tr["seed"]),
+        "max_steps": 1000,
+    }
+
+
+def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """The peer's side of one parity run (a sweep task): the peer script in the peer venv."""
+    py = peer_python()
+    if not py.exists():
+        raise FileNotFoundError(
+            f"No peer environment at {py.parent.parent}. Make it with `thesis parity --setup` "
+            f"(pip installs {', '.join(PEER_REQUIREMENTS)})."
+        )
+    ds = _load(config["dataset"], config["dataset_size"])
+    script = Path(__file__).with_name("peer_d3rlpy.py")
+    with tempfile.TemporaryDirectory(prefix="thesis-parity-") as tmp:
+        data = export_npz(ds, Path(tmp) / "data.npz")
+        cfg_path = Path(tmp) / "run.json"
+        cfg_path.write_text(json.dumps(peer_config(config, ds)))
+        out = Path(tmp) / "out.json"
+        env = {**os.environ, "OMP_NUM_THREADS": "1"}
+        proc = subprocess.run(
+            [
+                str(py),
+                str(script),
+                "--data",
+                str(data),
+                "--config",
+                str(cfg_path),
+                "--out",
+                str(out),
+            ],
+            env=env,
+            cwd=tmp,
+            capture_output=True,
+            text=True,
+        )
+        if proc.returncode != 0:
+            raise RuntimeError(f"The peer run failed ({py}):\n{proc.stderr[-3000:]}")
+        res = json.loads(out.read_text())
+    return [
+        _row(
+            config,
+            "peer",
+            res["returns"],
+            res["lengths"],
+            ds,
+            peer=res["peer"],
+            train_s=res["train_s"],
+        )
+    ]
+
+
+def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]]]:
+    """Each comparison's tasks, one per side and seed: ``{name: {"ours": [...], "peer": [...]}}``.
+
+    A peer run's config holds no ``init`` (it is ours to vary), so comparisons that differ only
+    there share their peer runs (the same task keys: run and stored once).
+    """
+    from thesis_lib.sweep import Task
+
+    out: dict[str, dict[str, list[Any]]] = {}
+    for c in comparisons:
+        sides: dict[str, list[Any]] = {"ours": [], "peer": []}
+        for seed in c.seeds:
+            config = {
+                "method": c.method,
+                "dataset": c.dataset,
+                "dataset_size": c.dataset_size,
+                "arch": dict(c.arch),
+                "train": {**c.train, "seed": int(seed)},
+                "episodes": c.episodes,
+            }
+            sides["ours"].append(Task(ours_run, {**config, "init": c.init}))
+            if c.peer:
+                sides["peer"].append(Task(peer_run, config))
+        out[c.name] = sides
+    return out
+
+
+def unique_tasks(tasks: dict[str, dict[str, list[Any]]]) -> list[Any]:
+    """Every task of :func:`parity_tasks` once (by key), ours first."""
+    seen: dict[str, Any] = {}
+    for side in ("ours", "peer"):
+        for sides in tasks.values():
+            for t in sides[side]:
+                seen.setdefault(t.key, t)
+    return list(seen.values())
+
+
+# ----------------------------------------------------------------------------------------------
+# The table
+
+
+def welch_interval(x: Any, y: Any, level: float = 0.95) -> tuple[float, float, float]:
+    """``mean(x) - mean(y)`` and its Welch t interval (unequal variances, unpaired).
+
+    Example:
+        >>> d, lo, hi = welch_interval([1.0, 2.0, 3.0], [1.0, 2.0, 3.0])
+        >>> d, round(lo, 2), round(hi, 2)
+        (0.0, -2.27, 2.27)
+    """
+    from scipy import stats
+
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    if len(x) < 2 or len(y) < 2:
+        raise ValueError(f"Need >= 2 seeds a side for an interval, got {len(x)} and {len(y)}.")
+    d = float(x.mean() - y.mean())
+    vx, vy = x.var(ddof=1) / len(x), y.var(ddof=1) / len(y)
+    se = float(np.sqrt(vx + vy))
+    if se == 0.0:
+        return d, d, d
+    dof = (vx + vy) ** 2 / (vx**2 / (len(x) - 1) + vy**2 / (len(y) - 1))
+    half = float(stats.t.ppf(0.5 + level / 2, dof)) * se
+    return d, d - half, d + half
+
+
+def parity_table(
+    comparisons: list[Comparison], rows: dict[str, dict[str, list[dict[str, Any]]]]
+) -> pd.DataFrame:
+    """One line per comparison: ours and the peer's mean score, the difference [95% CI] and
+    whether it is within the parity band (the interval holds 0 and ``|difference| <= 3``).
+
+    Args:
+        comparisons: The parity file's comparisons.
+        rows: ``{name: {"ours": rows, "peer": rows}}``: the stored rows of each comparison's
+            finished runs (a comparison with fewer than 2 a side gets no interval).
+    """
+    out = []
+    for c in comparisons:
+        got = rows.get(c.name, {})
+        ours = np.array([r["score"] for r in got.get("ours", [])], dtype=float)
+        peer = np.array([r["score"] for r in got.get("peer", [])], dtype=float)
+        every = got.get("ours", []) + got.get("peer", [])
+        size = {"d_model": 128, "n_layers": 3, **c.arch}
+        line: dict[str, Any] = {
+            "comparison": c.name,
+            "method": c.method,
+            "init": c.init if c.method != "BC" else "",
+            "dataset": f"{c.dataset} ({c.dataset_size})",
+            "arch": f"d{size['d_model']} L{size['n_layers']}" if c.method != "BC" else "MLP",
+            "updates": c.train.get("iterations"),
+            "seeds": len(ours),
+            "ours": float(ours.mean()) if len(ours) else np.nan,
+            "ours_seeds": " ".join(f"{v:.1f}" for v in ours),
+            "peer": float(peer.mean()) if len(peer) else np.nan,
+            "peer_seeds": " ".join(f"{v:.1f}" for v in peer),
+            "peer_name": every[-1]["peer"] if got.get("peer") else "",
+            "data_mean": float(every[0]["data_score_mean"]) if every else np.nan,
+            "data_sha": every[0]["data_sha"] if every else "",
+        }
+        if len(ours) >= 2 and len(peer) >= 2:
+            d, lo, hi = welch_interval(ours, peer)
+            line |= {"difference": d, "ci_low": lo, "ci_high": hi}
+            line["parity"] = bool(lo <= 0 <= hi and abs(d) <= 3.0)
+        else:
+            line |= {"difference": np.nan, "ci_low": np.nan, "ci_high": np.nan, "parity": None}
+        out.append(line)
+    return pd.DataFrame(out)
