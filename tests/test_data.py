@@ -349,6 +349,67 @@ def test_episode_with_wrong_observation_count_is_named():
         SequenceDataset([bad], K=2)
 
 
+def test_n_transitions_below_one_is_refused_and_the_good_set_kept(capsys):
+    """`--n-transitions 0` (or -5) used to exit 0 and replace the set by an empty one."""
+    did = generate("maze2d-umaze", "random", n_transitions=50)
+    for n in (0, -5):
+        with pytest.raises(ValueError, match=rf"`n_transitions`.*actually: {n}"):
+            generate("maze2d-umaze", "random", n_transitions=n)
+        with pytest.raises(ValueError, match="`n_transitions`"):
+            data.get_dataset("maze2d-umaze", "random", n_transitions=n)
+        argv = ["data", "generate", "--task", "maze2d-umaze", "--tier", "random"]
+        assert _cli([*argv, "--n-transitions", str(n)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "--n-transitions" in err and str(n) in err and "\n" not in err
+    with pytest.raises(ValueError, match="at least one transition"):  # the storage refuses too
+        data.write_dataset(did, [], "PointMaze_UMaze-v3")
+    ds = load(did)
+    assert len(ds) >= 1 and ds.n_transitions == 50
+    assert ds.metadata["thesis_info"]["n_transitions"] == 50
+
+
+@pytest.mark.parametrize("damage", ["[]", "{}", "not json", "half hdf5"])
+def test_a_damaged_set_is_reported_in_one_line_and_rebuilt_by_get_dataset(damage, capsys):
+    a = data.get_dataset("maze2d-umaze", "random", n_transitions=50)
+    if damage == "half hdf5":
+        h5 = a.path / "data" / "main_data.hdf5"
+        h5.write_bytes(h5.read_bytes()[: h5.stat().st_size // 2])
+    else:
+        (a.path / "data" / "metadata.json").write_text(damage)
+    with pytest.raises(data.DamagedDatasetError, match=r"thesis data generate --task maze2d-umaze"):
+        load(a.id)
+    assert _cli(["data", "card", a.id]) == 1  # one line, not a traceback
+    err = capsys.readouterr().err.strip()
+    assert "damaged" in err and a.id in err and "\n" not in err
+    with pytest.warns(UserWarning, match=r"'thesis/maze2d-umaze/random-v0' is damaged"):
+        b = data.get_dataset("maze2d-umaze", "random", n_transitions=50)
+    assert b.n_transitions == 50 and load(a.id).n_transitions == 50
+
+
+def test_a_damaged_set_we_cannot_make_names_what_to_do(tmp_path):
+    meta = tmp_path / "minari" / "D4RL" / "door" / "human-v2" / "data" / "metadata.json"
+    meta.parent.mkdir(parents=True)
+    meta.write_text("[]")
+    with pytest.raises(data.DamagedDatasetError, match=r"JSON object.*download the data set again"):
+        data.open_dataset("D4RL/door/human-v2")
+
+
+def test_making_and_closing_a_maze_env_leaves_no_file_in_the_temp_dir(tmp_path, monkeypatch):
+    """gymnasium-robotics writes <temp dir>/ant_maze<time>.xml for every maze env it makes."""
+    import tempfile
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    env = data.make_env("maze2d-umaze")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    env.close()
+    generate("maze2d-open", "random", n_transitions=20)  # the storage makes one too
+    data.load("thesis/maze2d-open/random-v0").recover_environment().close()
+    assert sorted(p.name for p in tmp.iterdir()) == []
+
+
 # --- CLI, cards, environments --------------------------------------------------------------
 
 

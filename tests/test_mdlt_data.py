@@ -130,6 +130,17 @@ def test_bad_audio(tmp_path):
         AU.cached_audio_features(silent, cache_dir=tmp_path / "c")
 
 
+@pytest.mark.parametrize("sr", [0, -22050, 0.5, float("nan")])
+def test_a_sample_rate_that_is_not_positive_names_sr(tmp_path, sr):
+    y = np.random.default_rng(0).standard_normal(SR).astype(np.float32)
+    with pytest.raises(ValueError, match=r"`sr`.*actually"):  # was a ZeroDivisionError at 0
+        AU.audio_features(y, sr=sr)
+    wav = tmp_path / "a.wav"
+    sf.write(wav, y, SR)
+    with pytest.raises(ValueError, match=r"`sr`.*actually"):
+        AU.load_audio(wav, sr=sr)
+
+
 def test_feature_cache_is_keyed_by_content(tmp_path):
     y, _ = click_track(seconds=1.5)
     p = tmp_path / "a.wav"
@@ -427,6 +438,15 @@ def test_load_aist_all_sequences_missing_frames_and_keypoints3d(aist_fixture):
     np.testing.assert_allclose(
         kp[0].angles[:, :3], 0, atol=0.02
     )  # mid-hip pelvis: spine tilts 0.5 deg
+
+
+def test_load_aist_takes_one_genre_as_a_string(aist_fixture):
+    """`genres="mHO"` was split into the characters 'm', 'H', 'O' (unknown genres)."""
+    one = R.load_aist(aist_fixture, genres="mHO", progress=False)
+    assert [s.genre for s in one] == ["mHO"]
+    assert [s.name for s in one] == [
+        s.name for s in R.load_aist(aist_fixture, genres=["mHO"], progress=False)
+    ]
 
 
 def test_aist_bad_layouts(aist_fixture, tmp_path):

@@ -492,6 +492,52 @@ def test_dance_command_end_to_end_on_foreign_audio(tmp_path):
     )
 
 
+def _no_work(*args, **kwargs):
+    raise AssertionError("dance() started loading the checkpoint before checking its arguments")
+
+
+def _dance_argv(tmp_path, monkeypatch) -> list[str]:
+    """`thesis mdlt dance` on an empty file, with the checkpoint loader made to fail the test."""
+    from thesis_lib.mdlt import train
+
+    wav = tmp_path / "song.wav"
+    wav.write_bytes(b"")  # never read: the checks come first
+    monkeypatch.setattr(train, "load_checkpoint", _no_work)
+    return ["mdlt", "dance", "--audio", str(wav), "--out", str(tmp_path / "angles.csv"), "-q"]
+
+
+def test_dance_checks_the_device_before_the_checkpoint(tmp_path, monkeypatch, capsys):
+    """`--device cuda` on a machine without CUDA was blamed on the checkpoint."""
+    from thesis_lib.cli import main
+
+    argv = _dance_argv(tmp_path, monkeypatch)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    assert main([*argv, "--device", "cuda"]) == 1
+    err = capsys.readouterr().err
+    assert "`device` 'cuda'" in err and "no CUDA GPU" in err and "checkpoint" not in err
+    assert main([*argv, "--device", "gpu"]) == 1
+    assert "`device`" in capsys.readouterr().err
+
+
+def test_dance_refuses_an_animation_suffix_before_any_work(tmp_path, monkeypatch, capsys):
+    """`--animation x.mp4` was refused only after ~14 s, with the CSV already written."""
+    from thesis_lib.cli import main
+
+    argv = _dance_argv(tmp_path, monkeypatch)
+    assert main([*argv, "--animation", str(tmp_path / "x.mp4")]) == 1
+    err = capsys.readouterr().err
+    assert "`animation`" in err and "x.mp4" in err and ".gif or .html" in err
+    assert not (tmp_path / "angles.csv").exists()
+
+
+def test_a_missing_checkpoint_points_to_thesis_mdlt_train(tmp_path):
+    with pytest.raises(FileNotFoundError, match=r"thesis mdlt train --out .*nope\.pt") as err:
+        load_checkpoint(tmp_path / "nope.pt")
+    assert "save_checkpoint" not in str(err.value)
+    with pytest.raises(ValueError, match="`device`"):
+        load_checkpoint(tmp_path / "nope.pt", device="cuda:99")
+
+
 @pytest.mark.parametrize("variant", ["transformer", "mamba"])
 def test_init_output_at_starts_at_the_given_pose(variant):
     from thesis_lib.mdlt.models import init_output_at

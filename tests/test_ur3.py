@@ -237,6 +237,49 @@ def test_cli_check_and_dry_run(tmp_path, capsys):
     assert main(["ur3", "play", str(tmp_path / "missing.csv")]) == 1
 
 
+@pytest.mark.parametrize("first", ["8.218E-02", "1e3", "nan", "inf", "-INF", "1E+00"])
+def test_a_headerless_csv_keeps_its_first_row_whatever_the_float_spelling(tmp_path, first):
+    from thesis_lib.ur3.cli import read_angles
+
+    a = np.full((10, 4), 0.1)
+    path = tmp_path / "angles.csv"
+    rows = [",".join([first, "0.1", "0.1", "0.1"])] + [",".join(["0.1"] * 4)] * 9
+    path.write_text("\n".join(rows) + "\n")
+    got = read_angles(path)
+    assert got.shape == (10, 4)  # the first row is data, not a header
+    a[0, 0] = float(first)
+    np.testing.assert_array_equal(got, a)
+    path.write_text("shoulder_pan,lift,elbow,wrist\n" + "\n".join(rows[1:]) + "\n")
+    assert read_angles(path).shape == (9, 4)  # a real header is still skipped
+
+
+@pytest.mark.parametrize("cols", [4, 6])
+def test_play_in_clip_mode_reports_the_frames_it_clipped(tmp_path, capsys, cols):
+    """`check` says 9 of 10 frames break the speed limits; `play` must not claim all is well."""
+    from thesis_lib.cli import main
+
+    if cols == 6:
+        q = np.tile(reach.HOME, (10, 1))
+        q[:, 0] += 0.2 * np.arange(10)
+    else:
+        q = np.zeros((10, 4))
+        q[:, 0] = 0.3 * np.arange(10)
+    path = tmp_path / "fast.csv"
+    np.savetxt(path, q, delimiter=",")
+    assert main(["ur3", "check", str(path)]) == 2
+    assert "speed limits broken in 9 of 10 frames" in capsys.readouterr().out
+    assert main(["ur3", "play", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "speed limits broken in 9 of 10 frames" in out
+    assert "9 of 10 frames clipped or slowed" in out
+    ok = tmp_path / "still.csv"
+    np.savetxt(
+        ok, np.zeros((10, cols)) if cols == 4 else np.tile(reach.HOME, (10, 1)), delimiter=","
+    )
+    assert main(["ur3", "play", str(ok)]) == 0
+    assert "clipped" not in capsys.readouterr().out  # nothing to report when nothing changed
+
+
 def test_mujoco_frames_show_the_arm_and_follow_the_pose():
     """Offscreen MuJoCo frames (EGL, set in conftest) are not blank and change with the pose."""
     from thesis_lib.ur3 import reach

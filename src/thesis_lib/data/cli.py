@@ -15,6 +15,9 @@ def _generate(args: argparse.Namespace) -> int:
     from .recipe import generate
     from .tasks import TASKS, get_task
 
+    if args.n_transitions is not None and args.n_transitions < 1:
+        print(f"--n-transitions must be ≥ 1, got {args.n_transitions}.", file=sys.stderr)
+        return 2
     tasks = list(TASKS) if args.task == "all" else [args.task]
     for task in tasks:
         spec = get_task(task)
@@ -69,7 +72,13 @@ def _card(args: argparse.Namespace) -> int:
     if not args.dataset_id:
         print("give a data-set id, or --experts", file=sys.stderr)
         return 2
-    card = data_card(args.dataset_id)
+    from .storage import DamagedDatasetError
+
+    try:
+        card = data_card(args.dataset_id)
+    except DamagedDatasetError as err:  # says how to rebuild it: no traceback
+        print(f"thesis data card: {err}", file=sys.stderr)
+        return 1
     print(json.dumps(card, default=str, indent=1) if args.json else format_card(card))
     return 0
 

@@ -201,7 +201,7 @@ def make_minari_env(dataset_id: str, **kwargs: Any) -> Any:
     import gymnasium as gym
     from gymnasium.envs.registration import EnvSpec
 
-    from .recipe import _register_robotics
+    from .recipe import _register_robotics, forget_maze_xml
 
     _register_robotics()
     md = _metadata(dataset_id)
@@ -216,7 +216,7 @@ def make_minari_env(dataset_id: str, **kwargs: Any) -> Any:
     )
     spec = EnvSpec.from_json(spec_json)
     _, task, _, _ = _parts(dataset_id)
-    return gym.make(spec, **(_EVAL_KWARGS.get(task, {}) | kwargs))
+    return forget_maze_xml(gym.make(spec, **(_EVAL_KWARGS.get(task, {}) | kwargs)))
 
 
 def open_dataset(name: str, dataset_size: str = "smoke", n_transitions: int | None = None) -> Any:

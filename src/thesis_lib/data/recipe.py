@@ -30,6 +30,7 @@ Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3 (InvertedDoublePendulum).
 
 from __future__ import annotations
 
+import contextlib
 import time
 import warnings
 from collections.abc import Callable
@@ -37,7 +38,14 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .storage import Episode, OfflineDataset, find_dataset, load, write_dataset
+from .storage import (
+    DamagedDatasetError,
+    Episode,
+    OfflineDataset,
+    find_dataset,
+    load,
+    write_dataset,
+)
 from .tasks import TaskSpec, check_tier, gen_dataset_id, get_task
 
 DatasetSize = Literal["smoke", "full"]
@@ -87,7 +95,23 @@ def make_env(task: str, **kwargs: object):  # -> gym.Env
         if spec.env_id.startswith("AdroitHand") and _ROBOTICS_NOTICE:
             warnings.warn(_ROBOTICS_NOTICE, stacklevel=2)
     kw = {**spec.env_kwargs, **kwargs}
-    return gym.make(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw)
+    return forget_maze_xml(gym.make(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw))
+
+
+def forget_maze_xml(env: Any) -> Any:
+    """Delete the model file a gymnasium-robotics maze (PointMaze, AntMaze) wrote; return ``env``.
+
+    Each maze env writes its MuJoCo model to ``<temp dir>/ant_maze<time>.xml`` and never
+    removes it (hundreds per book build). The model is loaded once the env is made, so the
+    file is removed here; other envs are returned untouched.
+    """
+    import os
+
+    xml = getattr(getattr(env, "unwrapped", env), "tmp_xml_file_path", None)
+    if isinstance(xml, str) and os.path.basename(xml).startswith("ant_maze"):
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(xml)
+    return env
 
 
 _ROBOTICS_NOTICE = ""
@@ -100,7 +124,6 @@ def _register_robotics() -> None:
     every chapter that makes a maze, so it is kept and raised as a warning for Adroit tasks only.
     """
     global _ROBOTICS_NOTICE
-    import contextlib
     import io
 
     import gymnasium as gym
@@ -235,6 +258,7 @@ def make_episodes(
     """
     spec: TaskSpec = get_task(task)
     check_tier(task, tier)
+    _check_n_transitions(n_transitions)
     noise = action_noise_for(task) if action_noise is None else float(action_noise)
     info: dict = {
         "task": task,
@@ -356,6 +380,18 @@ def _mlp_replay(
     return eps
 
 
+def _check_n_transitions(n: Any) -> int:
+    """``n`` as an int, or a ``ValueError`` naming ``n_transitions`` unless it is a whole number ≥ 1
+    (``20000.0`` from a YAML ``2e4`` passes)."""
+    try:
+        ok = not isinstance(n, bool) and int(n) == n and n >= 1
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ValueError(f"Expect `n_transitions` to be a whole number ≥ 1, actually: {n!r}.")
+    return int(n)
+
+
 def generate(
     task: str,
     tier: str,
@@ -380,11 +416,12 @@ def generate(
         The data-set id.
 
     Raises:
-        ValueError: unknown task or tier (lists the valid ones).
+        ValueError: unknown task or tier (lists the valid ones), or ``n_transitions < 1``.
+            An existing set is replaced only once the new one is written whole.
     """
     spec = get_task(task)
     dataset_id = gen_dataset_id(task, tier)
-    n = DATASET_SIZES[size] if n_transitions is None else int(n_transitions)
+    n = DATASET_SIZES[size] if n_transitions is None else _check_n_transitions(n_transitions)
     t0 = time.time()
     eps, info = make_episodes(task, tier, n, seed, action_noise)
     rets = np.array([e.episode_return for e in eps])
@@ -432,14 +469,26 @@ def get_dataset(
 
     This is what chapter notebooks call: on a fresh machine the data set is made on first
     use at the chosen scale and cached under :func:`thesis_lib.data.storage.data_dir`.
+    A damaged cached set (unreadable HDF5 file or metadata) is made again, with a warning.
+
+    Raises:
+        ValueError: unknown task or tier, or ``n_transitions < 1``.
     """
     dataset_id = gen_dataset_id(task, tier)
-    n = DATASET_SIZES[size] if n_transitions is None else int(n_transitions)
+    n = DATASET_SIZES[size] if n_transitions is None else _check_n_transitions(n_transitions)
     if find_dataset(dataset_id) is not None:
-        ds = load(dataset_id)
-        ti = ds.metadata.get("thesis_info", {})
+        try:
+            ds: OfflineDataset | None = load(dataset_id)
+        except DamagedDatasetError as err:
+            warnings.warn(
+                f"Data set '{dataset_id}' is damaged ({err.__cause__}); making it again.",
+                stacklevel=2,
+            )
+            ds = None
+        ti = ds.metadata.get("thesis_info", {}) if ds is not None else None
         if (
-            isinstance(ti, dict)
+            ds is not None
+            and isinstance(ti, dict)
             and ti.get("n_transitions") == n
             and ti.get("seed") == seed
             and ti.get("generator_version") == GENERATOR_VERSION

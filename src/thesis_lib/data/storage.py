@@ -174,9 +174,11 @@ class OfflineDataset:
         """``gymnasium.make`` of the recorded environment."""
         import gymnasium as gym
 
+        from .recipe import forget_maze_xml
+
         if self.env_id is None:
             raise ValueError(f"Data set '{self.id}' records no environment.")
-        return gym.make(self.env_id, **kwargs)
+        return forget_maze_xml(gym.make(self.env_id, **kwargs))
 
 
 def _generate_command(dataset_id: str) -> str | None:
@@ -247,15 +249,37 @@ def load(dataset_id: str, validate: bool = True) -> OfflineDataset:
     if path is None:
         raise FileNotFoundError(_missing_message(dataset_id))
     try:
+        _check_metadata(path)
         return _read(dataset_id, path, validate)
-    except (OSError, KeyError, ValueError, json.JSONDecodeError) as e:
+    # AssertionError: Minari checks the metadata it reads with ``assert``
+    except (OSError, KeyError, ValueError, AssertionError) as e:
         if isinstance(e, EpisodeFormatError):
             raise
         raise DamagedDatasetError(_damaged_message(dataset_id, path, e)) from e
 
 
 class DamagedDatasetError(OSError):
-    """A data set's files exist but cannot be read (a truncated or half-written HDF5 file)."""
+    """A data set's files exist but cannot be read (a truncated or half-written HDF5 file, a
+    ``metadata.json`` that is not Minari's)."""
+
+
+def _check_metadata(path: Path) -> None:
+    """Raise ``ValueError`` unless ``path/data/metadata.json`` is a JSON object holding what
+    Minari reads first (the data format, and the spaces or the environment spec), so a damaged
+    file is reported as such rather than as Minari's ``AttributeError`` or bare ``assert``."""
+    md = json.loads((path / "data" / "metadata.json").read_text())
+    if not isinstance(md, dict):
+        raise ValueError(
+            f"Expect metadata.json to hold a JSON object, actually: a {type(md).__name__}"
+        )
+    if "data_format" not in md:
+        raise ValueError("Expect metadata.json to name its 'data_format', actually: none")
+    spaces = all(isinstance(md.get(k), str) for k in ("observation_space", "action_space"))
+    if not spaces and not isinstance(md.get("env_spec"), str):
+        raise ValueError(
+            "Expect metadata.json to hold the observation and action spaces or an 'env_spec', "
+            "actually: neither"
+        )
 
 
 def _damaged_message(dataset_id: str, path: Path, err: BaseException) -> str:
@@ -347,9 +371,19 @@ def write_dataset(
 
     Returns:
         The data set's directory.
+
+    Raises:
+        ValueError: no transitions to write (an existing set of that id is kept).
+        EpisodeFormatError: an episode's arrays do not fit together (the set is kept too).
     """
     root = Path(root) if root is not None else data_dir()
     path = root / dataset_id
+    n_steps = sum(len(e) for e in episodes)
+    if n_steps < 1:  # checked before anything is written: an existing set is kept
+        raise ValueError(
+            f"Expect at least one transition for data set '{dataset_id}', actually: "
+            f"{len(episodes)} episode(s) with {n_steps} transitions."
+        )
     if path.exists() and not overwrite:
         raise FileExistsError(f"Data set '{dataset_id}' exists at {path}.")
     # Written into a staging root, then renamed into place: an interrupted write never
@@ -385,6 +419,20 @@ def write_dataset(
     return path
 
 
+@contextlib.contextmanager
+def _private_tempdir() -> Iterator[None]:
+    """Point :mod:`tempfile` at a fresh folder for the block, then delete the folder and all
+    that was left in it (the model files gymnasium-robotics' maze envs write and never remove)."""
+    old = tempfile.tempdir
+    tmp = tempfile.mkdtemp(prefix="thesis-maze-")
+    tempfile.tempdir = tmp
+    try:
+        yield
+    finally:
+        tempfile.tempdir = old
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def _mkdirs(p: Path) -> Path:
     p.mkdir(parents=True, exist_ok=True)
     return p
@@ -404,8 +452,10 @@ def _write(
     from minari import create_dataset_from_buffers
     from minari.data_collector import EpisodeBuffer
 
+    from .recipe import forget_maze_xml
+
     path = root / dataset_id
-    env = gym.make(env_id)
+    env = forget_maze_xml(gym.make(env_id))
     dict_obs = isinstance(env.observation_space, gym.spaces.Dict)
     buffers = []
     for i, e in enumerate(episodes):
@@ -431,7 +481,14 @@ def _write(
     has_ref = ref_min_score is not None and ref_max_score is not None
     import warnings
 
-    with _minari_path(root), warnings.catch_warnings():
+    # Minari makes the env (twice, with reference scores) and never closes it: a maze env's
+    # model file goes to a temp folder of its own, removed after.
+    maze = hasattr(env.unwrapped, "tmp_xml_file_path")
+    with (
+        _minari_path(root),
+        warnings.catch_warnings(),
+        _private_tempdir() if maze else contextlib.nullcontext(),
+    ):
         warnings.filterwarnings("ignore", message=".*author_email.*")
         create_dataset_from_buffers(
             dataset_id,

@@ -72,6 +72,17 @@ def feature_sample_rate(fps: int = 60) -> int:
     return int(fps) * HOP_LENGTH
 
 
+def _check_sr(sr: object, where: str) -> int:
+    """``sr`` as an int, or a ``ValueError`` naming ``sr`` unless it is a whole number of Hz > 0."""
+    try:
+        ok = not isinstance(sr, bool) and int(sr) == sr and sr > 0  # type: ignore[call-overload,operator]
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{where}: expect a positive sample rate `sr` in Hz, actually: {sr!r}.")
+    return int(sr)  # type: ignore[call-overload]
+
+
 def load_audio(path: str | os.PathLike, sr: int | None = None) -> tuple[np.ndarray, int]:
     """Read an audio file as mono float32, resampled to ``sr`` when given.
 
@@ -90,6 +101,8 @@ def load_audio(path: str | os.PathLike, sr: int | None = None) -> tuple[np.ndarr
     """
     import soundfile as sf
 
+    if sr is not None:
+        sr = _check_sr(sr, "load_audio")
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"No audio file at {path}.")
@@ -199,7 +212,7 @@ def audio_features(
 
     Raises:
         AudioError: unreadable, silent, too short or non-finite audio.
-        ValueError: an array without ``sr``.
+        ValueError: an array without ``sr``, or ``sr`` not a positive number of Hz.
     """
     import librosa
 
@@ -210,9 +223,10 @@ def audio_features(
     else:
         if sr is None:
             raise ValueError("audio_features: pass sr= (Hz) with an array signal.")
+        sr = _check_sr(sr, "audio_features")
         y = _check_signal(audio, "audio_features")
-        if int(sr) != target_sr:
-            y = _resample(y, int(sr), target_sr)
+        if sr != target_sr:
+            y = _resample(y, sr, target_sr)
         where = "audio_features"
     y = _check_signal(y, where)
 

@@ -334,7 +334,7 @@ def load_aist(
     audio_dir: str | Path | None = None,
     fps: int = AIST_FPS,
     source: str = "smpl",
-    genres: Sequence[str] | None = None,
+    genres: str | Sequence[str] | None = None,
     cache_dir: str | Path | None | bool = None,
     paper_compat: bool = False,
     skip_missing_audio: bool = False,
@@ -349,13 +349,15 @@ def load_aist(
         audio_dir: the music folder; default ``root/wav`` (or wavs, music, audio).
         fps: audio feature frames per second.
         source: joints from SMPL (``"smpl"``) or from COCO-17 ``"keypoints3d"``.
-        genres: keep only these music genres (``["mBR", "mHO"]``).
+        genres: keep only these music genres (``["mBR", "mHO"]``; one name alone: ``"mHO"``).
         cache_dir: feature cache (see :func:`audio.cached_audio_features`); False disables it.
         paper_compat: the authors' angle computation and frame times (see angles, sync).
         skip_missing_audio: skip sequences whose music is missing instead of raising.
         keep_joints: attach the synchronised (T, 24, 3) joints.
     """
     root = Path(root)
+    if isinstance(genres, str):  # one genre, not its characters
+        genres = [genres]
     names = list_aist_sequences(root, all_sequences=all_sequences)
     if genres is not None:
         unknown = set(genres) - set(AIST_GENRES)

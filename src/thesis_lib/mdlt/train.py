@@ -24,7 +24,14 @@ import torch
 from thesis_lib.mdlt.models import MDLTConfig, MDLTMamba, MDLTTransformer, build_model
 from thesis_lib.seq.trainer import TrainConfig, Trainer
 
-__all__ = ["DanceBatch", "DanceWindows", "MDLTTrainer", "load_checkpoint", "save_checkpoint"]
+__all__ = [
+    "DanceBatch",
+    "DanceWindows",
+    "MDLTTrainer",
+    "check_device",
+    "load_checkpoint",
+    "save_checkpoint",
+]
 
 
 @dataclass
@@ -242,6 +249,35 @@ def save_checkpoint(
     return path
 
 
+def check_device(device: str | torch.device) -> torch.device:
+    """``device`` as a ``torch.device``, or a ``ValueError`` naming it when it is not a device
+    name or not available on this machine (``cuda`` without a CUDA GPU or build).
+
+    Used in: ``thesis mdlt dance``, :func:`load_checkpoint`.
+    """
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError, ValueError) as err:
+        raise ValueError(
+            f"Expect `device` to be a torch device such as 'cpu' or 'cuda', actually: {device!r} "
+            f"({err})."
+        ) from None
+    if dev.type == "cuda":
+        n = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if n == 0:
+            raise ValueError(
+                f"Expect `device` {str(device)!r} to be available, actually: torch sees no CUDA "
+                f"GPU here (torch {torch.__version__}, CUDA build: {torch.version.cuda}). "
+                "Use --device cpu."
+            )
+        if dev.index is not None and dev.index >= n:
+            raise ValueError(
+                f"Expect `device` {str(device)!r} to be available, actually: torch sees {n} "
+                f"CUDA GPU(s) (cuda:0 … cuda:{n - 1})."
+            )
+    return dev
+
+
 def load_checkpoint(
     path: str | os.PathLike[str], device: str = "cpu"
 ) -> tuple[MDLTTransformer | MDLTMamba, Any, dict[str, Any]]:
@@ -253,13 +289,16 @@ def load_checkpoint(
 
     Raises:
         FileNotFoundError: No file at ``path``.
-        ValueError: Not an MDLT checkpoint, or one without a feature scaler.
+        ValueError: ``device`` is not usable here (checked first), not an MDLT checkpoint, or
+            one without a feature scaler.
     """
+    check_device(device)  # a missing GPU is not the checkpoint's fault
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(
-            f"No checkpoint at '{path}'. Train one with thesis_lib.chapters.mdlt.train_model "
-            "(or the 06_mdlt chapter with save_checkpoint) first."
+            f"No checkpoint at '{path}'. Train one with 'thesis mdlt train --out {path}' "
+            "(thesis_lib.chapters.mdlt.train_translator), or leave out --checkpoint for the "
+            "packaged one."
         )
     try:
         ckpt = torch.load(path, map_location=device, weights_only=True)

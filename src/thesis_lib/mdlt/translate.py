@@ -141,11 +141,15 @@ def dance(
 
     Raises:
         FileNotFoundError: Missing audio or checkpoint.
-        ValueError: Unreadable/silent audio, or a checkpoint that is not MDLT's.
+        ValueError: An unusable ``device`` or ``animation`` suffix (both checked before any
+            work), unreadable/silent audio, or a checkpoint that is not MDLT's.
     """
     from thesis_lib.mdlt.audio import audio_features
-    from thesis_lib.mdlt.train import load_checkpoint
+    from thesis_lib.mdlt.train import check_device, load_checkpoint
 
+    check_device(device)  # the cheap checks first: nothing is computed or written before them
+    if animation is not None:
+        _check_animation_path(animation)
     audio = Path(audio)
     if not audio.is_file():
         raise FileNotFoundError(f"No audio file at '{audio}'.")
@@ -248,6 +252,16 @@ def ur3_joint_positions(q: np.ndarray) -> np.ndarray:
     return np.stack(points, axis=-2)
 
 
+#: the animation formats :func:`animate_arm` writes, by file suffix.
+ANIMATION_SUFFIXES = (".gif", ".html", ".htm")
+
+
+def _check_animation_path(path: str | os.PathLike) -> None:
+    suffix = Path(path).suffix.lower()
+    if suffix not in ANIMATION_SUFFIXES:
+        raise ValueError(f"Expect `animation` to end in .gif or .html, actually: '{path}'.")
+
+
 def animate_arm(
     angles: np.ndarray,
     fps: int = 60,
@@ -267,6 +281,8 @@ def animate_arm(
     import matplotlib.pyplot as plt
     from matplotlib.animation import FuncAnimation, PillowWriter
 
+    if path is not None:
+        _check_animation_path(path)
     angles = np.asarray(angles)
     step = max(1, int(round(fps / animation_fps)))
     n = len(angles) if max_seconds is None else min(len(angles), int(max_seconds * fps))
@@ -312,10 +328,7 @@ def animate_arm(
         path.parent.mkdir(parents=True, exist_ok=True)
         if path.suffix.lower() == ".gif":
             anim.save(path, writer=PillowWriter(fps=animation_fps))
-        elif path.suffix.lower() in (".html", ".htm"):
+        else:  # .html or .htm (checked above)
             path.write_text(anim.to_jshtml(fps=animation_fps))
-        else:
-            plt.close(fig)
-            raise ValueError(f"Unknown animation format '{path.suffix}'. Use .gif or .html.")
         plt.close(fig)
     return anim

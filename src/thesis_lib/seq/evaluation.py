@@ -126,8 +126,10 @@ def _env_factory(env: Any) -> tuple[Callable[[], Any] | None, Any, str | None]:
                 "evaluate needs several copies of the environment: pass a task name, a factory "
                 "(lambda: gym.make(...)), a gymnasium VectorEnv, or an env made by gym.make (with a spec)."
             )
+        from thesis_lib.data.recipe import forget_maze_xml
+
         spec = env.spec
-        return (lambda: gym.make(spec)), None, None
+        return (lambda: forget_maze_xml(gym.make(spec))), None, None
     if callable(env):
         return env, None, None
     raise TypeError(

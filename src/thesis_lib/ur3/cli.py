@@ -13,8 +13,12 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .safety import SafetyReport
 
 
 def read_angles(path: str | Path) -> np.ndarray:
@@ -28,9 +32,7 @@ def read_angles(path: str | Path) -> np.ndarray:
         a = np.load(path)
     else:
         first = path.read_text().splitlines()[:1]
-        header = bool(first) and any(
-            c.isalpha() for c in first[0].replace("e-", "").replace("e+", "")
-        )
+        header = bool(first) and not all(_is_number(c) for c in first[0].split(","))
         if header:  # e.g. `thesis mdlt dance --out`: time_s, then the four angles
             import pandas as pd
 
@@ -48,6 +50,26 @@ def read_angles(path: str | Path) -> np.ndarray:
     return a
 
 
+def _is_number(cell: str) -> bool:
+    """Whether ``cell`` is a float literal (``8.218E-02``, ``1e3``, ``nan``, ``inf`` …), i.e. not a
+    header name."""
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def _clip_note(before: SafetyReport, changed: int, max_change: float) -> str | None:
+    """What clipping did, as ``check`` would report it, or ``None`` when nothing broke a limit."""
+    if before.ok:
+        return None
+    return (
+        f"clipped: {before.summary()[:-1]}; {changed} of {before.n_frames} frames clipped or "
+        f"slowed (largest change {max_change:.3f} rad)."
+    )
+
+
 def _trajectory(args: argparse.Namespace):
     from .dance import prepare_dance
     from .safety import SafetyLimits, UnsafeTrajectoryError, check_trajectory, clip_trajectory
@@ -55,14 +77,17 @@ def _trajectory(args: argparse.Namespace):
     a = read_angles(args.angles)
     limits = SafetyLimits(speed_scale=args.speed_scale)
     if a.shape[1] == 4:
-        return prepare_dance(a, args.fps, mode=args.mode, limits=limits).q, limits
+        pb = prepare_dance(a, args.fps, mode=args.mode, limits=limits)
+        return pb.q, limits, _clip_note(pb.before, pb.changed_frames, pb.max_deviation)
     dt = 1.0 / args.fps
-    if args.mode == "clip":
-        return clip_trajectory(a, dt, limits), limits
     rep = check_trajectory(a, dt, limits)
+    if args.mode == "clip":
+        q = clip_trajectory(a, dt, limits)
+        dev = np.abs(q - a).max(axis=1)
+        return q, limits, _clip_note(rep, int((dev > 1e-9).sum()), float(dev.max()))
     if not rep.ok:
         raise UnsafeTrajectoryError(rep)
-    return a, limits
+    return a, limits, None
 
 
 def _backend(args: argparse.Namespace):
@@ -80,7 +105,7 @@ def _play(args: argparse.Namespace) -> int:
     from .safety import UnsafeTrajectoryError
 
     try:
-        q, limits = _trajectory(args)
+        q, limits, note = _trajectory(args)
     except UnsafeTrajectoryError as err:
         print(f"thesis ur3 play: {err}", file=sys.stderr)
         return 2
@@ -91,6 +116,8 @@ def _play(args: argparse.Namespace) -> int:
     except UnsafeTrajectoryError as err:
         print(f"thesis ur3 play: {err}", file=sys.stderr)
         return 2
+    if note:  # the file broke a limit: say so, not only that the clipped motion is safe
+        print(note)
     print(res.report.summary())
     print("\n".join(drv.log))
     if args.gif:
