@@ -3,6 +3,11 @@
 Papermill silently injects any ``-p name value`` it is given, even a misspelt one. Each chapter
 notebook therefore calls :func:`config_from_namespace` right after its ``parameters`` cell, and
 the ``thesis run`` command checks names before it starts a kernel (:func:`validate_parameters`).
+
+Values are checked once, against the type hints of the chapter's ``Config``
+(:func:`check_parameters`): by :func:`config_from_namespace` (a notebook run by papermill, a study
+file) and by ``thesis run`` before papermill starts (``-p``, ``-f``, profiles). A bad value is
+one line naming the parameter, the value and what is expected.
 """
 
 from __future__ import annotations
@@ -10,9 +15,11 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import inspect
+import types
+import typing
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar, Union
 
 T = TypeVar("T")
 
@@ -68,15 +75,16 @@ def config_from_namespace(
 
     Raises:
         TypeError: if ``cls`` is not a dataclass.
-        ValueError: for an unknown parameter (see :func:`validate_parameters`), or whatever
+        ValueError: for an unknown parameter (see :func:`validate_parameters`), a value that
+            does not fit the field's type hint (see :func:`check_parameters`), or whatever
             ``cls.__post_init__`` rejects.
     """
-    if not dataclasses.is_dataclass(cls):
+    if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
         raise TypeError(f"{cls!r} is not a dataclass")
-    fields = {f.name for f in dataclasses.fields(cls) if f.init}
+    hints = config_hints(cls)
     names = [n for n, v in namespace.items() if _is_parameter_like(n, v)]
-    validate_parameters(names, fields, chapter)
-    return cls(**{n: namespace[n] for n in names})
+    validate_parameters(names, hints, chapter)
+    return cls(**check_parameters(hints, {n: namespace[n] for n in names}, f"in {chapter}"))
 
 
 def _is_parameter_like(name: str, value: Any) -> bool:
@@ -108,6 +116,188 @@ def parse_value(text: str) -> Any:
         return yaml.safe_load(text)
     except yaml.YAMLError:
         return text
+
+
+# --- Values: checked against the Config's type hints -----------------------------------------
+
+
+def config_hints(cls: type) -> dict[str, Any]:
+    """The type hint of each ``__init__`` field of the dataclass ``cls``, in field order.
+
+    >>> @dataclasses.dataclass
+    ... class Demo:
+    ...     seed: int = 0
+    ...     envs: list[str] = dataclasses.field(default_factory=list)
+    >>> config_hints(Demo)
+    {'seed': <class 'int'>, 'envs': list[str]}
+    """
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls) if f.init}
+
+
+def chapter_hints(chapter: str) -> dict[str, Any]:
+    """:func:`config_hints` of ``chapter``'s ``Config``, read from its module's source without
+    importing it (a chapter module imports torch: seconds), so ``thesis run`` refuses a bad
+    value at once. Hints that name anything but builtins and ``Literal`` (or a ``Config`` with
+    base classes) are read by importing the module.
+
+    Raises:
+        ValueError: no chapters module for ``chapter``, or it has no ``Config``.
+    """
+    import ast
+    import importlib
+    import importlib.util
+
+    name = chapter_module(chapter)
+    spec = importlib.util.find_spec(name)
+    if spec is None or not spec.origin:
+        raise ValueError(f"{chapter}: no module {name} (its Config defines the parameters)")
+    tree = ast.parse(Path(spec.origin).read_text())
+    node = next((n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Config"), None)
+    if node is None:
+        raise ValueError(f"{chapter}: {name} has no dataclass Config")
+    if not node.bases:
+        fields = [n for n in node.body if isinstance(n, ast.AnnAssign)]
+        try:
+            return {
+                ast.unparse(f.target): eval(ast.unparse(f.annotation), {"Literal": Literal})
+                for f in fields
+            }
+        except NameError:
+            pass
+    return config_hints(importlib.import_module(name).Config)
+
+
+class _Mismatch(Exception):
+    """A value does not fit a type hint (turned into a message by :func:`check_value`)."""
+
+
+def check_value(name: str, value: Any, hint: Any, where: str = "") -> Any:
+    """``value`` for the parameter ``name`` whose type hint is ``hint``, or a clear error.
+
+    ``int``: a whole number (``2.0`` becomes 2; ``2.5`` and ``true`` are refused). ``float``:
+    any number but a boolean. ``bool``: only true or false. ``Literal[...]``: only its values.
+    ``list[X]``: a list or tuple of X; one X (say a string) becomes a one-element list, never
+    a list of its characters, and a string that starts with ``[`` is read as YAML (a plain
+    ``papermill -p`` passes lists as text). ``dict[K, V]``, ``X | None``, other classes:
+    checked as such; a hint this check does not know passes the value on unchecked.
+
+    >>> check_value("algos", "PPO", list[str])
+    ['PPO']
+    >>> check_value("iterations", 2.0, int)
+    2
+    >>> check_value("seed", 1.5, int, "from -p seed 1.5")
+    Traceback (most recent call last):
+    ...
+    ValueError: Expect `seed` to be an int, actually: 1.5 (from -p seed 1.5)
+
+    Raises:
+        ValueError: naming the parameter, the value, what is expected and ``where`` (the
+            value's source).
+    """
+    try:
+        return _conform(value, hint)
+    except _Mismatch:
+        at = f" ({where})" if where else ""
+        raise ValueError(
+            f"Expect `{name}` to be {_describe(hint)}, actually: {value!r}{at}"
+        ) from None
+
+
+def check_parameters(
+    hints: Mapping[str, Any], values: Mapping[str, Any], where: str | Mapping[str, str] = ""
+) -> dict[str, Any]:
+    """``values`` checked with :func:`check_value` against ``hints`` (names not in ``hints``
+    pass unchanged: :func:`validate_parameters` checks names); ``where`` describes the source
+    of all values, or of each by name.
+
+    >>> check_parameters({"seed": int, "envs": list[str]}, {"seed": 3.0, "envs": "Hopper-v5"})
+    {'seed': 3, 'envs': ['Hopper-v5']}
+    """
+    return {
+        n: v
+        if n not in hints
+        else check_value(n, v, hints[n], where if isinstance(where, str) else where.get(n, ""))
+        for n, v in values.items()
+    }
+
+
+def _conform(value: Any, hint: Any) -> Any:
+    """``value`` as ``hint`` wants it (see :func:`check_value`); raises :class:`_Mismatch`."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is Any:
+        return value
+    if hint is None or hint is type(None):
+        if value is None:
+            return None
+    elif origin is Literal:
+        if any(value == a and type(value) is type(a) for a in args):
+            return value
+    elif origin in (Union, types.UnionType):
+        for arg in args:
+            try:
+                return _conform(value, arg)
+            except _Mismatch:
+                pass
+    elif hint is bool:
+        if isinstance(value, bool):
+            return value
+    elif hint is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        if isinstance(value, float) and value.is_integer():
+            return int(value)
+    elif hint is float:
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            return value
+    elif hint in (list, tuple) or origin in (list, tuple):
+        if isinstance(value, str) and value.lstrip().startswith("["):
+            value = parse_value(value)
+        if not isinstance(value, list | tuple | dict | set):
+            value = [value]  # one item, never iterated (a string is not a list of characters)
+        if isinstance(value, list | tuple):
+            if origin is tuple and args and args[-1] is not Ellipsis:
+                if len(value) != len(args):
+                    raise _Mismatch
+                return type(value)(_conform(v, a) for v, a in zip(value, args))
+            item = args[0] if args else Any
+            return type(value)(_conform(v, item) for v in value)
+    elif hint is dict or origin is dict:
+        if isinstance(value, str) and value.lstrip().startswith("{"):
+            value = parse_value(value)
+        if isinstance(value, dict):
+            key, val = args or (Any, Any)
+            return {_conform(k, key): _conform(v, val) for k, v in value.items()}
+    elif not isinstance(hint, type) or isinstance(value, hint):
+        return value  # a hint this check does not know (the Config checks it), or a match
+    raise _Mismatch
+
+
+_NAMES = {
+    bool: ("true or false", "true/false values"),
+    int: ("an int", "ints"),
+    float: ("a number", "numbers"),
+    str: ("a string", "strings"),
+    type(None): ("None", "None"),
+}
+
+
+def _describe(hint: Any, plural: bool = False) -> str:
+    """What ``hint`` expects, in words: ``a list of strings``, ``one of 'smoke', 'full'``."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is None or hint in _NAMES:
+        return _NAMES[type(None) if hint is None else hint][plural]
+    if origin is Literal:
+        return "one of " + ", ".join(repr(a) for a in args)
+    if origin in (Union, types.UnionType):
+        return " or ".join(_describe(a, plural) for a in args)
+    if hint in (list, tuple) or origin in (list, tuple):
+        items = f" of {_describe(args[0], True)}" if args else ""
+        return ("lists" if plural else "a list") + items
+    if hint is dict or origin is dict:
+        items = f" of {_describe(args[0], True)} to {_describe(args[1], True)}" if args else ""
+        return ("mappings" if plural else "a mapping") + items
+    return getattr(hint, "__name__", str(hint))
 
 
 # --- One source for parameters: the chapter's Config ---------------------------------------
@@ -417,7 +607,7 @@ def check_full_profile(
             )
     known = {k: v for k, v in full.items() if k in defaults}
     try:
-        cls(**known)
+        cls(**check_parameters(config_hints(cls), known))
     except (TypeError, ValueError) as err:
         problems.append(f"{where}: {cls.__name__} rejects these values: {err}")
     return problems

@@ -23,7 +23,13 @@ from typing import Any
 
 import yaml
 
-from thesis_lib.book.params import parse_value, validate_parameters
+from thesis_lib.book.params import (
+    CHAPTER_MODULES,
+    chapter_hints,
+    check_parameters,
+    parse_value,
+    validate_parameters,
+)
 from thesis_lib.book.paths import project_root
 
 GENERATED = Path("book") / "generated"
@@ -109,10 +115,8 @@ def notebook_parameters(chapter: str, root: Path | None = None) -> dict[str, Any
     }
 
 
-def load_profile(
-    chapter: str, profile: str | Path = "smoke", root: Path | None = None
-) -> dict[str, Any]:
-    """Parameters of a profile: ``'smoke'``, ``'full'`` or the path of a YAML file.
+def profile_path(chapter: str, profile: str | Path = "smoke", root: Path | None = None) -> Path:
+    """The file of a profile: ``params/<chapter>.<profile>.yml`` or the YAML file given.
 
     Raises:
         ValueError: unknown profile name. FileNotFoundError: the file does not exist.
@@ -128,12 +132,46 @@ def load_profile(
             )
     if not path.is_file():
         raise FileNotFoundError(f"No parameter file {path} for chapter '{chapter}'.")
-    data = yaml.safe_load(path.read_text()) or {}
+    return path
+
+
+def load_profile(
+    chapter: str, profile: str | Path = "smoke", root: Path | None = None
+) -> dict[str, Any]:
+    """Parameters of a profile: ``'smoke'``, ``'full'`` or the path of a YAML file.
+
+    Raises:
+        ValueError: unknown profile name; the file is not YAML (one line: the file, the line
+            and the problem) or not a mapping. FileNotFoundError: the file does not exist.
+    """
+    path = profile_path(chapter, profile, root)
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise ValueError(f"{path}{_yaml_problem(err)}") from None
     if not isinstance(data, dict):
         raise ValueError(
             f"{path} must hold a mapping of parameter names to values, got {type(data).__name__}."
         )
     return data
+
+
+def _yaml_problem(err: yaml.YAMLError) -> str:
+    """A YAML error in one line: ``, line 3: invalid YAML (while parsing a flow sequence:
+    expected ',' or ']', but got ':')``."""
+    mark = getattr(err, "problem_mark", None)
+    line = f", line {mark.line + 1}" if mark is not None else ""
+    what = [getattr(err, "context", None), getattr(err, "problem", None)]
+    text = ": ".join(str(w) for w in what if w) or str(err).splitlines()[0]
+    return f"{line}: invalid YAML ({text})"
+
+
+def _as_typed(name: str, value: Any) -> str:
+    """``-p NAME VALUE`` as typed (near enough): ``-p seed 1.5``, ``-p flag true``."""
+    import json
+
+    text = value if isinstance(value, str) else json.dumps(value, default=repr)
+    return f"-p {name} {text}"
 
 
 def run_chapter(
@@ -149,9 +187,13 @@ def run_chapter(
 ) -> ChapterRun:
     """Execute one chapter notebook with papermill.
 
+    Every parameter is checked before papermill starts: its name against the notebook's
+    ``parameters`` cell, its value against the type hints of the chapter's ``Config``
+    (:func:`~thesis_lib.book.params.check_parameters`, as the notebook will check it).
+
     Args:
         chapter: a chapter name (see :func:`resolve_chapter`).
-        parameters: overrides on top of the profile.
+        parameters: overrides on top of the profile (``thesis run -p``).
         profile: ``'smoke'``, ``'full'``, a YAML path, or ``None`` for the notebook's defaults.
         output: where the executed notebook goes (default ``book/generated/<chapter>.ipynb``).
         kernel: Jupyter kernel name.
@@ -160,16 +202,27 @@ def run_chapter(
             :func:`sweep_environment`: how the chapter's task grids run).
 
     Raises:
-        ValueError: an unknown parameter name (listing the valid ones).
+        ValueError: an unknown parameter name (listing the valid ones), a value of the wrong
+            type (naming the parameter, the value and where it came from), a profile that is
+            not valid YAML.
         ChapterFailed: a cell raised; names the cell and the executed notebook.
     """
     import papermill as pm
 
     root = root or project_root()
     chapter = resolve_chapter(chapter, root)
-    params = dict(load_profile(chapter, profile, root)) if profile is not None else {}
-    params.update(parameters or {})
+    params: dict[str, Any] = {}
+    where: dict[str, str] = {}
+    if profile is not None:
+        path = profile_path(chapter, profile, root)
+        params = load_profile(chapter, path, root)
+        shown = path.relative_to(root) if path.is_relative_to(root) else path
+        where = dict.fromkeys(params, f"in {shown}")
+    for name, value in (parameters or {}).items():
+        params[name], where[name] = value, f"from {_as_typed(name, value)}"
     validate_parameters(params, notebook_parameters(chapter, root), chapter)
+    if chapter in CHAPTER_MODULES:
+        params = check_parameters(chapter_hints(chapter), params, where)
     out = Path(output) if output else root / GENERATED / f"{chapter}.ipynb"
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

@@ -494,7 +494,7 @@ def run_rl_curves(cfg: Config, cache_dir: str | Path | None = None) -> pd.DataFr
     """
     from thesis_lib.rl import learning_curves
 
-    return learning_curves(
+    episodes = learning_curves(
         cfg.rl_algos,
         cfg.rl_env,
         cfg.rl_timesteps,
@@ -504,6 +504,14 @@ def run_rl_curves(cfg: Config, cache_dir: str | Path | None = None) -> pd.DataFr
         learning_rate=cfg.rl_learning_rate,
         cache_dir=cache_dir if cfg.rl_resume else None,
     )
+    empty = [a for a in cfg.rl_algos if a not in set(episodes["algo"])]
+    if empty:
+        raise ValueError(
+            f"No {cfg.rl_env} episode ended within rl_timesteps={cfg.rl_timesteps!r} for "
+            f"{', '.join(empty)}: give each algorithm at least one episode's steps "
+            "(Pendulum-v1: 200)."
+        )
+    return episodes
 
 
 def summarise_rl(episodes: pd.DataFrame, last: int = 5) -> pd.DataFrame:
