@@ -7,7 +7,7 @@ PY     := $(VENV)/bin/python
 JOBS   ?= 2
 STAMP  := $(VENV)/.installed
 
-.PHONY: venv book api chapter study claims test test-fast lint format bench clean help
+.PHONY: venv book api chapter study claims parity test test-fast lint format bench clean help
 
 help:
 	@echo "make book      run every chapter (smoke profile) and build the HTML book"
@@ -16,6 +16,7 @@ help:
 	@echo "make chapter CHAPTER=01_background [PROFILE=full]   run one chapter"
 	@echo "make study CHAPTER=04_hdt [JOBS=2]   run or resume a pre-registered study"
 	@echo "make claims    studies/claims.csv from the committed studies"
+	@echo "make parity [ONLY='dt-study bc-study']   our DT/BC against d3rlpy's (params/parity.yml)"
 	@echo "make test-fast unit tests only (no notebook runs, no book build)"
 	@echo "make lint      ruff (lint + format check) and the type checker"
 	@echo "make format    ruff format + safe fixes"
@@ -47,6 +48,12 @@ study: $(STAMP)
 
 claims: $(STAMP)
 	$(VENV)/bin/thesis claims
+
+# Peer parity: makes the peer venv (d3rlpy 2.8.1) under $THESIS_CACHE_DIR once, runs what is
+# missing of params/parity.yml (or only ONLY's comparisons), writes studies/parity/parity.csv.
+parity: $(STAMP)
+	$(VENV)/bin/thesis parity --setup
+	nice $(VENV)/bin/thesis parity -j $(JOBS) $(if $(ONLY),--only $(ONLY))
 
 test: $(STAMP)
 	$(PY) -m pytest

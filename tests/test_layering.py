@@ -3,7 +3,8 @@
 The layers (``thesis_lib.<top>``, the first name after ``thesis_lib``):
 
 - **foundation** ``data``, ``dtw``, ``rl``: what every method builds on;
-- **methods** the foundation plus ``seq``, ``defender``, ``clfd``, ``mdlt``, ``ur3``;
+- **methods** the foundation plus ``seq``, ``defender``, ``clfd``, ``mdlt``, ``ur3``, and
+  ``parity`` (the harness that trains ``seq``'s methods beside a peer library's);
 - **services** ``book``, ``sweep``, ``stats``, ``_io``: shared machinery (paths, results, paper
   tables, the task engine, the evidence rules, atomic file writes) that any layer may use;
 - **chapters** ``chapters`` (one module per notebook; the legacy ``background`` module counts as
@@ -50,13 +51,14 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 PKG = "thesis_lib"
 
 FOUNDATION = {"data", "dtw", "rl"}
-METHODS = FOUNDATION | {"seq", "defender", "clfd", "mdlt", "ur3"}
+METHODS = FOUNDATION | {"seq", "defender", "clfd", "mdlt", "ur3", "parity"}
 SERVICES = {"book", "sweep", "stats", "_io"}
 CHAPTERS = {"chapters", "background"}
 ENTRY = {"cli"}
 # (importer, imported): edges between method packages that the design wants
 METHOD_EDGES = {
     ("mdlt", "seq"),  # MDLT-T/MDLT-M are built from seq's blocks, trained by seq's one trainer
+    ("parity", "seq"),  # the peer-parity harness trains seq's DT/BC against a peer library's
 }
 
 

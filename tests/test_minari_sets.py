@@ -32,10 +32,11 @@ def minari_root(tmp_path, monkeypatch):
 # ------------------------------------------------------------------ task keys of existing sets
 
 
-def _tiny_hdt():
+def _tiny_hdt(**kw):
     from thesis_lib.chapters import hdt
 
     return hdt.Config(
+        **kw,
         datasets=["hopper/medium"],
         methods=["BC", "DT", "HDT"],
         seeds=[0],
@@ -51,12 +52,21 @@ def _tiny_hdt():
 
 def test_task_keys_of_task_tier_sets_are_unchanged():
     """The keys of the stored study/sweep tasks of 'task/tier' sets (computed on f33c85f, before
-    Minari ids were accepted): a change here would orphan the running study's results."""
+    Minari ids were accepted): a change here would orphan the committed studies' results. Those
+    ran before the transformers' ``init`` existed, with PyTorch's defaults (``init="torch"``,
+    what a study file that names no ``init`` reads as); the default ``init`` makes new keys for
+    the transformers only."""
     from thesis_lib.chapters import decision_mamba as dm
     from thesis_lib.chapters import hdt
     from thesis_lib.seq.runner import EvalSpec
 
-    cfg = _tiny_hdt()
+    new = _tiny_hdt()
+    new_keys = {
+        m: hdt.study_task(new, m, "hopper/medium", 0, new.arch(False)).key for m in new.methods
+    }
+    assert new_keys["BC"] == "654399e8f19a64b3"  # BC has no init: its runs are the same
+    assert new_keys["DT"] != "44c79d1a5285a803" and new_keys["HDT"] != "748967226e6598ff"
+    cfg = _tiny_hdt(init="torch")
     keys = {m: hdt.study_task(cfg, m, "hopper/medium", 0, cfg.arch(False)).key for m in cfg.methods}
     assert keys == {"BC": "654399e8f19a64b3", "DT": "44c79d1a5285a803", "HDT": "748967226e6598ff"}
     compat = hdt.study_task(cfg, "DT", "hopper/medium", 0, cfg.arch(True), label="DT-compat")
@@ -67,6 +77,7 @@ def test_task_keys_of_task_tier_sets_are_unchanged():
         "6dee81c5e068bf78",
     ]
     c5 = dm.Config(
+        init="torch",
         datasets=["hopper/medium"],
         methods=["DT", "DM-noRTG"],
         iterations=10,

@@ -159,7 +159,62 @@ def plot_claims(claims: pd.DataFrame) -> Any:
     return fig
 
 
+def load_parity(path: str | Path | None = None) -> pd.DataFrame:
+    """The peer-parity table ``studies/parity/parity.csv`` (``thesis parity`` writes it); empty
+    where no parity run is committed."""
+    from thesis_lib.book.paths import project_root
+
+    p = Path(path) if path else project_root() / "studies" / "parity" / "parity.csv"
+    return pd.read_csv(p) if p.exists() else pd.DataFrame()
+
+
+def parity_view(table: pd.DataFrame) -> pd.DataFrame:
+    """The parity table for reading: per comparison, both sides' mean score (and each seed's),
+    the data set's own mean, the difference ours - peer with its 95% interval, and the verdict
+    (``at parity``: the interval holds 0 and the difference is at most 3 points)."""
+    if table.empty:
+        return pd.DataFrame({"comparison": [], "result": []})
+
+    def diff(r: pd.Series) -> str:
+        if pd.isna(r["difference"]):
+            return ""
+        return f"{r['difference']:+.1f} [{r['ci_low']:.1f}, {r['ci_high']:.1f}]"
+
+    def verdict(r: pd.Series) -> str:
+        if pd.isna(r.get("peer")) or r["seeds"] == 0:
+            return "no peer" if r["seeds"] else "not run"
+        return "at parity" if str(r["parity"]) == "True" else "gap"
+
+    def side(mean: Any, seeds: Any) -> str:
+        return "" if pd.isna(mean) else f"{mean:.1f} ({seeds})"
+
+    return pd.DataFrame({
+        "comparison": table["comparison"],
+        "method": table["method"],
+        "init": table["init"].fillna(""),
+        "model": table["arch"],
+        "updates": table["updates"],
+        "ours (seeds)": [side(m, s) for m, s in zip(table["ours"], table["ours_seeds"], strict=True)],
+        "d3rlpy (seeds)": [side(m, s) for m, s in zip(table["peer"], table["peer_seeds"], strict=True)],
+        "data mean": table["data_mean"].round(1),
+        "ours − peer [95% CI]": table.apply(diff, axis=1),
+        "result": table.apply(verdict, axis=1),
+    })  # fmt: skip
+
+
+def no_peer_table() -> pd.DataFrame:
+    """The learned methods with no peer package, and what stands in for one."""
+    from thesis_lib.parity import NO_PEER
+
+    return pd.DataFrame(
+        {"method": list(NO_PEER), "no peer package; instead": list(NO_PEER.values())}
+    )
+
+
 __all__ = [
+    "load_parity",
+    "no_peer_table",
+    "parity_view",
     "Config",
     "VERDICT_COLOURS",
     "headline",

@@ -39,6 +39,7 @@ import pandas as pd
 __all__ = [
     "KNOWN_DIFFERENCES",
     "NO_PEER",
+    "PEER_METHODS",
     "PEER_REQUIREMENTS",
     "Comparison",
     "export_npz",
@@ -52,6 +53,9 @@ __all__ = [
     "unique_tasks",
     "welch_interval",
 ]
+
+PEER_METHODS: tuple[str, ...] = ("DT", "BC")
+"""Methods the peer library has."""
 
 PEER_REQUIREMENTS: tuple[str, ...] = (
     "d3rlpy==2.8.1",
@@ -109,8 +113,14 @@ class Comparison:
     peer: bool = True
 
     def __post_init__(self) -> None:
-        if self.method not in ("DT", "BC"):
-            raise ValueError(f"Unknown parity method {self.method!r}. Valid: DT, BC.")
+        from thesis_lib.seq.registry import check_methods
+
+        check_methods([self.method])
+        if self.peer and self.method not in PEER_METHODS:
+            raise ValueError(
+                f"No peer for {self.method!r} (d3rlpy has {', '.join(PEER_METHODS)}); "
+                f"give it `peer: false` to run our side alone (see NO_PEER)."
+            )
         if isinstance(self.seeds, str) or not self.seeds:
             raise ValueError(f"Expect `seeds` as a non-empty list, got {self.seeds!r}.")
 

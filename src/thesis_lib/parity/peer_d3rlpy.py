@@ -137,7 +137,7 @@ def main() -> None:
         logger_adapter=d3rlpy.logging.NoopAdapterFactory(),
     )
     train_s = time.process_time() - t0
-    returns, lengths = _evaluate(algo, cfg)
+    returns, lengths = _evaluate(algo, cfg) if cfg["episodes"] > 0 else ([], [])
     out = {
         "returns": returns,
         "lengths": lengths,

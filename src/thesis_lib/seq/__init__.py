@@ -59,12 +59,14 @@ from thesis_lib.seq.mamba import (
 from thesis_lib.seq.models import (
     BC,
     HDT,
+    INIT_SCHEMES,
     BCConfig,
     DecisionTransformer,
     DTConfig,
     HDTConfig,
     SeqOutput,
     TokenTransformer,
+    init_transformer,
     masked_mse,
 )
 from thesis_lib.seq.registry import METHODS, ArchSpec, build_model
@@ -120,6 +122,7 @@ __all__ = [
     "GPTBlockConfig",
     "GatedMLP",
     "HDTConfig",
+    "INIT_SCHEMES",
     "LayerState",
     "Mamba",
     "MambaBlock",
@@ -143,6 +146,7 @@ __all__ = [
     "hippo_legs",
     "interleave_embeddings",
     "interleave_tokens",
+    "init_transformer",
     "masked_mse",
     "padding_mask",
     "resolve_scan_backend",
