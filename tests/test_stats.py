@@ -108,6 +108,41 @@ def test_incomplete_grid_and_bad_scores_are_errors():
         stats.probability_of_improvement(np.array([[np.nan]]), np.array([[1.0]]))
 
 
+def test_a_bad_row_is_named_by_its_task_and_what_is_wrong():
+    rows = _rows(X, Y)
+    rows["task_key"] = [f"k{i}" for i in range(len(rows))]
+    nan = rows.copy()
+    nan.loc[3, "score"] = np.nan  # HDT, seed 0, setting s3: the other seeds of s3 are there
+    with pytest.raises(
+        ValueError, match=r"HDT: the row of setting 's3' \(seed 0\) has no score .* \(task k3\)"
+    ):
+        stats.compare(nan, "HDT", "DT", "score", reps=100)
+    text = rows.astype({"score": object})
+    text.loc[3, "score"] = "n/a"
+    with pytest.raises(ValueError, match=r"has score 'n/a', not a number \(task k3\)"):
+        stats.compare(text, "HDT", "DT", "score", reps=100)
+    no_seed = rows.astype({"seed": float})
+    no_seed.loc[3, "seed"] = np.nan
+    with pytest.raises(ValueError, match=r"the row of setting 's3' has no seed \(task k3\)"):
+        stats.compare(no_seed, "HDT", "DT", "score", reps=100)
+    with pytest.raises(
+        ValueError, match=r"Expect the rows to have the column 'seed' \(`seed_col`\)"
+    ):
+        stats.compare(rows.drop(columns="seed"), "HDT", "DT", "score", reps=100)
+    with pytest.raises(ValueError, match=r"incomplete: no row for \(setting, seed\) \('s0', 0\)"):
+        stats.compare(rows.drop(index=0), "HDT", "DT", "score", reps=100)
+
+
+@pytest.mark.parametrize("margin", ["half", -1.0, True, None])
+def test_a_comparison_margin_must_be_a_number(margin):
+    from thesis_lib.stats.claims import check_comparison
+
+    spec = {"claim": "C3", "x": "HDT", "y": "DT", "margin": margin}
+    with pytest.raises(ValueError, match=r"Expect `margin` of comparison C3 \(HDT vs DT\)"):
+        check_comparison(spec)
+    check_comparison({**spec, "margin": 2})  # an int is a number
+
+
 def test_performance_profile_counts_runs_above_each_threshold():
     share, lo, hi = stats.performance_profile(
         np.array([[1.0, 10.0], [2.0, 20.0]]), [0.0, 1.5, 15.0, 30.0], reps=500

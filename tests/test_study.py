@@ -673,3 +673,149 @@ def test_the_estimate_of_cpu_hours_left_prices_each_task_like_its_finished_kin(p
     for t in hdt:
         (store / f"{t.key}.json").unlink(missing_ok=True)
     assert st.cpu_hours_left(study, tasks) == 0.0  # nothing finished: no basis for a price
+
+
+# ------------------------------------------------------------------ issue #37: study boundaries
+
+
+def test_a_second_runner_skips_the_tasks_another_holds_and_takes_over_dead_ones(project, capsys):
+    """Two `thesis study` of one chapter at once: a task another process holds (its
+    `tasks/<key>.lock`) is skipped, not run twice; the lock of a process that died is taken."""
+    import subprocess
+    import sys
+
+    keys = [t.key for t in st.study_tasks(st.load_study("04_hdt"))]
+    store = project / "studies" / "04_hdt" / "tasks"
+    store.mkdir(parents=True)
+    locks = [str(store / f"{k}.lock") for k in keys[:5]]
+    holder = subprocess.Popen(  # another runner, busy with the first five tasks
+        [sys.executable, "-c", "import fcntl, os, sys, time\n"
+         "fs = [open(p, 'w') for p in sys.argv[1:]]\n"
+         "for f in fs: fcntl.flock(f, fcntl.LOCK_EX); f.write(f'pid {os.getpid()}'); f.flush()\n"
+         "print('held', flush=True); time.sleep(120)", *locks],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        rows = st.run_study("04_hdt", progress=False)
+        assert len(CALLS) == 15 and len(rows) == 15  # the other runner's five were not run
+        assert f"skipping 5 task(s) another run holds, e.g. {locks[0]} (pid {holder.pid}" in (
+            capsys.readouterr().err
+        )
+        assert sorted(p.name for p in store.glob("*.lock")) == sorted(Path(p).name for p in locks)
+    finally:
+        holder.kill()  # it dies holding its locks: their files stay behind
+        holder.wait()
+    assert all(Path(p).exists() for p in locks)
+    CALLS.clear()
+    st.run_study("04_hdt", progress=False)  # the dead runner's tasks are taken over
+    assert len(CALLS) == 5 and not list(store.glob("*.lock"))
+    assert json.loads((project / "studies" / "04_hdt" / "run.json").read_text())["complete"]
+
+
+def test_thesis_study_takes_its_study_files_path_and_refuses_a_misnamed_one(
+    project, capsys, monkeypatch
+):
+    from thesis_lib.cli import main
+
+    monkeypatch.chdir(project)
+    assert main(["study", "params/04_hdt.study.yml", "--status"]) == 0
+    assert '"tasks_done": 0' in capsys.readouterr().out
+    assert main(["study", str(project / "params" / "04_hdt.study.yml")]) == 0
+    assert len(CALLS) == 20 and (project / "studies" / "04_hdt" / "rows.csv").is_file()
+    # a study file outside params/ is not the registered study: refused, nothing runs
+    (project / "elsewhere").mkdir()
+    (project / "elsewhere" / "04_hdt.study.yml").write_text(yaml.safe_dump(STUDY))
+    assert main(["study", "elsewhere/04_hdt.study.yml"]) == 1
+    assert "is not the registered study of 04_hdt" in capsys.readouterr().err
+    # a file named unlike its chapter would write its tasks where no one reads them
+    (project / "params" / "04_hdx.study.yml").write_text(yaml.safe_dump(STUDY))
+    CALLS.clear()
+    for args in (["04_hdx", "--status"], ["params/04_hdx.study.yml"], ["04_hdt", "04_hdx"]):
+        assert main(["study", *args]) == 1
+        err = capsys.readouterr().err
+        assert "04_hdx.study.yml is named unlike its `chapter: 04_hdt`" in err
+    assert CALLS == [] and not (project / "studies" / "04_hdx").exists()
+
+
+@pytest.mark.parametrize(
+    ("patch", "message"),
+    [
+        ({"config": {"seeds": 3}}, "Expect `seeds` to be a list of ints, actually: 3 (config in"),
+        ({"config": {"offset": "lots"}}, "Expect `offset` to be a number, actually: 'lots'"),
+        ({"config": {"settings": ["a", 1]}}, "Expect `settings` to be a list of strings"),
+        (
+            {"scale_check": {"config": {"seeds": "0-2"}}},
+            "Expect `seeds` to be a list of ints, actually: '0-2' (scale_check.config in",
+        ),
+        ({"metric": "scroe"}, "Expect `metric` to be a column of the 04_hdt study's rows, "),
+        ({"secondary": "best"}, "Expect `secondary` to be a column of"),
+        ({"columns": {"seed": "run"}}, "Expect `columns.seed` to be a column of"),
+        (
+            {"comparisons": [{**STUDY["comparisons"][0], "margin": "half"}]},
+            "Expect `margin` of comparison C3 (HDT vs DT) to be a number >= 0, actually: 'half'",
+        ),
+        ({"metric": ["score"]}, "Expect `metric` to be a column name, actually: ['score']"),
+    ],
+)
+def test_bad_study_values_name_their_key_before_anything_runs(
+    project, capsys, monkeypatch, patch, message
+):
+    from thesis_lib.cli import main
+
+    mod = types.SimpleNamespace(
+        Config=FakeConfig,
+        study_tasks=fake_study_tasks,
+        STUDY_COLUMNS=["method", "setting", "seed", "offset", "score"],
+    )
+    monkeypatch.setattr(st, "chapter_module", lambda chapter: mod)
+    (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump({**STUDY, **patch}))
+    assert main(["study", "04_hdt", "--status"]) == 1
+    err = capsys.readouterr().err
+    assert message in err and "params/04_hdt.study.yml" in err and "Traceback" not in err
+    assert main(["study", "04_hdt"]) == 1 and CALLS == []
+
+
+def test_the_hdt_study_checks_its_values_and_metrics_against_the_chapter():
+    """The real chapter: its Config's types and its declared STUDY_COLUMNS."""
+    data = yaml.safe_load((REPO / "params" / "04_hdt.study.yml").read_text())
+    st.study_config(st.parse_study(data))  # the registered study passes
+    for patch, message in [
+        ({"config": {**data["config"], "iterations": "lots"}}, "`iterations` to be an int"),
+        ({"metric": "score_finl"}, "`metric` to be a column of the 04_hdt study's rows"),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            st.study_config(st.parse_study({**data, **patch}))
+
+
+@pytest.mark.parametrize(
+    ("damage", "what"),
+    [
+        (lambda row: row.update(score=float("nan")), "has no score (NaN or missing)"),
+        (lambda row: row.pop("score"), "has no score (NaN or missing)"),
+        (lambda row: row.update(score="n/a"), "has score 'n/a', not a number"),
+        (lambda row: row.pop("seed"), "has no seed"),
+    ],
+    ids=["nan", "missing", "text", "no-seed"],
+)
+def test_claims_name_the_task_file_of_a_bad_row(project, damage, what):
+    st.run_study("04_hdt", progress=False)
+    task = next(t for t in st.study_tasks(st.load_study("04_hdt")) if t.config["method"] == "HDT")
+    path = project / "studies" / "04_hdt" / "tasks" / f"{task.key}.json"
+    rec = json.loads(path.read_text())
+    damage(rec["rows"][0])
+    path.write_text(json.dumps(rec))
+    with pytest.raises(ValueError) as err:
+        st.write_claims(reps=100)  # what `thesis claims` runs
+    assert f"studies/04_hdt/tasks/{task.key}.json" in str(err.value) and what in str(err.value)
+
+
+def test_claims_refuse_rows_without_a_seed_column(project):
+    st.run_study("04_hdt", progress=False)
+    for path in (project / "studies" / "04_hdt" / "tasks").glob("*.json"):
+        rec = json.loads(path.read_text())
+        for row in rec["rows"]:
+            del row["seed"]
+        path.write_text(json.dumps(rec))
+    with pytest.raises(ValueError, match="Expect the rows to have the column 'seed'"):
+        st.write_claims(reps=100)

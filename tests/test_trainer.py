@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pandas as pd
@@ -116,6 +118,104 @@ def test_resume_matches_an_uninterrupted_run(kind, tmp_path):
     np.testing.assert_array_equal(h_resumed["loss"].to_numpy(), h_full["loss"].to_numpy())
     for a, b in zip(full.model.parameters(), second.model.parameters()):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
+
+
+def _checkpointed(path):
+    """A tiny DT run of 10 iterations that leaves its checkpoint at ``path``."""
+    trainer = Trainer(_model("dt"), _dataset(), _cfg(iterations=10, checkpoint_path=str(path)))
+    trainer.train()
+    return trainer
+
+
+@pytest.mark.parametrize(
+    "change,differs",
+    [
+        (dict(seed=1), "seed: 0 -> 1"),
+        (dict(lr=1e-3), "lr: 0.003 -> 0.001"),
+        (dict(weight_decay=0.0), "weight_decay: 0.0001 -> 0.0"),
+        (dict(warmup_steps=2), "warmup_steps: 5 -> 2"),
+        (dict(batch_size=4), "batch_size: 8 -> 4"),
+        (dict(grad_clip=1.0), "grad_clip: 0.25 -> 1.0"),
+    ],
+)
+def test_a_checkpoint_is_not_resumed_by_another_training_config(tmp_path, change, differs):
+    path = tmp_path / "ckpt.pt"
+    _checkpointed(path)
+    with pytest.raises(ValueError, match=re.escape(differs)) as err:
+        Trainer(_model("dt"), _dataset(), _cfg(iterations=20, checkpoint_path=str(path), **change))
+    msg = str(err.value)
+    assert str(path) in msg and "resume=False" in msg and "\n" not in msg
+    # resume=False starts afresh (and its checkpoints replace the old one)
+    fresh = Trainer(
+        _model("dt"),
+        _dataset(),
+        _cfg(iterations=3, checkpoint_path=str(path), resume=False, **change),
+    )
+    assert fresh.iteration == 0 and len(fresh.train()) == 3
+
+
+def test_a_checkpoint_is_not_resumed_by_another_model_or_data_set(tmp_path):
+    path = tmp_path / "ckpt.pt"
+    _checkpointed(path)
+    cfg = _cfg(iterations=20, checkpoint_path=str(path))
+    torch.manual_seed(0)
+    wider = DecisionTransformer(DTConfig(SD, AD, **{**SMALL, "d_model": 32}))
+    with pytest.raises(ValueError, match=r"model\.d_model: 16 -> 32"):
+        Trainer(wider, _dataset(), cfg)
+    other_data = SequenceDataset(_episodes(seed=1), K=K, subgoal_fn=subgoal_fn(False))
+    with pytest.raises(ValueError, match=r"data\.sha256: '\w+' -> '\w+'"):
+        Trainer(_model("dt"), other_data, cfg)
+    fewer = SequenceDataset(_episodes(n=5), K=K, subgoal_fn=subgoal_fn(False))
+    with pytest.raises(ValueError, match=r"data\.size: 180 -> 150"):
+        Trainer(_model("dt"), fewer, cfg)
+    # the same data sampled with another seed is the same data set: resumed
+    assert Trainer(_model("dt"), _dataset(seed=7), cfg).iteration == 10
+
+
+def test_a_checkpoint_grows_to_more_iterations_and_refuses_fewer(tmp_path):
+    path = tmp_path / "ckpt.pt"
+    _checkpointed(path)
+    more = Trainer(_model("dt"), _dataset(), _cfg(iterations=15, checkpoint_path=str(path)))
+    assert more.iteration == 10
+    h = more.train()
+    assert h["iteration"].tolist() == list(range(1, 16))  # continued up to the new total
+    with pytest.raises(ValueError, match=r"holds 15 iterations, more than iterations=10"):
+        Trainer(_model("dt"), _dataset(), _cfg(iterations=10, checkpoint_path=str(path)))
+    with pytest.raises(ValueError, match=r"Expect `iterations` >= 15 .*actually: 12"):
+        more.train(iterations=12)
+
+
+def test_a_checkpoint_that_does_not_record_its_run_is_refused(tmp_path):
+    path = tmp_path / "ckpt.pt"
+    _checkpointed(path)
+    old = torch.load(path, weights_only=True)
+    del old["made_by"]  # as the code before the record wrote them
+    torch.save(old, path)
+    with pytest.raises(ValueError, match="does not record what made it") as err:
+        Trainer(_model("dt"), _dataset(), _cfg(iterations=20, checkpoint_path=str(path)))
+    assert str(path) in str(err.value) and "resume=False" in str(err.value)
+
+
+def test_the_readme_example_gives_the_same_numbers_twice(tmp_path, monkeypatch):
+    """The README's library example, as written there (``torch.manual_seed(0)`` before the
+    model: the Trainer uses the model's initial weights as they are), at a few iterations."""
+    from thesis_lib import data
+
+    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
+    ds = data.get_dataset("hopper", "medium", n_transitions=300)
+
+    def example(seeded=True):  # as a script run twice: the batches' generator starts afresh too
+        seq = data.SequenceDataset(ds, K=20)
+        if seeded:
+            torch.manual_seed(0)
+        model = DecisionTransformer(DTConfig.for_data(seq, d_model=32, n_layers=1))
+        return Trainer(
+            model, seq, TrainConfig(iterations=3, warmup_steps=10, progress=False)
+        ).train()
+
+    np.testing.assert_array_equal(example()["loss"], example()["loss"])
+    # without the seed (the example before): other initial weights, other numbers
+    assert not np.array_equal(example(seeded=False)["loss"], example(seeded=False)["loss"])
 
 
 def test_dataset_model_mismatch_is_a_clear_error():

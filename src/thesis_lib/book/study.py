@@ -7,18 +7,25 @@ tasks (``study_tasks(cfg) -> list[Task]``) and runs them through :mod:`thesis_li
 with the store ``studies/<chapter>/tasks/``: each finished task is written at once and is
 committed with the project, so a study resumes across working sessions. ``rows.csv`` and
 ``run.json`` (study id, the study file's hash, commits, versions, CPU-hours, progress) are
-rewritten after each run. ``thesis claims`` turns every study's rows into
-``studies/claims.csv``, one verdict per claim, by :mod:`thesis_lib.stats.claims`.
+rewritten after each run. Each task a run takes is locked (``tasks/<key>.lock``, see
+:func:`task_locks`) while the run lasts, so a second ``thesis study`` of the same chapter skips
+the tasks the first one is running instead of running them again. ``thesis claims`` turns
+every study's rows into ``studies/claims.csv``, one verdict per claim, by
+:mod:`thesis_lib.stats.claims`.
 
 The book renders ``studies/``; it never recomputes a study.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import importlib
 import json
-from collections.abc import Mapping
+import os
+import socket
+import sys
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -105,8 +112,31 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     if not data["comparisons"]:
         raise ValueError(f"study file{where} pre-registers no comparison")
     for c in data["comparisons"]:
-        check_comparison(c)
+        try:
+            check_comparison(c)
+        except ValueError as e:
+            raise ValueError(f"{e}{where}") from None
+    for key, ok, expect in (
+        ("metric", isinstance(data["metric"], str) and bool(data["metric"]), "a column name"),
+        ("secondary", isinstance(data.get("secondary", ""), str | None), "a column name"),
+        ("config", isinstance(data["config"], Mapping | None), "a mapping of Config fields"),
+        ("columns", isinstance(data.get("columns") or {}, Mapping), "a mapping"),
+        (
+            "budget_cpu_hours",
+            isinstance(data.get("budget_cpu_hours"), int | float | None)
+            and not isinstance(data.get("budget_cpu_hours"), bool),
+            "a number of hours",
+        ),
+    ):
+        if not ok:
+            raise ValueError(f"Expect `{key}` to be {expect}, actually: {data[key]!r}{where}")
     cols = {**DEFAULT_COLUMNS, **(data.get("columns") or {})}
+    bad = {k: v for k, v in cols.items() if k not in DEFAULT_COLUMNS or not isinstance(v, str)}
+    if bad:
+        raise ValueError(
+            f"Expect `columns` to map {sorted(DEFAULT_COLUMNS)} to column names, actually: "
+            f"{bad}{where}"
+        )
     check = data.get("scale_check")
     if check is not None:
         if not isinstance(check, Mapping) or set(check) - SCALE_CHECK_KEYS:
@@ -134,7 +164,13 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
 
 
 def load_study(chapter_or_path: str | Path) -> Study:
-    """Read ``params/<chapter>.study.yml`` (or a path) and validate it."""
+    """Read ``params/<chapter>.study.yml`` (or a path) and validate it.
+
+    Raises:
+        FileNotFoundError: no such study file.
+        ValueError: the file is invalid (:func:`parse_study`), or a ``*.study.yml`` is named
+            unlike its ``chapter:`` (its tasks and rows would go to another chapter's study).
+    """
     import yaml
 
     p = Path(chapter_or_path)
@@ -143,7 +179,37 @@ def load_study(chapter_or_path: str | Path) -> Study:
     if not p.is_file():
         have = sorted(x.name for x in (project_root() / "params").glob("*.study.yml"))
         raise FileNotFoundError(f"No study file {p}. Study files here: {have or 'none'}.")
-    return parse_study(yaml.safe_load(p.read_text()) or {}, p)
+    study = parse_study(yaml.safe_load(p.read_text()) or {}, p)
+    stem = p.name.removesuffix(p.suffix)
+    if stem.endswith(".study") and stem.removesuffix(".study") != study.chapter:
+        raise ValueError(
+            f"Study file {p} is named unlike its `chapter: {study.chapter}`: its results go to "
+            f"studies/{study.chapter}/, so name it {study.chapter}.study.yml (or fix `chapter:`)."
+        )
+    return study
+
+
+def study_chapter(chapter_or_path: str | Path) -> str:
+    """The chapter of a study named by its chapter (``04_hdt``) or by its study file's path.
+
+    A path must be the chapter's ``params/<chapter>.study.yml``: that file is the study that
+    ``thesis study``, ``thesis claims`` and the book read.
+
+    Raises:
+        FileNotFoundError: no such study file.
+        ValueError: the file is invalid (:func:`load_study`), or a path outside ``params/``.
+    """
+    p = Path(chapter_or_path)
+    if p.suffix not in (".yml", ".yaml"):
+        return str(chapter_or_path)
+    study = load_study(p)
+    registered = study_path(study.chapter)
+    if not registered.is_file() or p.resolve() != registered.resolve():
+        raise ValueError(
+            f"{p} is not the registered study of {study.chapter} ({registered}): copy it "
+            f"there (or run 'thesis study {study.chapter}')."
+        )
+    return study.chapter
 
 
 def chapter_module(chapter: str) -> Any:
@@ -164,6 +230,8 @@ def study_config(study: Study, scale: str = "study") -> Any:
     from thesis_lib.book.params import config_from_namespace
 
     mod = chapter_module(study.chapter)
+    _check_study_values(study, mod.Config)
+    _check_study_columns(study, getattr(mod, "STUDY_COLUMNS", None))
     # a field added after a study file was written takes the value that study ran with
     values = {**getattr(mod, "STUDY_FILE_DEFAULTS", {}), **study.config}
     if scale == "check":
@@ -171,6 +239,49 @@ def study_config(study: Study, scale: str = "study") -> Any:
             raise ValueError(f"study {study.study} has no scale_check config")
         values.update(study.scale_check["config"])
     return config_from_namespace(mod.Config, values, f"{study.chapter} (study {study.study})")
+
+
+def _check_study_values(study: Study, config_cls: type) -> None:
+    """Each value of the study file's ``config`` (and ``scale_check.config``) fits the type hint
+    of its ``Config`` field (:func:`~thesis_lib.book.params.check_value`, naming the file), and
+    a list is written as one: ``seeds: 3`` is not the list ``[3]`` (as ``-p seeds 3`` would be),
+    it is refused. Unknown fields are left to ``config_from_namespace``."""
+    from thesis_lib.book.params import _describe, check_value, config_hints
+
+    hints = config_hints(config_cls)
+    where = f" in {study.path}" if study.path else ""
+    check = (study.scale_check or {}).get("config") or {}
+    for part, values in (("config", study.config), ("scale_check.config", check)):
+        for name, value in values.items():
+            if name not in hints:
+                continue
+            checked = check_value(name, value, hints[name], f"{part}{where}")
+            if isinstance(checked, list | tuple) and not isinstance(value, list | tuple):
+                raise ValueError(
+                    f"Expect `{name}` to be {_describe(hints[name])}, actually: {value!r} "
+                    f"({part}{where})"
+                )
+
+
+def _check_study_columns(study: Study, columns: Any) -> None:
+    """The study's metric, secondary metric, comparison metrics and ``columns`` name columns
+    of its rows, where the chapter declares them (``STUDY_COLUMNS``; else nothing to check)."""
+    if columns is None:
+        return
+    where = f" in {study.path}" if study.path else ""
+    named = [("metric", study.metric), ("secondary", study.secondary)]
+    named += [(f"columns.{k}", v) for k, v in study.columns.items()]
+    named += [
+        (f"comparisons[{i}].metric", c["metric"])
+        for i, c in enumerate(study.comparisons)
+        if "metric" in c
+    ]
+    for key, col in named:
+        if col is not None and col not in columns:
+            raise ValueError(
+                f"Expect `{key}` to be a column of the {study.chapter} study's rows, actually: "
+                f"{col!r}{where}; its columns: {', '.join(columns)}"
+            )
 
 
 def study_tasks(study: Study) -> list[Any]:
@@ -219,6 +330,56 @@ def reuse_tasks(study: Study, keys: list[str]) -> int:
     return n
 
 
+def _try_lock(path: Path) -> int | None:
+    """An exclusive ``flock`` on ``path`` (created if need be, stamped with our pid and host),
+    or ``None`` when another process holds it. A lock file left by a process that died holds
+    no lock (the kernel released it): it is taken over."""
+    import fcntl
+
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            return None
+        try:  # the holder may have removed the file between our open and our lock: retry
+            same = os.fstat(fd).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode())
+            return fd
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def task_locks(store: str | Path, keys: list[str]) -> Iterator[list[str]]:
+    """Lock the tasks ``keys`` of the task store ``store`` for the block: yields the keys this
+    process took, in order; the others are held by another process (another ``thesis study``).
+
+    One lock file per task, ``<store>/<key>.lock`` (an exclusive ``fcntl.flock``; the file
+    names the holder's pid and host), removed at the end of the block, whether the tasks
+    finished or failed. A lock file whose process died is taken over. POSIX only.
+
+    Used in: :func:`run_study` (one runner per task of a study).
+    """
+    root = Path(store)
+    root.mkdir(parents=True, exist_ok=True)
+    held: dict[str, int] = {}
+    try:
+        for k in keys:
+            fd = _try_lock(root / f"{k}.lock")
+            if fd is not None:
+                held[k] = fd
+        yield list(held)
+    finally:
+        for k, fd in held.items():
+            (root / f"{k}.lock").unlink(missing_ok=True)  # while still held: no one else's
+            os.close(fd)
+
+
 def run_study(
     chapter: str,
     *,
@@ -234,32 +395,62 @@ def run_study(
 
     ``keep_going``: a failed task does not stop the study; the others run, and
     :class:`~thesis_lib.sweep.GridFailed` lists the failures at the end (their tracebacks are in
-    ``studies/<chapter>/tasks/failed/``)."""
-    from thesis_lib.book.results import git_commit
-    from thesis_lib.sweep import run_tasks
+    ``studies/<chapter>/tasks/failed/``).
 
+    ``chapter`` may also be the path of the chapter's study file (:func:`study_chapter`). The
+    run locks every task it is to run, from its start to its end (:func:`task_locks`); a task
+    that another process holds is skipped (said on stderr), so a second run of a study never
+    runs a task that the first one is running or will run. The rows returned are those of the
+    tasks this run finished or found stored."""
+    from thesis_lib.book.results import git_commit
+    from thesis_lib.sweep import TaskStore, run_tasks
+
+    chapter = study_chapter(chapter)
     study = load_study(chapter)
     tasks = study_tasks(study)
     out = studies_dir(chapter)
     if study.reuse and not force:
         reuse_tasks(study, [t.key for t in tasks])
-    try:
-        rows = run_tasks(
-            tasks,
-            out / "tasks",
-            executor=executor,
-            n_jobs=n_jobs,
-            address=address,
-            force=force,
-            desc=f"study {study.study}",
-            progress=progress,
-            provenance={"study": study.study, "study_hash": study.hash, "commit": git_commit()},
-            keep_going=keep_going,
-        )
-    finally:
-        if task_records(study):
-            write_study_summary(study, [t.key for t in tasks])
+    store = TaskStore(out / "tasks")
+    todo = [t.key for t in tasks if force or not store.has(t.key)]
+    with task_locks(store.root, todo) as taken:
+        busy = set(todo) - set(taken)
+        if busy:
+            first = store.root / f"{next(k for k in todo if k in busy)}.lock"
+            print(
+                f"study {study.study}: skipping {len(busy)} task(s) another run holds, e.g. "
+                f"{first} ({_holder(first)})",
+                file=sys.stderr,
+            )
+        try:
+            rows = run_tasks(
+                [t for t in tasks if t.key not in busy],
+                store.root,
+                executor=executor,
+                n_jobs=n_jobs,
+                address=address,
+                force=force,
+                desc=f"study {study.study}",
+                progress=progress,
+                provenance={
+                    "study": study.study,
+                    "study_hash": study.hash,
+                    "commit": git_commit(),
+                },
+                keep_going=keep_going,
+            )
+        finally:
+            if task_records(study):
+                write_study_summary(study, [t.key for t in tasks])
     return rows
+
+
+def _holder(lock: Path) -> str:
+    """Who holds a task lock, as its file says (``pid 123 on host``)."""
+    try:
+        return lock.read_text().strip() or "holder unknown"
+    except OSError:
+        return "holder unknown"
 
 
 def task_records(study: Study, keys: list[str] | None = None) -> list[dict[str, Any]]:
@@ -359,7 +550,8 @@ def write_study_summary(
 
 
 def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
-    """The pre-registered comparisons of a finished study (raises if it is incomplete)."""
+    """The pre-registered comparisons of a finished study (raises if it is incomplete, or if
+    a row the comparisons read is wrong: the error names its task file and what is wrong)."""
     from thesis_lib.stats.claims import evaluate_comparisons
 
     study = load_study(chapter)
@@ -374,6 +566,8 @@ def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
     rows = study_rows(study)
     if "scale" in rows:
         rows = rows[rows["scale"].fillna("study") == "study"]
+    if "task_key" in rows:  # a bad row is named by its task file (thesis_lib.stats.score_matrix)
+        rows = rows.assign(task_file=f"studies/{chapter}/tasks/" + rows["task_key"] + ".json")
     c = study.columns
     res = evaluate_comparisons(
         rows,

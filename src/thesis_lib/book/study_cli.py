@@ -3,6 +3,7 @@
 thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
 thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate)
+thesis study params/04_hdt.study.yml  # the same, named by its study file
 thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
 thesis study 03_defender 02_clfd -j 2 --keep-going   # unattended: a failed task stops nothing
 thesis study 03_defender -j 2 --commit-every 600      # and commit finished tasks every 10 min
@@ -26,6 +27,7 @@ def _status(chapter: str) -> dict:
     from thesis_lib.book import study as st
     from thesis_lib.sweep import TaskStore
 
+    chapter = st.study_chapter(chapter)
     s = st.load_study(chapter)
     tasks = st.study_tasks(s)
     keys = [t.key for t in tasks]
@@ -44,8 +46,9 @@ def _status(chapter: str) -> dict:
     return out
 
 
-#: what :func:`commit_studies` leaves out (git pathspec globs).
-NOT_COMMITTED = ("studies/*/tasks/failed/**", "**/.*.tmp", "**/.*.tmp.*")
+#: what :func:`commit_studies` leaves out (git pathspec globs): failed tasks' tracebacks,
+#: temporary files and the locks of running tasks (:func:`~thesis_lib.book.study.task_locks`).
+NOT_COMMITTED = ("studies/*/tasks/failed/**", "**/.*.tmp", "**/.*.tmp.*", "studies/*/tasks/*.lock")
 
 
 def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
@@ -145,8 +148,10 @@ def _cmd_study(args: argparse.Namespace) -> int:
     os.environ.setdefault("MUJOCO_GL", KERNEL_ENV_DEFAULTS["MUJOCO_GL"])
     from thesis_lib.book import study as st
 
-    for chapter in args.chapter:  # every study file first: a typo fails before hours of work
-        st.load_study(chapter)
+    # every study file first (names, values, metrics): a typo fails before hours of work
+    args.chapter = [st.study_chapter(c) for c in args.chapter]
+    for chapter in args.chapter:
+        st.study_config(st.load_study(chapter))
     if args.status:
         for chapter in args.chapter:
             print(json.dumps(_status(chapter), indent=1))
@@ -209,7 +214,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "chapter",
         nargs="+",
-        help="e.g. 04_hdt (reads params/<chapter>.study.yml); several run one after another",
+        help="e.g. 04_hdt or params/04_hdt.study.yml (reads params/<chapter>.study.yml); "
+        "several run one after another",
     )
     p.add_argument(
         "--executor",

@@ -10,9 +10,17 @@ to 0.25 (HDT: each level separately, as its two optimisers did), masked MSE. The
 
 Randomness: batches come from the data set's own generator (``SequenceDataset(seed=...)``),
 dropout from the trainer's own torch generator state (``TrainConfig.seed``); the global
-torch RNG is left as it was. A checkpoint holds the model, optimiser, scheduler, both RNG
-states, the iteration and the history, so a resumed run continues with the same numbers as
+torch RNG is left as it was. The model's initial weights are the caller's: the Trainer does
+not re-initialise a model, so seed torch before building it (``torch.manual_seed(0)``) for a
+run that gives the same numbers twice. A checkpoint holds the model, optimiser, scheduler, both
+RNG states, the iteration and the history, so a resumed run continues with the same numbers as
 an uninterrupted one.
+
+A checkpoint also records what made it (:meth:`Trainer.made_by`: the :data:`RESULT_FIELDS` of
+the :class:`TrainConfig`, the model's class and config, the data set's size and content hash)
+and is resumed only by a trainer made the same way; ``iterations`` may grow (the run goes on to
+the new total), never shrink below what the checkpoint holds. Anything else is refused with the
+fields that differ: delete the file or set ``TrainConfig(resume=False)`` to start afresh.
 
 Used in: HDT chapter (thesis 5.2.5); Decision Mamba chapter (5.3).
 """
@@ -20,10 +28,12 @@ Used in: HDT chapter (thesis 5.2.5); Decision Mamba chapter (5.3).
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import math
 import os
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, is_dataclass
 from pathlib import Path
 from typing import Any, cast
 
@@ -33,9 +43,13 @@ import torch
 import torch.nn as nn
 from tqdm.auto import tqdm
 
-from thesis_lib._io import atomic_write
+from thesis_lib._io import atomic_write, hash_arrays
 
-__all__ = ["TrainConfig", "Trainer", "batch_to_torch"]
+__all__ = ["RESULT_FIELDS", "TrainConfig", "Trainer", "batch_to_torch", "data_fingerprint"]
+
+#: The :class:`TrainConfig` fields that change a run's numbers: a checkpoint is resumed only by a
+#: trainer with the same values (``iterations`` may grow; the rest only say how or where to run).
+RESULT_FIELDS = ("seed", "lr", "weight_decay", "warmup_steps", "batch_size", "grad_clip")
 
 
 @dataclass
@@ -117,6 +131,34 @@ def batch_to_torch(
     return batch.to_torch(device)
 
 
+def data_fingerprint(dataset: Any) -> dict[str, Any]:
+    """The size and content hash of a data set: what a checkpoint records of its training data.
+
+    The hash covers every array attribute of ``dataset`` (states, actions, returns-to-go,
+    sub-goals, ...: dtype, shape and bytes, by name) and its scalar settings (``K``,
+    ``rtg_scale``, ``paper_compat``, ...), not its random generator: the same data sampled with
+    another seed is the same data set (a resumed run restores the generator's state).
+
+    Used in: :class:`Trainer` checkpoints (HDT, Decision Mamba and MDLT chapters).
+
+    Example:
+        >>> from thesis_lib.data import Episode, SequenceDataset
+        >>> ep = Episode(0, np.arange(8.0).reshape(4, 2), np.zeros((3, 1)), np.ones(3),
+        ...              np.zeros(3, bool), np.zeros(3, bool))
+        >>> a, b = (data_fingerprint(SequenceDataset([ep], K=2, seed=s)) for s in (0, 1))
+        >>> a == b, a["size"], a == data_fingerprint(SequenceDataset([ep], K=3))
+        (True, 3, False)
+    """
+    attrs = sorted(getattr(dataset, "__dict__", {}).items())
+    settings = {k: v for k, v in attrs if isinstance(v, (bool, int, float, str))}
+    h = hashlib.sha256(json.dumps(settings, sort_keys=True).encode())
+    for name, value in attrs:
+        if isinstance(value, np.ndarray):
+            h.update(name.encode())
+            hash_arrays(h, [value])
+    return {"size": len(dataset), "sha256": h.hexdigest()[:16]}
+
+
 def _mean_return(result: Any) -> float:
     if hasattr(result, "returns"):
         return float(np.mean(result.returns))
@@ -131,7 +173,9 @@ class Trainer:
     Args:
         model: :class:`~thesis_lib.seq.models.BC`, ``DecisionTransformer``, ``HDT`` or any
             module with ``forward(batch, targets) -> SeqOutput`` and a ``config`` holding
-            ``state_dim``, ``act_dim`` and ``K``.
+            ``state_dim``, ``act_dim`` and ``K``. Trained from its weights as they are (the
+            Trainer does not re-initialise it): seed torch before building it
+            (``torch.manual_seed(0)``) for the same numbers on every run.
         dataset: Where batches come from.
         config: :class:`TrainConfig`.
         eval_fn: Called as ``eval_fn(model)`` (model in eval mode) every
@@ -140,7 +184,9 @@ class Trainer:
 
     Raises:
         ValueError: If the data set and the model disagree on dimensions, or an HDT gets a
-            data set without sub-goals.
+            data set without sub-goals; or if ``config.checkpoint_path`` holds a checkpoint
+            (and ``config.resume``) made by another run (:meth:`load`) or with more iterations
+            than ``config.iterations``.
     """
 
     def __init__(
@@ -168,8 +214,15 @@ class Trainer:
         self.history: list[dict[str, float]] = []
         self.last_eval: float = math.nan
         self._rng_state = torch.Generator().manual_seed(config.seed).get_state()
+        self._data_fingerprint: dict[str, Any] | None = None
         if config.resume and config.checkpoint_path and Path(config.checkpoint_path).exists():
             self.load(config.checkpoint_path)
+            if self.iteration > config.iterations:
+                raise ValueError(
+                    f"Checkpoint '{config.checkpoint_path}' holds {self.iteration} iterations, "
+                    f"more than iterations={config.iterations}: ask for at least "
+                    f"{self.iteration}, or start fresh (delete the file or set resume=False)."
+                )
 
     # -- one step ---------------------------------------------------------------------------
 
@@ -225,6 +278,11 @@ class Trainer:
         """
         cfg = self.config
         total = cfg.iterations if iterations is None else int(iterations)
+        if total < self.iteration:
+            raise ValueError(
+                f"Expect `iterations` >= {self.iteration} (this trainer's iterations so far), "
+                f"actually: {total}."
+            )
         bar = tqdm(
             total=total,
             initial=self.iteration,
@@ -267,9 +325,28 @@ class Trainer:
 
     # -- checkpoints ------------------------------------------------------------------------
 
+    def made_by(self) -> dict[str, Any]:
+        """What this trainer's numbers depend on, as a checkpoint records it (flat, JSON-like).
+
+        The :data:`RESULT_FIELDS` of the config; ``model_class`` and ``model.<field>`` for each
+        field of the model's ``config`` dataclass; ``data.size`` and ``data.sha256`` of the
+        data set (:func:`data_fingerprint`, computed once per trainer).
+        """
+        made: dict[str, Any] = {k: getattr(self.config, k) for k in RESULT_FIELDS}
+        made["model_class"] = type(self.model).__name__
+        model_cfg = getattr(self.model, "config", None)
+        if model_cfg is not None and is_dataclass(model_cfg) and not isinstance(model_cfg, type):
+            made.update({f"model.{k}": v for k, v in asdict(model_cfg).items()})
+        if self._data_fingerprint is None:
+            self._data_fingerprint = data_fingerprint(self.dataset)
+        made.update({f"data.{k}": v for k, v in self._data_fingerprint.items()})
+        # as it reads back: tuples as lists, anything not JSON as its repr
+        return json.loads(json.dumps(made, default=repr))
+
     def state_dict(self) -> dict[str, Any]:
-        """Everything a resumed run needs."""
+        """Everything a resumed run needs, and what made it (:meth:`made_by`)."""
         return {
+            "made_by": self.made_by(),
             "model_class": type(self.model).__name__,
             "model_config": asdict(cast(Any, self.model).config)
             if hasattr(self.model, "config")
@@ -295,7 +372,9 @@ class Trainer:
 
         Raises:
             FileNotFoundError: If there is no checkpoint at ``path``.
-            ValueError: If it was written for another model class.
+            ValueError: If it was written for another model class, or made by another run: it
+                records another :meth:`made_by` (the message names each field that differs,
+                old -> new), or none (a checkpoint of the code before the record).
         """
         path = Path(path)
         if not path.exists():
@@ -303,10 +382,30 @@ class Trainer:
                 f"No checkpoint at '{path}'. Train with TrainConfig(checkpoint_path=...) first."
             )
         ckpt = torch.load(path, map_location=self.device, weights_only=True)
+        fresh = "delete it or set resume=False to start fresh"
         if ckpt["model_class"] != type(self.model).__name__:
             raise ValueError(
                 f"Checkpoint '{path}' holds a {ckpt['model_class']}, not a {type(self.model).__name__}; "
-                f"build the matching model (config: {ckpt['model_config']})."
+                f"build the matching model (config: {ckpt['model_config']}), or {fresh}."
+            )
+        if not isinstance(ckpt.get("made_by"), dict):
+            raise ValueError(
+                f"Checkpoint '{path}' does not record what made it (written before checkpoints "
+                f"were keyed by their run), so it cannot be matched to this run: {fresh}."
+            )
+        old, new = ckpt["made_by"], self.made_by()
+
+        def show(made: dict[str, Any], k: str) -> str:
+            return repr(made[k]) if k in made else "(absent)"
+
+        differ = [
+            f"{k}: {show(old, k)} -> {show(new, k)}"
+            for k in [*new, *(k for k in old if k not in new)]
+            if show(old, k) != show(new, k)
+        ]
+        if differ:
+            raise ValueError(
+                f"Checkpoint '{path}' was made by another run ({'; '.join(differ)}): {fresh}."
             )
         self.model.load_state_dict(ckpt["model"])
         self.optimizer.load_state_dict(ckpt["optimizer"])

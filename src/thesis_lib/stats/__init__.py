@@ -223,26 +223,70 @@ def score_matrix(
 ) -> tuple[np.ndarray, list[str]]:
     """``(seeds, settings)`` matrix of ``metric`` for ``method`` from tidy rows.
 
+    A row that is wrong is named by where it came from: its ``task_file`` column, else its
+    ``task_key`` column (a study's rows have both), else its index.
+
     Raises:
-        ValueError: the method is missing, a (setting, seed) appears twice, or settings have
-            different seed counts (the grid is incomplete: finish the study first).
+        ValueError: a column is missing, the method is missing, a row has no seed or no number
+            for ``metric`` (NaN, missing, text), a (setting, seed) appears twice, or settings
+            have different seeds (the grid is incomplete: finish the study first).
     """
+    _check_columns(rows, method_col=method_col, setting_col=setting_col, seed_col=seed_col)
+    _check_columns(rows, metric=metric)
     sub = rows[rows[method_col] == method]
     if sub.empty:
         known = sorted(rows[method_col].unique())
         raise ValueError(f"no rows for method {method!r}; methods: {known}")
-    if sub.duplicated([setting_col, seed_col]).any():
-        raise ValueError(f"{method}: a (setting, seed) appears more than once")
-    wide = sub.pivot(index=seed_col, columns=setting_col, values=metric)
     if settings is not None:
-        missing = [s for s in settings if s not in wide.columns]
+        missing = [s for s in settings if s not in set(sub[setting_col])]
         if missing:
             raise ValueError(f"{method}: no rows for settings {missing}")
+        sub = sub[sub[setting_col].isin(settings)]
+    values = pd.to_numeric(sub[metric], errors="coerce").astype(float)
+    bad = sub.index[sub[seed_col].isna() | ~np.isfinite(values)]
+    if len(bad):
+        r = {k: v.item() if isinstance(v, np.generic) else v for k, v in sub.loc[bad[0]].items()}
+        if pd.isna(r[seed_col]):
+            what = f"has no {seed_col}"
+        elif pd.isna(r[metric]):
+            what = f"({seed_col} {r[seed_col]!r}) has no {metric} (NaN or missing)"
+        else:
+            what = f"({seed_col} {r[seed_col]!r}) has {metric} {r[metric]!r}, not a number"
+        raise ValueError(
+            f"{method}: the row of {setting_col} {r[setting_col]!r} {what} ({_source(sub, bad[0])})"
+        )
+    if sub.duplicated([setting_col, seed_col]).any():
+        raise ValueError(f"{method}: a (setting, seed) appears more than once")
+    wide = sub.assign(**{metric: values}).pivot(index=seed_col, columns=setting_col, values=metric)
+    if settings is not None:
         wide = wide[list(settings)]
     if wide.isna().any().any():
         counts = sub.groupby(setting_col)[seed_col].nunique().to_dict()
-        raise ValueError(f"{method}: unequal seeds per setting {counts}; the grid is incomplete")
+        absent = [f"({c!r}, {k!r})" for c in wide.columns for k in wide.index[wide[c].isna()]]
+        raise ValueError(
+            f"{method}: unequal seeds per setting {counts}; the grid is incomplete: no row for "
+            f"({setting_col}, {seed_col}) {', '.join(absent)}"
+        )
     return wide.to_numpy(dtype=float), [str(c) for c in wide.columns]
+
+
+def _check_columns(rows: pd.DataFrame, **columns: str) -> None:
+    """Each named column is in ``rows`` (``ValueError`` naming the parameter and the column)."""
+    for name, col in columns.items():
+        if col not in rows.columns:
+            example = f" (e.g. {_source(rows, rows.index[0])})" if len(rows) else ""
+            raise ValueError(
+                f"Expect the rows to have the column {col!r} (`{name}`), actually: "
+                f"{', '.join(map(str, rows.columns))}{example}"
+            )
+
+
+def _source(rows: pd.DataFrame, index: Any) -> str:
+    """Where row ``index`` came from: its task file or task key, else its index."""
+    for col, label in (("task_file", ""), ("task_key", "task ")):
+        if col in rows.columns and isinstance(rows.at[index, col], str):
+            return f"{label}{rows.at[index, col]}"
+    return f"row {index}"
 
 
 def compare(
@@ -271,6 +315,8 @@ def compare(
     if aggregate not in AGGREGATES:
         raise ValueError(f"aggregate must be one of {sorted(AGGREGATES)}, got {aggregate!r}")
     kw = dict(method_col=method_col, setting_col=setting_col, seed_col=seed_col)
+    _check_columns(rows, **kw)
+    _check_columns(rows, metric=metric)
     known = set(rows[method_col].unique())
     for m in (x, y):
         if m not in known:

@@ -15,7 +15,7 @@ from typing import Any
 
 import pandas as pd
 
-from . import compare
+from . import AGGREGATES, compare
 
 #: id -> (thesis section, statement), as in CLAIMS.md.
 CLAIMS: dict[str, tuple[str, str]] = {
@@ -102,7 +102,8 @@ COMPARISON_KEYS = {
 
 
 def check_comparison(spec: Mapping[str, Any]) -> None:
-    """Raise ``ValueError`` for an unknown key, claim or kind in one comparison spec."""
+    """Raise ``ValueError`` for an unknown key, claim, kind or aggregate in one comparison spec,
+    or a ``margin`` that is not a number >= 0 (all read before the study runs)."""
     unknown = set(spec) - COMPARISON_KEYS
     if unknown:
         raise ValueError(
@@ -115,6 +116,17 @@ def check_comparison(spec: Mapping[str, Any]) -> None:
         raise ValueError(f"unknown claim {spec['claim']!r}; valid: {', '.join(CLAIMS)}")
     if spec.get("kind", "superior") not in ("superior", "noninferior"):
         raise ValueError(f"kind must be 'superior' or 'noninferior', got {spec['kind']!r}")
+    name = f"{spec['claim']} ({spec['x']} vs {spec['y']})"
+    margin = spec.get("margin", 0.0)
+    if isinstance(margin, bool) or not isinstance(margin, int | float) or not margin >= 0:
+        raise ValueError(
+            f"Expect `margin` of comparison {name} to be a number >= 0, actually: {margin!r}"
+        )
+    if spec.get("aggregate", "mean") not in AGGREGATES:
+        raise ValueError(
+            f"Expect `aggregate` of comparison {name} to be one of {sorted(AGGREGATES)}, "
+            f"actually: {spec['aggregate']!r}"
+        )
 
 
 def evaluate_comparisons(
