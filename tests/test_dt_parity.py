@@ -203,27 +203,37 @@ def test_v1_study_files_keep_their_init_and_task_keys():
 @pytest.mark.slow
 def test_dt_learns_to_bc_level_on_hopper_medium():
     """Our DT within 5 normalised points of BC on the hopper/medium smoke set, at the study's
-    size with a short budget. With the v1 initialisation (``init="torch"``) the same run falls
-    more than 5 points short (measured: DT 16.8 against BC 30.8 at 10k updates, issue #33)."""
-    from thesis_lib.data import get_dataset
-    from thesis_lib.seq import EvalSpec, TrainSpec, run_offline
+    size (d32, 1 layer) with batch 16 for 10k updates (about 90 CPU-seconds a run; the three
+    runs share the two cores through the parity harness's own task function). With the v1
+    initialisation (``init="torch"``) the same run stops more than 5 points short: measured
+    here 12.0 and 15.0 (seeds 0, 1) against 35.2 and 32.0 with the default."""
+    from thesis_lib.parity import ours_run
+    from thesis_lib.sweep import Task, run_tasks
 
-    ds = get_dataset("hopper", "medium")
-    train = TrainSpec(seed=0, iterations=LEARN_UPDATES, lr=3e-4, warmup_steps=500, eval_every=0)
-    ev = EvalSpec(episodes=6, targets=("max",), episode_seed="run")
+    def task(method: str, init: str) -> Task:
+        return Task(
+            ours_run,
+            {
+                "method": method,
+                "init": init,
+                "dataset": "hopper/medium",
+                "dataset_size": "smoke",
+                "arch": {"d_model": 32, "n_layers": 1},
+                "train": {"seed": 0, "iterations": 10_000, "batch_size": 16, "lr": 3e-4,
+                          "warmup_steps": 500},
+                "episodes": 6,
+            },
+        )  # fmt: skip
 
-    def score(method: str, init: str) -> float:
-        arch = ArchSpec(d_model=32, n_layers=1, init=init)
-        return run_offline(method, ds, arch, train, ev, task="hopper")[-1]["score_mean"]
-
-    bc = score("BC", "auto")
-    dt = score("DT", "auto")
-    v1 = score("DT", "torch")
+    rows = run_tasks(
+        [task("DT", "auto"), task("DT", "torch"), task("BC", "auto")],
+        executor="local",
+        n_jobs=2,
+        progress=False,
+    )
+    dt, v1, bc = rows["score"].tolist()
     assert dt >= bc - 5.0, (dt, bc)
-    assert v1 < bc - 5.0, (v1, bc)  # the test can fail: the old code does
-
-
-LEARN_UPDATES = 3000
+    assert v1 < bc - 5.0, (v1, bc)  # the test can fail: the v1 code does
 
 
 # ----------------------------------------------------------------------------------------------

@@ -176,6 +176,7 @@ def _data_sha(ds: Any) -> str:
 
 
 def _row(config: dict[str, Any], side: str, returns: Any, lengths: Any, ds: Any, **extra: Any):
+    """One parity row: the run's D4RL-normalised score (of the mean return), the data set's."""
     from thesis_lib.data import normalized_score
 
     task = config["dataset"].split("/")[0]
@@ -211,14 +212,13 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     ev = EvalSpec(episodes=config["episodes"], targets=("max",), episode_seed="run")
     t0 = time.process_time()
     rows = run_offline(config["method"], ds, arch, train, ev, task=config["dataset"].split("/")[0])
-    last = rows[-1]
-    n = config["episodes"]
+    last = rows[-1]  # the final evaluation: its mean return and length over the episodes
     return [
         _row(
             config,
             "ours",
-            [last["return_mean"]] * n,
-            [last["length_mean"]] * n,
+            [last["return_mean"]],
+            [last["length_mean"]],
             ds,
             peer="thesis_lib",
             train_s=round(time.process_time() - t0, 1),

@@ -103,8 +103,8 @@ def _evaluate(algo, cfg: dict) -> tuple[list[float], list[int]]:
                 action = policy.predict(np.asarray(obs, dtype=np.float32), reward)
             else:
                 action = algo.predict(np.asarray(obs, dtype=np.float32)[None])[0]
-            obs, reward, terminated, truncated, _ = env.step(action)
-            reward = float(reward)
+            obs, r, terminated, truncated, _ = env.step(action)
+            reward = float(r)
             total, n = total + reward, n + 1
             done = terminated or truncated or n >= cfg["max_steps"]
         returns.append(total)
