@@ -154,6 +154,23 @@ def test_chapter_results_writes_files_and_provenance(tmp_path, monkeypatch):
         res.table("bad", [1, 2])
 
 
+def test_chapter_results_examples_leave_nothing_in_the_temp_dir(tmp_path, monkeypatch):
+    """The ChapterResults example made its results folder with mkdtemp and never removed it:
+    one more folder in the system's temp dir per test run."""
+    import doctest
+    import tempfile
+
+    from thesis_lib.book import results
+
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
+    monkeypatch.delenv("THESIS_RESULTS_DIR", raising=False)  # the example sets and removes it
+    outcome = doctest.testmod(results, report=False)
+    assert outcome.attempted > 0 and outcome.failed == 0
+    assert sorted(p.name for p in temp.iterdir()) == []
+
+
 def test_toc_chapters_have_notebooks_and_profiles_match_defaults():
     root = project_root()
     chapters = list_chapters(root)

@@ -210,6 +210,38 @@ def test_transformer_generate_equals_windowed_forward_on_its_own_predictions():
     assert np.allclose(both[0], pred, atol=1e-5) and np.allclose(both[1], m.generate(g), atol=1e-5)
 
 
+def test_transformer_past_its_time_step_table_warns_once_and_slides_the_window():
+    """A song longer than MDLT-T's time-step table capped every later slot at the table's last
+    entry (never trained), silently: a trained MDLT-T then nearly stopped after the table
+    (9.5 s). Now it warns once and each later window gets consecutive trained steps."""
+    import warnings
+
+    torch.manual_seed(1)
+    K, table, T = 4, 10, 40
+    m = MDLTTransformer(MDLTConfig(K=K, max_timestep=table, **TINY)).eval()
+    f = np.random.default_rng(2).random((T, 438)).astype(np.float32)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pred = m.generate(f)
+        short = m.generate(f[:table])  # inside the table: no warning, the same translation
+    said = [str(w.message) for w in caught if "max_timestep" in str(w.message)]
+    assert len(said) == 1 and f"table has {table} frames" in said[0] and str(T) in said[0]
+    assert np.allclose(short, pred[:table], atol=1e-5)
+    period = table - K  # the steps restart every `period` frames
+    for t in (table, 15, 21, T - 1):
+        s = t - K + 1
+        steps = torch.arange(K) + s % period + 1  # consecutive, inside the trained 1..table-1
+        assert steps.max() < table
+        poses_in = np.vstack([np.zeros((1, 4)), pred[s:t]]).astype(np.float32)
+        batch = {
+            "audio": torch.tensor(f[s : t + 1])[None],
+            "poses_in": torch.tensor(poses_in)[None],
+            "timesteps": steps[None],
+            "mask": torch.ones(1, K, dtype=torch.bool),
+        }
+        assert np.allclose(m(batch).actions[0, -1].detach().numpy(), pred[t], atol=1e-5), t
+
+
 def test_mamba_recurrent_inference_equals_full_forward():
     torch.manual_seed(2)
     m = MDLTMamba(MDLTConfig(variant="mamba", K=16, **TINY)).eval()
@@ -490,6 +522,51 @@ def test_dance_command_end_to_end_on_foreign_audio(tmp_path):
         )
         == 1
     )
+
+
+def test_dance_command_reports_the_ur3_limits_and_animates_the_played_pose(
+    tmp_path, monkeypatch, capsys
+):
+    """`thesis mdlt dance` said nothing about the UR3's limits (the packaged model breaks the
+    speed limits on real music) and animated the raw angles, not the pose `thesis ur3 play`
+    plays (offsets, halved swings)."""
+    import soundfile as sf
+
+    from thesis_lib.cli import main
+    from thesis_lib.mdlt import translate
+    from thesis_lib.mdlt.audio import FeatureScaler, audio_features
+    from thesis_lib.ur3.dance import map_dance
+    from thesis_lib.ur3.safety import check_trajectory, clip_trajectory
+
+    sr = 22050
+    wav = tmp_path / "noise.wav"
+    sf.write(wav, 0.3 * np.random.default_rng(0).normal(size=sr).astype(np.float32), sr)
+    scaler = FeatureScaler().fit([audio_features(wav)])
+    torch.manual_seed(0)
+    model = build_model(MDLTConfig(variant="mamba", K=8, **TINY)).eval()
+    ckpt = save_checkpoint(tmp_path / "tiny.pt", model, scaler, {"fps": 60})
+    drawn, draw = [], translate.ur3_joint_positions
+    monkeypatch.setattr(
+        translate, "ur3_joint_positions", lambda q: drawn.append(np.array(q)) or draw(q)
+    )
+    out, gif = tmp_path / "angles.csv", tmp_path / "arm.gif"
+    argv = ["mdlt", "dance", "--audio", str(wav), "--checkpoint", str(ckpt), "--out", str(out)]
+    assert main([*argv, "--animation", str(gif), "-q"]) == 0
+    said = capsys.readouterr().out
+    angles = pd.read_csv(out).drop(columns="time_s").to_numpy()
+    q = map_dance(angles)  # what `thesis ur3 play` plays (before clipping)
+    # the animation (15 fps: every 4th frame) draws the mapped angles, wrist included
+    assert len(drawn) == 1 and drawn[0].shape == (len(q[::4]), 6)
+    assert np.allclose(drawn[0], q[::4], atol=1e-5)
+    # one line: which limits break in how many frames, and what clipping would change
+    report = check_trajectory(q, 1 / 60)
+    assert len(report.speed_frames) > 0  # an untrained model jitters faster than the arm may
+    clipped = int((np.abs(clip_trajectory(q, 1 / 60) - q).max(axis=1) > 1e-9).sum())
+    lines = [line for line in said.splitlines() if line.startswith("UR3 limits")]
+    assert len(lines) == 1, said
+    assert f"speed limits broken in {len(report.speed_frames)} of {len(q)} frames" in lines[0]
+    assert report.summary()[:-1] in lines[0]
+    assert f"playing it clips or slows {clipped} of {len(q)} frames" in lines[0]
 
 
 def _no_work(*args, **kwargs):

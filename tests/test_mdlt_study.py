@@ -3,6 +3,7 @@ checkpoint and the two undocumented choices (PhantomDance fps, MDLT-M's windows)
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -184,6 +185,7 @@ def test_thesis_mdlt_dance_without_checkpoint(tmp_path):
     from thesis_lib.mdlt.synth import synth_music
     from thesis_lib.ur3.dance import map_dance
     from thesis_lib.ur3.model import POSITION_LIMITS
+    from thesis_lib.ur3.safety import check_trajectory
 
     assert (REPO / "src/thesis_lib/mdlt/assets/mdlt_packaged.pt").stat().st_size < 400_000
     piece = synth_music("mPO", 118.0, 12.0, seed=7)
@@ -206,6 +208,14 @@ def test_thesis_mdlt_dance_without_checkpoint(tmp_path):
     q = map_dance(a)
     assert ((q >= POSITION_LIMITS[:, 0]) & (q <= POSITION_LIMITS[:, 1])).all()
     assert a.std(0).max() > 0.02  # it moves
+    # speeds too: the packaged model moves faster than the UR3 may in some frames (on the
+    # packaged recording as well), and `mdlt dance` says so in one line, as `ur3 check` would
+    report = check_trajectory(q, 1 / 60)
+    assert len(report.position_frames) == 0 and len(report.speed_frames) > 0
+    assert f"UR3 limits (mapped as 'thesis ur3 play' plays it): {report.summary()[:-1]}" in (
+        res.stdout
+    ), res.stdout
+    assert "playing it clips or slows" in res.stdout
 
 
 def test_thesis_mdlt_train_writes_a_checkpoint_dance_reads(tmp_path):
@@ -266,7 +276,7 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
     assert first["file"] == PACKAGED_RECORDING and first["licence"] == "CC BY-SA 3.0"
     assert first["sample_rate"] == 44100 and first["seconds"] > 60
     assert bool(first["inside_ur3_limits"]) and first["beats"] > 60  # ~140 bpm for 62 s
-    # the README's claim for the packaged model (the study's probe): it follows the beat
+    # the README states the packaged model beats its shuffled controls (and that this check is weak)
     assert bool(first["beat_above_control"]), first.to_dict()
     _, scaler, meta = load_checkpoint(packaged_checkpoint())
     assert meta["variant"] == "mamba_audio" and scaler.mute == ("tempogram",)
@@ -289,9 +299,20 @@ def test_thesis_mdlt_dance_without_audio_dances_to_the_packaged_recording(tmp_pa
 
     out = tmp_path / "angles.csv"
     assert main(["mdlt", "dance", "--out", str(out), "-q"]) == 0
-    assert "Will Savino" in capsys.readouterr().out  # the credit is printed
+    said = capsys.readouterr().out
+    assert "Will Savino" in said  # the credit is printed
     df = pd.read_csv(out)
     assert len(df) == pytest.approx(60 * 62.3, abs=3) and df["time_s"].iloc[-1] > 62
+    # the README's claim for the packaged model on it: inside the UR3's joint limits and
+    # workspace, faster than its speed limits in some frames (said, and slowed by ur3 play)
+    lines = [x for x in said.splitlines() if x.startswith("UR3 limits")]
+    assert len(lines) == 1, said
+    line = lines[0]
+    assert "joint limits" not in line and "workspace" not in line, line
+    broken = re.search(r"speed limits broken in (\d+) of (\d+) frames", line)
+    peak = re.search(r"peak speed ([\d.]+)x the allowed", line)
+    assert broken and peak and "playing it clips or slows" in line, line
+    assert 0 < int(broken[1]) < 0.25 * int(broken[2]) and 1 < float(peak[1]) < 5, line
 
 
 def test_teacher_forcing_runs_are_labelled_apart():

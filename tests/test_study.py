@@ -789,6 +789,28 @@ def test_the_hdt_study_checks_its_values_and_metrics_against_the_chapter():
 
 
 @pytest.mark.parametrize(
+    "chapter", ["02_clfd", "03_defender", "05_decision_mamba", "06_mdlt", "07_ur3_deployment"]
+)
+def test_every_registered_study_declares_its_columns_and_passes_the_check(chapter):
+    """Only the HDT chapter declared STUDY_COLUMNS, so no other study's metrics were checked."""
+    columns = st.chapter_module(chapter).STUDY_COLUMNS
+    assert len(columns) == len(set(columns)) and {"method", "setting", "seed"} <= set(columns)
+    st.study_config(st.load_study(chapter))  # the committed study file names real columns
+
+
+def test_a_misspelt_ur3_metric_is_refused_at_load_naming_it(tmp_path):
+    """`metric: goals_meen` was accepted: the study would run and the claims read no column."""
+    data = yaml.safe_load((REPO / "params" / "07_ur3_deployment.study.yml").read_text())
+    copy = tmp_path / "07_ur3_deployment.study.yml"
+    copy.write_text(yaml.safe_dump({**data, "metric": "goals_meen"}))
+    with pytest.raises(ValueError) as err:
+        st.study_config(st.load_study(copy))
+    said = str(err.value)
+    assert "`metric` to be a column of the 07_ur3_deployment study's rows" in said
+    assert "'goals_meen'" in said and str(copy) in said and "goals_mean" in said
+
+
+@pytest.mark.parametrize(
     ("damage", "what"),
     [
         (lambda row: row.update(score=float("nan")), "has no score (NaN or missing)"),

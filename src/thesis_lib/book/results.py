@@ -126,13 +126,15 @@ class ChapterResults:
 
     Example:
         >>> import tempfile, os, pandas as pd
-        >>> os.environ["THESIS_RESULTS_DIR"] = tempfile.mkdtemp()
+        >>> tmp = tempfile.TemporaryDirectory()  # removed below, with what the run wrote
+        >>> os.environ["THESIS_RESULTS_DIR"] = tmp.name
         >>> res = ChapterResults("demo", config={"n": 3}, seed=0)
         >>> res.table("numbers", pd.DataFrame({"x": [1, 2]})).name
         'numbers.csv'
         >>> sorted(res.finish()["artifacts"])
         ['numbers.csv']
         >>> del os.environ["THESIS_RESULTS_DIR"]
+        >>> tmp.cleanup()
 
     Args:
         chapter: folder name, e.g. ``"01_background"``.

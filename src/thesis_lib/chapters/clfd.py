@@ -741,6 +741,23 @@ STAGE_PROTOCOLS = ("Seen", "Unseen", "Seen + Unseen", "Seen->Unseen")
 RL_FINAL_SHARE = 0.2
 
 
+#: The columns of the study's rows (:func:`study_alignment_task`, :func:`study_stage_task`,
+#: :func:`study_rl_task`); the study engine checks the study file's metrics against them. The
+#: RL rows also carry the learning curve ``success_ep<k>`` (:func:`rl_success_curve`), whose
+#: names follow ``rl_episodes`` and ``rl_checkpoints`` and are not listed.
+STUDY_COLUMNS = [
+    "claim", "method", "setting", "encoder", "seed", "scale", "n_demos", "epochs",
+    # C10: alignment
+    "alignment_error_pct", "neg_alignment_error", "val_best_pct", "neg_val_alignment_error",
+    "test_seen_unseen_pct", "final_loss", "encoder_sha", "data_sha",
+    # C11: stage classification
+    "features", "stage_accuracy", "train_accuracy", "n_test",
+    # C12: RL
+    "episodes", "success_final", "success_mean", "success_best", "final_distance_m",
+    "lifted_final", "return_final", "expert_return",
+]  # fmt: skip
+
+
 def _study_config(config: dict[str, Any]) -> Config:
     import torch
 

@@ -32,6 +32,7 @@ import pandas as pd
 import torch
 from tqdm.auto import tqdm
 
+from thesis_lib.chapters.hdt import STUDY_COLUMNS as HDT_STUDY_COLUMNS
 from thesis_lib.seq.evaluation import evaluate, target_returns
 from thesis_lib.seq.registry import ArchSpec, build_model, check_methods
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
@@ -1008,6 +1009,15 @@ def format_table_5_5(
     cols = [f"{m} {d}" if d != "none" else m for m, d in order]
     return wide[[c for c in cols if c in wide.columns]]
 
+
+#: The columns of the study's rows: a run's (:func:`thesis_lib.chapters.hdt.study_run`, the
+#: HDT chapter's ``STUDY_COLUMNS``) and a C6 timing's (:func:`timing_task`); the study engine
+#: checks the study file's metrics against them.
+STUDY_COLUMNS = [
+    *HDT_STUDY_COLUMNS,
+    "arch", "train_ms", "act_ms_window", "act_ms_recurrent", "train_per_s", "act_per_s_window",
+    "act_per_s_recurrent", "act_per_s",
+]  # fmt: skip
 
 #: The Config fields a C6 timing task carries (its config, so its key).
 _TIMING_FIELDS = (

@@ -1353,6 +1353,23 @@ def study_demonstrations(
     return demos, info
 
 
+#: The columns of a study run's row (:func:`study_run`; the ``demos_*`` and ``sac_rollouts_*``
+#: in filtered runs only); the study engine checks the study file's metrics against them.
+STUDY_COLUMNS = [
+    "method", "setting", "seed", "scale", "top_up",
+    *(c for c in RUN_COLUMNS if c != "seed"),
+    # training_run_numbers
+    "episodes", "crashes", "filtered", "crash_rate", "filtered_rate", "crash_free_rate",
+    "crashes_per_1k_steps", "return_best", "return_last",
+    *(f"{k}_b{b}" for b in range(STUDY_CURVE_BINS) for k in ("crash_rate", "filtered_rate", "return")),
+    "eval_return", "eval_return_std", "eval_crash_rate", "eval_length", "eval_score",
+    "best_score", "steps", "train_wall_s", "train_cpu_s", "log_speed",
+    # study_demonstrations
+    "demos_file", "demos_safe", "demos_unsafe", "demos_safe_expert", "demos_unsafe_expert",
+    "sac_rollouts_safe", "sac_rollouts_unsafe",
+]  # fmt: skip
+
+
 def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One study task: a training run (:func:`train_run`), reduced to one row.
 

@@ -1225,6 +1225,15 @@ def _study_songs(
     ]
 
 
+#: The columns of a study run's rows (:func:`study_run`; ``aje_windowed`` and ``mismatch_cost``
+#: in MDLT-M's rows only); the study engine checks the study file's metrics against them.
+STUDY_COLUMNS = [
+    "method", "setting", "seed", "scope", "scale", "folds", "songs", "aje", "neg_aje",
+    "aje_mean_pose", "gain_vs_mean_pose", "fid", "beat_align", "train_s", "data_sha",
+    "aje_windowed", "mismatch_cost",
+]  # fmt: skip
+
+
 def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One C13 study task: one method, one scope (and genre), one seed, over every fold.
 

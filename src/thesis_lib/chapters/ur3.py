@@ -594,6 +594,13 @@ def plot_demo_subgoals(episode: Any, ax: Any = None) -> tuple[Any, list[int], li
 
 # ------------------------------------------------------------------------------------ the study
 
+#: The columns of a study run's row (:func:`study_run`); the study engine checks the study
+#: file's metrics against them.
+STUDY_COLUMNS = [
+    "method", "setting", "train_demos", "seed", "scale", "goals_mean", "goals_std", "all_five",
+    "episodes",
+]  # fmt: skip
+
 
 def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One C14 study task: :func:`reach_task` reduced to one row per run.

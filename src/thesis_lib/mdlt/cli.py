@@ -6,6 +6,10 @@
 
 ``dance`` without ``--checkpoint`` uses the small checkpoint shipped in the package, and without
 ``--audio`` the recording shipped in it (:func:`thesis_lib.mdlt.translate.packaged_recording`).
+It checks the dance against the UR3's joint, speed and workspace limits as ``thesis ur3 check``
+does and says in one line how many frames break which limit, and how many ``thesis ur3 play``
+(clip mode) would clip or slow; ``--animation`` draws the arm in the pose ``thesis ur3 play``
+plays (:func:`thesis_lib.ur3.dance.map_dance`).
 
 Used in: MDLT chapter (thesis 6.5).
 """
@@ -19,6 +23,7 @@ import sys
 
 def _cmd_dance(args: argparse.Namespace) -> int:
     from thesis_lib.mdlt.translate import PACKAGED_RECORDING_CREDIT, dance, packaged_recording
+    from thesis_lib.ur3.dance import map_dance, prepare_dance
 
     audio = args.audio
     if audio is None:
@@ -36,6 +41,7 @@ def _cmd_dance(args: argparse.Namespace) -> int:
         device=args.device,
         progress=not args.quiet,
         max_animation_s=args.animation_seconds,
+        to_joints=map_dance,  # the arm drawn in the pose `thesis ur3 play` plays
     )
     n = len(result.angles)
     print(
@@ -43,6 +49,9 @@ def _cmd_dance(args: argparse.Namespace) -> int:
         + (f"; plot -> {args.plot}" if args.plot else "")
         + (f"; animation -> {args.animation}" if args.animation else "")
     )
+    # the check `thesis ur3 check` makes, and what `thesis ur3 play` (clip mode) would change
+    playback = prepare_dance(result.angles, result.fps, mode="clip")
+    print(f"UR3 limits (mapped as 'thesis ur3 play' plays it): {playback.summary()}")
     return 0
 
 

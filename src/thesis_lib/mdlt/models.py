@@ -27,6 +27,7 @@ Used in: MDLT chapter (thesis 6.4).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Literal
 
@@ -88,8 +89,9 @@ class MDLTConfig:
     dropout: float = 0.1
     """Dropout (MDLT-T: inside the Transformer; MDLT-M: on the token embeddings)."""
     max_timestep: int = 8192
-    """MDLT-T's time-step vocabulary (the thesis: the longest song + 1). Longer songs reuse the
-    last index for every later frame (documented in :meth:`MDLTTransformer.timesteps`)."""
+    """MDLT-T's time-step vocabulary (the thesis: the longest song + 1). A longer song is
+    translated with a sliding window of time steps that restarts inside the table, with a
+    warning (:meth:`MDLTTransformer.window_timesteps`)."""
     pose_input: bool = True
     """MDLT-M reads the previous pose as the thesis text says (6.4.2). ``False``: audio only,
     as the authors' MDLT-M code (``Linear(438->d) -> Mamba -> Linear(d->4)``)."""
@@ -230,10 +232,38 @@ class MDLTTransformer(nn.Module):
         """Embedding indices of song frames ``0, 1, ..``: ``index + 1``, capped at ``max_timestep``.
 
         The authors used 0-based steps in training and 1-based ones at inference (a bug); here
-        both are 1-based. Frames past the vocabulary (songs longer than any training song)
-        share its last entry rather than failing.
+        both are 1-based. In a training batch frames past the vocabulary share its last entry
+        rather than failing; :meth:`generate` keeps whole songs inside the table with
+        :meth:`window_timesteps` instead.
         """
         return (frame_index + 1).clamp(max=self.config.max_timestep)
+
+    def window_timesteps(self, idx: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        """Embedding indices ``(T, K)`` of the inference windows of a ``T``-frame song.
+
+        ``idx``/``valid``: each frame's window ``s..t`` left-aligned in ``K`` slots (song frame
+        index, real slot). A window inside the table (``t < max_timestep``) gets
+        :meth:`timesteps` (``index + 1``), as in training. A window past it has its steps
+        shifted back by a multiple of ``P = max_timestep - K`` frames: they restart every
+        ``P`` frames and stay consecutive and inside ``1..max_timestep - 1``, the steps a
+        model whose longest training song set ``max_timestep`` (longest + 1) was trained on;
+        its last entry is never trained. (Capping at that last entry, as :meth:`timesteps`
+        does, gives every slot of every later window that one untrained embedding, and a
+        trained MDLT-T then nearly stops moving.) Padding slots get 0.
+
+        Example:
+            >>> cfg = MDLTConfig(K=3, max_timestep=5, d_model=8, n_layers=1, n_heads=2, d_ff=8)
+            >>> m = MDLTTransformer(cfg)
+            >>> idx, valid = _window_index(8, 3, "cpu")
+            >>> m.window_timesteps(idx, valid).tolist()
+            [[1, 0, 0], [1, 2, 0], [1, 2, 3], [2, 3, 4], [3, 4, 5], [2, 3, 4], [1, 2, 3], [2, 3, 4]]
+        """
+        table = self.config.max_timestep
+        period = max(1, table - self.config.K)
+        start = idx[:, :1]  # the window's first frame (slot 0 is always real)
+        end = torch.where(valid, idx, -1).amax(dim=1, keepdim=True)  # its last: the frame t
+        shift = torch.where(end >= table, (start // period) * period, 0)
+        return torch.where(valid, self.timesteps(idx - shift), torch.zeros_like(idx))
 
     def _encode(self, audio: torch.Tensor, times: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         scale = math.sqrt(self.config.d_model)
@@ -294,6 +324,9 @@ class MDLTTransformer(nn.Module):
         ``[0, â_s .. â_{t-1}]`` of its own earlier predictions. The encoder memories of all
         windows are computed first (they do not depend on the predictions), in chunks. A list
         of songs is translated as one batch (a list comes back).
+
+        A song longer than the time-step table (``max_timestep`` frames) warns once and is
+        translated with a sliding window of time steps (:meth:`window_timesteps`).
         """
         from tqdm.auto import tqdm
 
@@ -305,7 +338,16 @@ class MDLTTransformer(nn.Module):
         idx, valid = _window_index(
             T, K, device
         )  # (T, K) frame index of each window slot, (T, K) real?
-        times = torch.where(valid, self.timesteps(idx), torch.zeros_like(idx))
+        if T > self.config.max_timestep:
+            warnings.warn(
+                f"MDLT-T's time-step table has {self.config.max_timestep} frames (max_timestep: "
+                f"its longest training song + 1) and this song {T}: past frame "
+                f"{self.config.max_timestep} its windows' time steps restart every "
+                f"{max(1, self.config.max_timestep - K)} frames (a sliding window); train "
+                f"with longer songs to cover it.",
+                stacklevel=3,  # the caller of generate (under torch.no_grad's wrapper)
+            )
+        times = self.window_timesteps(idx, valid)
         x = torch.zeros(n_songs, T, self.config.state_dim, device=device)
         for i, song in enumerate(songs):
             x[i, : lengths[i]] = song.to(device)

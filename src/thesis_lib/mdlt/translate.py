@@ -6,7 +6,9 @@ for the first four UR3 joints (thesis 6.3.3: two shoulder joints, elbow, wrist).
 command ``thesis mdlt dance --audio song.wav --checkpoint ckpt.pt --out angles.csv``.
 
 The drawing uses the UR3's standard Denavit-Hartenberg parameters (Universal Robots' published
-values) with the last two joints at zero.
+values), joints not given at zero; ``thesis mdlt dance`` draws the angles as ``thesis ur3 play``
+maps them onto the arm, and reports how the dance fares against the UR3's joint, speed and
+workspace limits.
 
 Used in: MDLT chapter (thesis 6.5); ``thesis mdlt dance``.
 """
@@ -14,6 +16,7 @@ Used in: MDLT chapter (thesis 6.5); ``thesis mdlt dance``.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
@@ -49,6 +52,8 @@ class DanceResult(NamedTuple):
     """``(T,)`` seconds of each frame (frame ``i`` at ``i / fps``)."""
     frame: pd.DataFrame
     """``time_s`` and one column per joint (what the CSV holds)."""
+    fps: int = 60
+    """Frames per second of ``angles`` (the checkpoint's feature rate)."""
 
 
 ASSETS = Path(__file__).resolve().parent / "assets"
@@ -120,6 +125,7 @@ def dance(
     progress: bool = False,
     animation_fps: int = 15,
     max_animation_s: float | None = 30.0,
+    to_joints: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> DanceResult:
     """Translate the music in ``audio`` into UR3 joint angles with a trained MDLT checkpoint.
 
@@ -138,6 +144,11 @@ def dance(
         progress: Show a progress bar over the frames.
         animation_fps: Frames per second of the animation (the angles are subsampled).
         max_animation_s: Animate at most this many seconds (``None``: the whole song).
+        to_joints: Maps the ``(T, 4)`` angles to the UR3 joint angles ``(T, 4..6)`` the
+            animation draws. ``thesis mdlt dance`` passes
+            :func:`thesis_lib.ur3.dance.map_dance`, so the arm is drawn in the pose
+            ``thesis ur3 play`` plays (its offsets, halved swings and fixed wrist); ``None``:
+            the raw angles on the first four joints. The CSV and the plot hold the raw angles.
 
     Raises:
         FileNotFoundError: Missing audio or checkpoint.
@@ -174,13 +185,13 @@ def dance(
         plt.close(fig)
     if animation is not None:
         animate_arm(
-            angles,
+            angles if to_joints is None else to_joints(angles),
             fps=fps,
             path=animation,
             animation_fps=animation_fps,
             max_seconds=max_animation_s,
         )
-    return DanceResult(angles, times, frame)
+    return DanceResult(angles, times, frame, fps)
 
 
 def plot_angles(
@@ -270,8 +281,9 @@ def animate_arm(
     max_seconds: float | None = 30.0,
     true: np.ndarray | None = None,
 ):
-    """A matplotlib animation of the UR3 arm following ``angles (T, 4)``; saved when ``path`` is
-    given (``.gif`` with Pillow, ``.html`` as a self-contained HTML5/JS player).
+    """A matplotlib animation of the UR3 arm following ``angles (T, 4..6)`` (joint angles, the
+    missing ones at zero: :func:`ur3_joint_positions`); saved when ``path`` is given (``.gif``
+    with Pillow, ``.html`` as a self-contained HTML5/JS player).
 
     ``true``: also draw the ground-truth arm (grey). Returns the ``FuncAnimation`` (in a
     notebook: ``IPython.display.HTML(anim.to_jshtml())``).

@@ -161,6 +161,25 @@ class DancePlayback:
         """Seconds."""
         return len(self.q) / self.fps
 
+    def summary(self) -> str:
+        """One line: how many frames of the mapped dance break which limit (as ``thesis ur3
+        check`` reports it) and, in ``"clip"`` mode, how many frames playing it clips or slows
+        (as ``thesis ur3 play`` reports it).
+
+        >>> pb = prepare_dance(np.array([[0.0] * 4, [1.0] * 4]), fps=60)
+        >>> pb.summary()  # doctest: +NORMALIZE_WHITESPACE
+        'speed limits broken in 1 of 2 frames (first at frame 1); peak speed 9.55x the allowed;
+        playing it clips or slows 1 of 2 frames (largest change 0.448 rad).'
+        """
+        line = self.before.summary()
+        if self.before.ok or self.mode != "clip":
+            return line
+        line = (
+            f"{line[:-1]}; playing it clips or slows {self.changed_frames} of "
+            f"{self.before.n_frames} frames (largest change {self.max_deviation:.3f} rad)"
+        )
+        return "; ".join([line, *(n.rstrip(".") for n in self.notes)]) + "."
+
 
 def prepare_dance(
     angles: np.ndarray,
