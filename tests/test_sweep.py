@@ -488,3 +488,18 @@ def test_thesis_book_keeps_j_for_chapters():
     assert (args.jobs, args.task_jobs, args.executor, args.force) == (2, 4, "local", False)
     args = build_parser().parse_args(["run", "04_hdt", "--task-jobs", "2", "--address", "h:1"])
     assert (args.task_jobs, args.address) == (2, "h:1")
+
+
+def test_local_grids_leave_joblib_parallel_working():
+    """A local grid's process pool is joblib's reusable executor; a ``joblib.Parallel`` later in
+    the same process reuses it. Made by loky's factory it lacked joblib's temp-folder manager,
+    and that Parallel call raised AttributeError ('_temp_folder_manager')."""
+    from joblib import Parallel, delayed
+
+    from thesis_lib.sweep import probe
+
+    rows = run_tasks(
+        [Task(probe, {"i": i}) for i in range(3)], executor="local", n_jobs=2, progress=False
+    )
+    assert sorted(rows["i"]) == [0, 1, 2]
+    assert Parallel(n_jobs=2)(delayed(abs)(-i) for i in range(4)) == [0, 1, 2, 3]

@@ -167,13 +167,20 @@ def _run_joblib(
     from concurrent.futures.process import BrokenProcessPool
 
     from joblib import cpu_count
-    from joblib.externals.loky import get_reusable_executor
+    from joblib.executor import get_memmapping_executor
 
     from . import TaskFailed
 
     threads = str(max(cpu_count() // n_jobs, 1))
     env = {var: os.environ.get(var, threads) for var in THREAD_VARS}
-    executor = get_reusable_executor(max_workers=n_jobs, env=env)
+
+    def get_reusable_executor() -> Any:
+        # joblib's own factory, not loky's: loky's reusable executor lacks the temp-folder
+        # manager joblib.Parallel expects when it reuses that executor later in the process
+        # (AttributeError '_temp_folder_manager' in the next Parallel(n_jobs>1) call).
+        return get_memmapping_executor(n_jobs, env=env)
+
+    executor = get_reusable_executor()
     queue = iter(todo)
     pending: dict[Any, Task] = {}
 
@@ -185,7 +192,7 @@ def _run_joblib(
         try:
             fut = executor.submit(_guarded, task)
         except BrokenProcessPool:  # a worker died (killed, out of memory): a fresh pool
-            executor = get_reusable_executor(max_workers=n_jobs, env=env)
+            executor = get_reusable_executor()
             fut = executor.submit(_guarded, task)
         pending[fut] = task
 
