@@ -171,7 +171,8 @@ def load_parity(path: str | Path | None = None) -> pd.DataFrame:
 def parity_view(table: pd.DataFrame) -> pd.DataFrame:
     """The parity table for reading: per comparison, both sides' mean score (and each seed's),
     the data set's own mean, the difference ours - peer with its 95% interval, and the verdict
-    (``at parity``: the interval holds 0 and the difference is at most 3 points)."""
+    (``at parity``: the interval holds 0 and the difference is at most 3 points; ``gap``: the
+    interval excludes 0; ``not shown``: neither)."""
     if table.empty:
         return pd.DataFrame({"comparison": [], "result": []})
 
@@ -183,7 +184,10 @@ def parity_view(table: pd.DataFrame) -> pd.DataFrame:
     def verdict(r: pd.Series) -> str:
         if pd.isna(r.get("peer")) or r["seeds"] == 0:
             return "no peer" if r["seeds"] else "not run"
-        return "at parity" if str(r["parity"]) == "True" else "gap"
+        if str(r["parity"]) == "True":
+            return "at parity"
+        # a gap only where the interval excludes 0; otherwise neither parity nor a gap is shown
+        return "gap" if r["ci_high"] < 0 or r["ci_low"] > 0 else "not shown"
 
     def side(mean: Any, seeds: Any) -> str:
         return "" if pd.isna(mean) else f"{mean:.1f} ({seeds})"
