@@ -13,16 +13,12 @@ ours is faster.
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import tempfile
 import time
-from pathlib import Path
 
 import torch
 
 from thesis_lib.data import SequenceDataset, get_dataset
-from thesis_lib.parity import export_npz, peer_config, peer_python
+from thesis_lib.parity import peer_python, run_peer
 from thesis_lib.seq import DecisionTransformer, DTConfig
 from thesis_lib.seq.trainer import TrainConfig, Trainer
 
@@ -47,19 +43,7 @@ def peer(ds, d_model: int, n_layers: int, updates: int) -> float:
         "train": {"seed": 0, "iterations": updates, "warmup_steps": 10},
         "episodes": 0,
     }
-    script = Path(__import__("thesis_lib.parity", fromlist=["x"]).__file__).with_name(
-        "peer_d3rlpy.py"
-    )
-    with tempfile.TemporaryDirectory() as tmp:
-        data = export_npz(ds, Path(tmp) / "d.npz")
-        (Path(tmp) / "c.json").write_text(json.dumps(peer_config(config, ds)))
-        out = Path(tmp) / "o.json"
-        subprocess.run(
-            [str(peer_python()), str(script), "--data", str(data), "--config",
-             str(Path(tmp) / "c.json"), "--out", str(out)],
-            check=True, capture_output=True, cwd=tmp,
-        )  # fmt: skip
-        return float(json.loads(out.read_text())["train_s"])
+    return float(run_peer(config, ds)["train_s"])
 
 
 def main() -> None:

@@ -34,7 +34,7 @@ from tqdm.auto import tqdm
 
 from thesis_lib.chapters.hdt import STUDY_COLUMNS as HDT_STUDY_COLUMNS
 from thesis_lib.seq.evaluation import evaluate, target_returns
-from thesis_lib.seq.registry import ArchSpec, build_model, check_methods
+from thesis_lib.seq.registry import LEGACY_INIT, ArchSpec, build_model, check_methods
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
@@ -127,7 +127,7 @@ def parse_arch(text: str | Arch) -> Arch:
     return Arch(*values)
 
 
-STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": "torch"}
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT}
 """What a study file that does not name these fields ran with (the v1 studies, registered
 before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
 

@@ -30,7 +30,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from thesis_lib.seq.registry import ArchSpec, check_methods
+from thesis_lib.seq.registry import LEGACY_INIT, ArchSpec, check_methods
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.subgoals import select_subgoal_indices
 
@@ -89,7 +89,7 @@ _EXTRA_SEED_DEFAULT = ("hopper/medium", "maze2d-umaze/expert")
 _COMPAT_DEFAULT = "hopper/medium"
 
 
-STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": "torch"}
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT}
 """What a study file that does not name these fields ran with (the v1 studies, registered
 before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
 

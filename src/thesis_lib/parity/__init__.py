@@ -49,6 +49,7 @@ __all__ = [
     "parity_tasks",
     "peer_python",
     "peer_run",
+    "run_peer",
     "setup_peer",
     "unique_tasks",
     "welch_interval",
@@ -158,10 +159,9 @@ def load_parity_file(path: str | Path) -> list[Comparison]:
 
 
 def _load(dataset: str, size: str) -> Any:
-    from thesis_lib.data import get_dataset
+    from thesis_lib.data.minari_sets import open_dataset
 
-    task, tier = dataset.split("/")
-    return get_dataset(task, tier, size=size)  # type: ignore[arg-type]
+    return open_dataset(dataset, size)
 
 
 def _data_sha(ds: Any) -> str:
@@ -305,15 +305,16 @@ def peer_config(config: dict[str, Any], ds: Any) -> dict[str, Any]:
     }
 
 
-def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
-    """The peer's side of one parity run (a sweep task): the peer script in the peer venv."""
+def run_peer(config: dict[str, Any], ds: Any) -> dict[str, Any]:
+    """Run the peer script on ``ds`` in the peer venv; its result (``returns``, ``lengths``,
+    ``train_s``: the CPU seconds of d3rlpy's ``fit``, ``peer``). ``config["episodes"] = 0``
+    trains without evaluating (the speed benchmark)."""
     py = peer_python()
     if not py.exists():
         raise FileNotFoundError(
             f"No peer environment at {py.parent.parent}. Make it with `thesis parity --setup` "
             f"(pip installs {', '.join(PEER_REQUIREMENTS)})."
         )
-    ds = _load(config["dataset"], config["dataset_size"])
     script = Path(__file__).with_name("peer_d3rlpy.py")
     with tempfile.TemporaryDirectory(prefix="thesis-parity-") as tmp:
         data = export_npz(ds, Path(tmp) / "data.npz")
@@ -339,7 +340,13 @@ def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         )
         if proc.returncode != 0:
             raise RuntimeError(f"The peer run failed ({py}):\n{proc.stderr[-3000:]}")
-        res = json.loads(out.read_text())
+        return json.loads(out.read_text())
+
+
+def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """The peer's side of one parity run (a sweep task): :func:`run_peer`; one row."""
+    ds = _load(config["dataset"], config["dataset_size"])
+    res = run_peer(config, ds)
     return [
         _row(
             config,

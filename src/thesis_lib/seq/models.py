@@ -198,8 +198,7 @@ class _TransformerConfig(_ModelConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.init not in INIT_SCHEMES:
-            raise ValueError(f"Unknown init {self.init!r}. Valid: {', '.join(INIT_SCHEMES)}.")
+        resolve_init(self.init, self.paper_compat)  # validates
         if not isinstance(self.n_layers, int) or self.n_layers <= 0:
             raise ValueError(
                 f"Expect `n_layers` to be a positive int, actually: {self.n_layers!r}."
