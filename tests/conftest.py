@@ -11,6 +11,47 @@ import pytest
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+# --- the system temp dir is left as it was found (issue #37) ------------------------------------
+# The whole run (this process, the kernels and workers it starts: they inherit TMPDIR) writes its
+# temporary files into one private folder. At the end, anything left there but pytest's own
+# tmp_path folders and torch's compile cache fails the run, with the names; otherwise the folder
+# is removed, so `make test` leaves nothing behind in the system temp dir.
+_TEMP_ALLOWED = ("pytest-of-", "torchinductor_")
+
+
+def pytest_configure(config):
+    import tempfile
+
+    if os.environ.get("THESIS_TEST_TMPDIR"):  # a nested pytest (a test that runs pytest)
+        return
+    private = tempfile.mkdtemp(prefix="thesis-tests-")
+    os.environ["TMPDIR"] = os.environ["THESIS_TEST_TMPDIR"] = private
+    tempfile.tempdir = None  # gettempdir() reads TMPDIR again
+    config.stash[_TEMP_KEY] = private
+
+
+_TEMP_KEY = pytest.StashKey[str]()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    import shutil
+    from pathlib import Path
+
+    private = session.config.stash.get(_TEMP_KEY, None)
+    if private is None:
+        return
+    left = sorted(
+        str(p.relative_to(private))
+        for p in Path(private).iterdir()
+        if not p.name.startswith(_TEMP_ALLOWED)
+    )
+    if left:
+        print(f"\nThe tests left {len(left)} entries in their temp dir {private}: {left[:20]}")
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+    elif exitstatus == 0:
+        shutil.rmtree(private, ignore_errors=True)
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _one_torch_thread():
     """Small models run faster on one thread, and a busy 2-core CI machine has no spare core."""

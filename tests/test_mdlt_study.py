@@ -266,7 +266,8 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
     sf.write(wav, piece.audio, 22050)
     r = ex.recorded_music_check(wav, shuffles=2)
     assert r["sample_rate"] == 22050 and r["checkpoint"] == "mdlt_packaged.pt"
-    assert r["inside_ur3_limits"] and r["max_abs_angle"] <= np.pi
+    assert r["inside_position_limits"] and r["max_abs_angle"] <= np.pi
+    assert r["speed_limit_frames"] >= 0 and r["peak_speed_ratio"] > 0  # checked, as ur3 check
     assert r["frames"] == pytest.approx(60 * piece.duration, abs=3) and r["beats"] > 5
     assert isinstance(r["beat_above_control"], bool)
     for k in ("beat_align", "beat_align_shuffled", "std_0"):
@@ -275,7 +276,10 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
     first = table.iloc[0]
     assert first["file"] == PACKAGED_RECORDING and first["licence"] == "CC BY-SA 3.0"
     assert first["sample_rate"] == 44100 and first["seconds"] > 60
-    assert bool(first["inside_ur3_limits"]) and first["beats"] > 60  # ~140 bpm for 62 s
+    assert bool(first["inside_position_limits"]) and first["beats"] > 60  # ~140 bpm for 62 s
+    # the README: inside the joint limits and workspace, but 436 of 3,739 frames too fast (3.8x)
+    assert first["workspace_frames"] == 0 and first["frames"] == pytest.approx(3739, abs=5)
+    assert 400 <= first["speed_limit_frames"] <= 480 and 3.5 <= first["peak_speed_ratio"] <= 4.1
     # the README states the packaged model beats its shuffled controls (and that this check is weak)
     assert bool(first["beat_above_control"]), first.to_dict()
     _, scaler, meta = load_checkpoint(packaged_checkpoint())

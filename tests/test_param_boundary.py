@@ -259,3 +259,38 @@ def test_papermill_runs_the_check_in_the_kernel(tmp_path):
     pm.execute_notebook(tmp_path / "nb.ipynb", tmp_path / "ok.ipynb", {"algos": "TD3"}, **run)
     with pytest.raises(pm.PapermillExecutionError, match="Expect `seed` to be an int"):
         pm.execute_notebook(tmp_path / "nb.ipynb", tmp_path / "bad.ipynb", {"seed": 1.5}, **run)
+
+
+def test_thesis_run_refuses_before_importing_torch():
+    """The refusal comes at once: ``thesis run`` imports no sub-package's CLI (the chapters', MDLT's
+    and the data's import torch and scipy, seconds) and reads the chapter's hints without it."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from thesis_lib.cli import main\n"
+        "rc = main(['run', '04_hdt', '-p', 'iterations', 'abc'])\n"
+        "print(rc, 'torch' in sys.modules, 'scipy' in sys.modules)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.split() == ["1", "False", "False"]
+    assert "Expect `iterations` to be an int" in proc.stderr
+
+
+def test_the_lazy_subcommands_help_is_the_registered_help():
+    """``thesis --help`` lists the sub-packages' commands from ``SUBCOMMANDS`` without importing
+    them; each line must be the one the sub-package registers."""
+    import argparse
+
+    from thesis_lib.cli import SUBCOMMANDS, build_parser
+
+    full = build_parser()  # every sub-package imported and registered
+    lazy = build_parser("run")  # stand-ins only
+    for parser in (full, lazy):
+        actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        helps = {c.dest: c.help for c in actions[0]._choices_actions}
+        for name, (_, text) in SUBCOMMANDS.items():
+            assert helps[name] == text, name
+    args = build_parser("claims").parse_args(["claims", "--reps", "10"])
+    assert args.reps == 10  # the command asked for is the real one

@@ -196,7 +196,8 @@ def _add_sweep_options(cmd: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``thesis`` parser; with ``command``, only that sub-package's commands are imported."""
     parser = argparse.ArgumentParser(
         prog="thesis", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -279,21 +280,45 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark script")
     bench.set_defaults(func=_cmd_bench)
 
-    # Sub-packages contribute their own commands (e.g. 'thesis data').
-    for module in (
-        "thesis_lib.data.cli",
-        "thesis_lib.mdlt.cli",
-        "thesis_lib.ur3.cli",
-        "thesis_lib.book.study_cli",
-        "thesis_lib.parity.cli",
-    ):
-        mod = importlib.import_module(module)
-        mod.register(sub)
+    # Sub-packages contribute their own commands (e.g. 'thesis data'). Importing one imports its
+    # package (torch, scipy: seconds), so only the command asked for is imported; the others get
+    # a stand-in that lists them in `thesis --help` (SUBCOMMANDS: their one-line help).
+    wanted = {m for n, (m, _) in SUBCOMMANDS.items() if command in (None, n)}
+    for module in dict.fromkeys(m for m, _ in SUBCOMMANDS.values()):
+        if module in wanted:
+            importlib.import_module(module).register(sub)
+    for name, (_, text) in SUBCOMMANDS.items():
+        if name not in sub.choices:
+            sub.add_parser(name, help=text)
     return parser
 
 
+#: The commands a sub-package registers (``register(subparsers)`` in ``module``), with the help
+#: line ``thesis --help`` shows without importing them. ``study`` also registers ``claims``.
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "data": ("thesis_lib.data.cli", "demonstration data sets (Minari format)"),
+    "mdlt": ("thesis_lib.mdlt.cli", "music-to-dance translation (thesis chapter 6)"),
+    "ur3": (
+        "thesis_lib.ur3.cli",
+        "the UR3: play or check a dance, make reaching demonstrations",
+    ),
+    "study": ("thesis_lib.book.study_cli", "run or resume a chapter's pre-registered study"),
+    "claims": ("thesis_lib.book.study_cli", "write studies/claims.csv from the studies"),
+    "parity": (
+        "thesis_lib.parity.cli",
+        "our DT and BC against d3rlpy's at equal config (params/parity.yml)",
+    ),
+}
+
+
+def _command(argv: list[str]) -> str | None:
+    """The sub-command named in ``argv`` (its first word that is not an option), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(_command(argv)).parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError) as err:  # bad input: say what, not a traceback

@@ -1129,12 +1129,13 @@ def plot_predictions(cfg: Config, run: TableRun):
 def animate_best(cfg: Config, run: TableRun, variant: str, path: str | Path) -> Path:
     """GIF of the UR3 following ``variant``'s translation of the example song (dancer: grey)."""
     from thesis_lib.mdlt import animate_arm
+    from thesis_lib.ur3.dance import map_dance
 
     song = run.examples["songs"][0]
-    animate_arm(
-        run.examples["predictions"][variant][0],
+    animate_arm(  # both arms in the pose `thesis ur3 play` would play (offset and halving)
+        map_dance(run.examples["predictions"][variant][0]),
         fps=song.fps,
-        true=song.angles,
+        true=map_dance(song.angles),
         path=path,
         max_seconds=cfg.animation_seconds,
     )
@@ -1521,8 +1522,11 @@ def recorded_music_check(
 ) -> dict[str, Any]:
     """Translate a recorded music file (decoded at its own sample rate, then resampled to the
     feature rate as any input) with ``checkpoint`` (``None``: the packaged one) and check what a
-    robot needs: the angles inside the UR3's joint limits (after the playback mapping of
-    :func:`thesis_lib.ur3.dance.map_dance`), how much each joint moves, and the beat alignment
+    robot needs: ``inside_position_limits``, the angles inside the UR3's joint-position limits
+    (after the playback mapping of :func:`thesis_lib.ur3.dance.map_dance`); the joint-speed limits
+    as ``thesis ur3 check`` applies them (``speed_limit_frames``: frames over a limit,
+    ``peak_speed_ratio``: the fastest joint over its limit; ``workspace_frames``); how much each
+    joint moves, and the beat alignment
     against a shuffled-audio control (:func:`beat_check`); ``beat_above_control``: the score
     beats every shuffled control.
 
@@ -1531,7 +1535,7 @@ def recorded_music_check(
     from thesis_lib.mdlt.audio import audio_features, load_audio
     from thesis_lib.mdlt.train import load_checkpoint
     from thesis_lib.mdlt.translate import packaged_checkpoint
-    from thesis_lib.ur3.dance import map_dance
+    from thesis_lib.ur3.dance import map_dance, prepare_dance
     from thesis_lib.ur3.model import POSITION_LIMITS
 
     ckpt = Path(checkpoint) if checkpoint is not None else packaged_checkpoint()
@@ -1550,13 +1554,17 @@ def recorded_music_check(
         np.all(np.abs(angles) <= np.pi)
         and np.all((q >= POSITION_LIMITS[:, 0]) & (q <= POSITION_LIMITS[:, 1]))
     )
+    speeds = prepare_dance(angles, fps, mode="clip").before  # as `thesis ur3 check` reports it
     return {
         "file": Path(audio).name,
         "sample_rate": int(sr),
         "seconds": len(y) / sr,
         "checkpoint": ckpt.name,
         "frames": len(angles),
-        "inside_ur3_limits": inside,
+        "inside_position_limits": inside,
+        "speed_limit_frames": len(speeds.speed_frames),
+        "peak_speed_ratio": float(speeds.max_speed_ratio),
+        "workspace_frames": len(speeds.workspace_frames),
         "max_abs_angle": float(np.abs(angles).max()),
         **{f"std_{j}": float(angles[:, j].std()) for j in range(angles.shape[1])},
         **(beats := beat_check(angles, raw, translate, shuffles=shuffles, seed=seed, fps=fps)),
