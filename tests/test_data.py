@@ -52,7 +52,7 @@ def test_generate_store_load_round_trip_is_byte_identical(task, tier):
     if data.get_task(task).kind == "mujoco" and tier != "random" and not has_policies(task):
         pytest.skip(f"no shipped policy for {task}")
     did = generate(task, tier, n_transitions=1200, seed=3)
-    assert did == f"thesis/{task}/{tier}-v0"
+    assert did == f"thesis-1200/{task}/{tier}-v0"  # the size is in the id
     ds = load(did)
     eps, _ = make_episodes(task, tier, 1200, seed=3)
     assert ds.n_transitions == 1200 == sum(len(e) for e in eps)
@@ -381,7 +381,7 @@ def test_a_damaged_set_is_reported_in_one_line_and_rebuilt_by_get_dataset(damage
     assert _cli(["data", "card", a.id]) == 1  # one line, not a traceback
     err = capsys.readouterr().err.strip()
     assert "damaged" in err and a.id in err and "\n" not in err
-    with pytest.warns(UserWarning, match=r"'thesis/maze2d-umaze/random-v0' is damaged"):
+    with pytest.warns(UserWarning, match=r"'thesis-50/maze2d-umaze/random-v0' is damaged"):
         b = data.get_dataset("maze2d-umaze", "random", n_transitions=50)
     assert b.n_transitions == 50 and load(a.id).n_transitions == 50
 
@@ -406,7 +406,7 @@ def test_making_and_closing_a_maze_env_leaves_no_file_in_the_temp_dir(tmp_path, 
     env.step(env.action_space.sample())
     env.close()
     generate("maze2d-open", "random", n_transitions=20)  # the storage makes one too
-    data.load("thesis/maze2d-open/random-v0").recover_environment().close()
+    data.load("thesis-20/maze2d-open/random-v0").recover_environment().close()
     assert sorted(p.name for p in tmp.iterdir()) == []
 
 
@@ -439,11 +439,11 @@ def test_cli_generate_list_card(capsys):
         == 0
     )
     assert _cli(["data", "list"]) == 0
-    assert "thesis/maze2d-umaze/expert-v0" in capsys.readouterr().out
-    assert _cli(["data", "card", "thesis/maze2d-umaze/expert-v0"]) == 0
+    assert "thesis-600/maze2d-umaze/expert-v0" in capsys.readouterr().out
+    assert _cli(["data", "card", "thesis-600/maze2d-umaze/expert-v0"]) == 0
     out = capsys.readouterr().out
     assert "transitions: 600" in out and "D4RL-normalised" in out and "success rate" in out
-    card = data.data_card("thesis/maze2d-umaze/expert-v0")
+    card = data.data_card("thesis-600/maze2d-umaze/expert-v0")
     assert card["transitions"] == 600 and card["info"]["seed"] == 0
     assert _cli(["data", "card", "--experts"]) == 0
 
@@ -509,7 +509,7 @@ def test_cards_table_and_return_histogram():
     import matplotlib
 
     matplotlib.use("Agg")
-    ids = [generate("maze2d-umaze", t, n_transitions=700, seed=0) for t in ("random", "expert")]
+    ids = [generate("hopper", t, n_transitions=700, seed=0) for t in ("random", "expert")]
     df = data.cards_table(ids)
     assert list(df["transitions"]) == [700, 700]
     assert df.loc[1, "return_mean"] > df.loc[0, "return_mean"]

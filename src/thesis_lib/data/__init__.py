@@ -16,6 +16,7 @@ from .card import (
     QUALITY_TARGETS,
     cards_table,
     check_environments,
+    d4rl_comparison,
     data_card,
     expert_quality,
     format_card,
@@ -23,6 +24,7 @@ from .card import (
     plot_return_histograms,
     record_maze_experts,
 )
+from .d4rl_reference import D4RLStats, d4rl_stats
 from .deep_experts import (
     DEEP_EXPERT_CONFIGS,
     DeepExpertConfig,
@@ -31,7 +33,7 @@ from .deep_experts import (
     train_deep_expert,
 )
 from .experts import LinearPolicy, load_policy, load_policy_record, train_experts
-from .maze import WaypointExpert, bfs_distances
+from .maze import FixedTarget, WaypointExpert, bfs_distances, fixed_target_maze
 from .minari_sets import data_difference, dataset_key, is_minari_id, open_dataset
 from .recipe import (
     DATASET_SIZES,
@@ -55,9 +57,15 @@ from .storage import (
     minari_root,
     write_dataset,
 )
-from .tasks import TASKS, TaskSpec, gen_dataset_id, get_task, parse_dataset_id
+from .tasks import TASKS, TaskSpec, gen_dataset_id, get_task, parse_dataset_id, size_namespace
 
 __all__ = [
+    "D4RLStats",
+    "FixedTarget",
+    "d4rl_comparison",
+    "d4rl_stats",
+    "fixed_target_maze",
+    "size_namespace",
     "DEEP_EXPERT_CONFIGS",
     "DamagedDatasetError",
     "DeepExpertConfig",

@@ -61,7 +61,8 @@ def data_card(ds: str | OfflineDataset) -> dict[str, Any]:
 
     Returns:
         A dict: ``id, env_id, episodes, transitions, return_mean, return_std, return_min,
-        return_max, normalized_mean`` (``None`` without reference scores),
+        return_max, normalized_mean/std/min/max`` (``None`` without reference scores),
+        ``mean_length``,
         ``success_rate`` (goal-conditioned sets: share of episodes with positive return),
         ``terminations, truncations`` (episodes ending each way) and ``info`` (how it was
         made, for our data sets).
@@ -79,7 +80,11 @@ def data_card(ds: str | OfflineDataset) -> dict[str, Any]:
         "return_std": float(r.std()) if len(r) else float("nan"),
         "return_min": float(r.min()) if len(r) else float("nan"),
         "return_max": float(r.max()) if len(r) else float("nan"),
-        "normalized_mean": None if norm is None else float(norm.mean()),
+        "normalized_mean": None if norm is None or not len(r) else float(norm.mean()),
+        "normalized_std": None if norm is None or not len(r) else float(norm.std()),
+        "normalized_min": None if norm is None or not len(r) else float(norm.min()),
+        "normalized_max": None if norm is None or not len(r) else float(norm.max()),
+        "mean_length": d.n_transitions / len(d) if len(d) else float("nan"),
         "success_rate": float((r > 0).mean()) if goal else None,
         "terminations": int(sum(bool(e.terminations[-1]) for e in d.episodes if len(e))),
         "truncations": int(sum(bool(e.truncations[-1]) for e in d.episodes if len(e))),
@@ -109,7 +114,11 @@ def format_card(card: dict[str, Any]) -> str:
         f"[{card['return_min']:.1f}, {card['return_max']:.1f}]"
     )
     if card["normalized_mean"] is not None:
-        lines.append(f"{'D4RL-normalised':>16}: {card['normalized_mean']:.1f}")
+        lines.append(
+            f"{'D4RL-normalised':>16}: {card['normalized_mean']:.1f} ± {card['normalized_std']:.1f} "
+            f"[{card['normalized_min']:.1f}, {card['normalized_max']:.1f}]"
+        )
+    lines += _d4rl_lines(card)
     if card["success_rate"] is not None:
         lines.append(f"{'success rate':>16}: {card['success_rate']:.2f}")
     lines.append(
@@ -117,11 +126,82 @@ def format_card(card: dict[str, Any]) -> str:
     )
     if card.get("info"):
         lines.append(f"{'made by':>16}: {json.dumps(card['info'], default=str)}")
-    task = card["id"].split("/")[1] if card["id"].startswith("thesis/") else None
+        lines += _version_lines(card)
+    task = _our_task_tier(card["id"])[0]
     if task in TASKS and get_task(task).kind == "robotics":
         fam = "antmaze" if task.startswith("antmaze") else task if task == "kitchen" else "adroit"
         lines.append(f"{'feasibility':>16}: {FEASIBILITY[fam]}")
     return "\n".join(lines)
+
+
+def _our_task_tier(dataset_id: str) -> tuple[str | None, str | None]:
+    """``(task, tier)`` of a set made here (any size), else ``(None, None)``."""
+    from .tasks import is_our_namespace, parse_dataset_id
+
+    try:
+        ns, task, tier, _ = parse_dataset_id(dataset_id)
+    except ValueError:
+        return None, None
+    return (task, tier) if is_our_namespace(ns) else (None, None)
+
+
+def d4rl_comparison(card: dict[str, Any]) -> dict[str, Any] | None:
+    """Our set's statistics beside D4RL's published ones for the same tier
+    (:mod:`thesis_lib.data.d4rl_reference`), or ``None`` where D4RL has no such set.
+
+    Returns:
+        ``{"d4rl": D4RLStats, "in_band": bool | None, "why": str}``: ``in_band`` is ``None``
+        where D4RL publishes no return statistics (Maze2D), else whether our normalised mean
+        is within 10 points of D4RL's and our std at least half of D4RL's.
+    """
+    from .d4rl_reference import d4rl_stats, in_band
+
+    task, tier = _our_task_tier(card["id"])
+    ref = d4rl_stats(task, tier) if task and tier else None
+    if ref is None:
+        return None
+    if ref.mean is None or card.get("normalized_mean") is None:
+        return {"d4rl": ref, "in_band": None, "why": ref.computed}
+    ok, why = in_band(card["normalized_mean"], card["normalized_std"], ref)
+    return {"d4rl": ref, "in_band": ok, "why": why}
+
+
+def _version_lines(card: dict[str, Any]) -> list[str]:
+    """A line saying the set was made by an older recipe, and how to rebuild it."""
+    from .recipe import GENERATOR_VERSION
+    from .storage import _generate_command
+
+    made = card["info"].get("generator_version")
+    if made is None or made == GENERATOR_VERSION:
+        return []
+    return [
+        f"{'OUT OF DATE':>16}: made by recipe version {made}, this is {GENERATOR_VERSION}: "
+        f"rebuild with {_generate_command(card['id'])}"
+    ]
+
+
+def _d4rl_lines(card: dict[str, Any]) -> list[str]:
+    """The card's lines on D4RL's figures for the same tier."""
+    from .d4rl_reference import SOURCES
+
+    cmp = d4rl_comparison(card)
+    if cmp is None:
+        return []
+    ref = cmp["d4rl"]
+
+    def num(x: float | None, fmt: str = ".1f") -> str:
+        return "-" if x is None else format(x, fmt)
+
+    lines = [
+        f"{'D4RL':>16}: {ref.name}: {num(ref.transitions, ',d')} transitions, "
+        f"{num(ref.episodes, ',d')} episodes (mean length {num(ref.mean_length, '.0f')}); "
+        f"normalised {num(ref.mean)} ± {num(ref.std)} [{num(ref.min)}, {num(ref.max)}]"
+    ]
+    verdict = {True: "inside the band", False: "OUTSIDE the band", None: "no band"}
+    lines.append(f"{'beside D4RL':>16}: {verdict[cmp['in_band']]}: {cmp['why']}")
+    for key in ref.source:
+        lines.append(f"{'source':>16}: {SOURCES[key]}")
+    return lines
 
 
 def plot_return_histograms(

@@ -205,7 +205,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("data", help="demonstration data sets (Minari format)")
     sub = p.add_subparsers(dest="data_command", required=True)
 
-    g = sub.add_parser("generate", help="make thesis/<task>/<tier>-v0 by the D4RL recipe")
+    g = sub.add_parser(
+        "generate",
+        help="make thesis[-<size>]/<task>/<tier>-v0 by the D4RL recipe (smoke: thesis/, "
+        "full: thesis-1m/)",
+    )
     g.add_argument("--task", required=True, help="task name, or 'all' (see 'data list --tasks')")
     g.add_argument(
         "--tier", default="all", help="expert|medium|medium-replay|medium-expert|random|all"

@@ -6,7 +6,9 @@ Tiers (D4RL, Fu et al. 2020):
   of :func:`action_noise_for`, which is 0 for the MuJoCo tasks: the reset noise alone
   makes the episodes differ).
 - ``medium``: a policy of the same training run at about one third of the expert's
-  return, rolled out like the expert.
+  return, sampled as D4RL sampled its SAC medium policy, so that the returns spread: a
+  TQC/SAC actor draws its actions from its own Gaussian; an ARS linear policy (Hopper,
+  InvertedDoublePendulum) gets ARS's own exploration, new weight noise each episode.
 - ``medium-replay``: the experience of training up to medium. For the TQC experts
   (Walker2d, HalfCheetah, Ant): uniform random actions for the run's warm-up steps, then
   the shipped snapshots up to the medium one, each sampling from its own Gaussian (SAC's
@@ -17,7 +19,12 @@ Tiers (D4RL, Fu et al. 2020):
   requested size, as D4RL's 2M-transition sets), so its halves are exactly those sets.
 - ``random``: uniform random actions.
 - Maze2D ``expert``: the BFS + PD waypoint planner of :mod:`thesis_lib.data.maze` with
-  action noise; ``random``: uniform random actions.
+  action noise, driven to random goals one after another as D4RL's recorder was; the rewards
+  count the layout's fixed evaluation target (D4RL's maze2d); ``random``: uniform random actions.
+
+A set's id carries its size (:func:`~thesis_lib.data.tasks.size_namespace`): the smoke size
+(20k transitions) is ``thesis/<task>/<tier>-v0``, the full one (1M) ``thesis-1m/<task>/<tier>-v0``,
+any other ``thesis-<n>/...``; sizes never overwrite each other.
 
 Each tier draws from its own ``np.random.default_rng`` seeded by ``(seed, tier)``, so the
 same seed gives the same arrays, byte for byte, and no two tiers share initial states (as
@@ -46,13 +53,16 @@ from .storage import (
     load,
     write_dataset,
 )
-from .tasks import TaskSpec, check_tier, gen_dataset_id, get_task
+from .tasks import SMOKE_TRANSITIONS, TaskSpec, check_tier, gen_dataset_id, get_task
 
 DatasetSize = Literal["smoke", "full"]
 
 #: version of the recipe, stored in each set's ``thesis_info``. 2: TQC experts for
 #: Walker2d/HalfCheetah/Ant, one seed per tier (medium-expert's halves independent).
-GENERATOR_VERSION = 2
+#: 3: the medium tier samples its policy's own exploration (D4RL's medium sets were sampled
+#: from SAC's Gaussian: the returns spread); Maze2D scores D4RL's fixed target and its
+#: expert visits random goals; the size is part of the id (:func:`size_namespace`).
+GENERATOR_VERSION = 3
 
 #: order of the tiers in the per-tier seed (never reorder: it would change every set).
 _TIER_INDEX = {"expert": 0, "medium": 1, "medium-replay": 2, "medium-expert": 3, "random": 4}
@@ -69,7 +79,7 @@ def tier_seed(seed: int, tier: str) -> int:
 
 
 #: transitions per data set by size (D4RL's full size is 1M; medium-expert doubles).
-DATASET_SIZES: dict[str, int] = {"smoke": 20_000, "full": 1_000_000}
+DATASET_SIZES: dict[str, int] = {"smoke": SMOKE_TRANSITIONS, "full": 1_000_000}
 
 #: default action-noise std per task kind. Maze: D4RL's maze2d used a noisy planner.
 #: MuJoCo: 0, because the linear ARS policies are brittle (measured on 30k transitions:
@@ -86,7 +96,9 @@ def action_noise_for(task: str) -> float:
 
 
 def make_env(task: str, **kwargs: object):  # -> gym.Env
-    """``gymnasium.make`` for ``task``, with its episode limit (and robotics envs registered)."""
+    """``gymnasium.make`` for ``task``, with its episode limit (and robotics envs registered);
+    a Maze2D task as D4RL's maze2d, with its layout's fixed target
+    (:func:`thesis_lib.data.maze.fixed_target_maze`)."""
     import gymnasium as gym
 
     spec = get_task(task)
@@ -95,6 +107,10 @@ def make_env(task: str, **kwargs: object):  # -> gym.Env
         if spec.env_id.startswith("AdroitHand") and _ROBOTICS_NOTICE:
             warnings.warn(_ROBOTICS_NOTICE, stacklevel=2)
     kw = {**spec.env_kwargs, **kwargs}
+    if spec.kind == "maze":  # D4RL's maze2d: one fixed target per layout (data and evaluation)
+        from .maze import fixed_target_maze
+
+        return fixed_target_maze(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw)
     return forget_maze_xml(gym.make(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw))
 
 
@@ -231,6 +247,24 @@ def _noisy(pol: Callable[[np.ndarray], np.ndarray], std: float, low, high) -> Po
     return act
 
 
+class _EpisodePerturbed:
+    """A linear policy whose weights are perturbed anew each episode (ARS's exploration: each
+    roll-out of ARS's training uses ``W ± std·δ``); the draw comes from the roll-out's ``rng``
+    at the episode's first step."""
+
+    def __init__(self, base: Any, std: float):
+        self.base, self.std = base, std
+        self._current: Any = None
+
+    def reset(self, env: object) -> None:
+        self._current = None
+
+    def __call__(self, obs: Any, rng: np.random.Generator) -> np.ndarray:
+        if self._current is None:
+            self._current = self.base.perturbed(rng, self.std)
+        return self._current(obs)
+
+
 def _renumber(episodes: list[Episode]) -> list[Episode]:
     from dataclasses import replace
 
@@ -279,12 +313,15 @@ def make_episodes(
         info["action_noise"] = 0.0
         eps = rollout(env, _random_policy(env), n_transitions, rng)
     elif spec.kind == "maze":
-        from .maze import WaypointExpert
+        from .maze import D4RL_TARGET_CELLS, WaypointExpert
 
-        ex = WaypointExpert(noise_std=noise)
+        ex = WaypointExpert(noise_std=noise, random_goals=True, rng=rng)
         info["algorithm"] = (
-            f"BFS waypoints + PD (p={ex.p_gain}, d={ex.d_gain}) + N(0, {noise}) action noise"
+            f"BFS waypoints + PD (p={ex.p_gain}, d={ex.d_gain}) + N(0, {noise}) action noise, "
+            "driven to random goals one after another (D4RL's maze2d recorder); rewards count "
+            "the layout's fixed target"
         )
+        info["target_cell"] = list(D4RL_TARGET_CELLS[spec.env_id])
         eps = rollout(env, ex, n_transitions, rng, on_reset=ex.reset)
     elif tier == "medium-expert":
         env.close()
@@ -304,10 +341,24 @@ def make_episodes(
             "medium_return_mean": rec.medium_return_mean,
         }
         kind = "ARS linear" if rec.policy_kind == "linear" else rec.algorithm.split(",")[0]
-        if tier in ("expert", "medium"):
+        if tier == "expert":
             pol = load_policy(task, tier)
             info["algorithm"] = f"{kind} {tier} policy + N(0, {noise}) action noise"
             eps = rollout(env, _noisy(pol, noise, low, high), n_transitions, rng)
+        elif tier == "medium" and rec.policy_kind == "mlp":
+            pol = load_policy(task, tier)
+            info["action_noise"] = 0.0  # the actor's own Gaussian is the noise
+            info["algorithm"] = f"{kind} medium policy, actions sampled from its Gaussian"
+            eps = rollout(env, pol.sample, n_transitions, rng)
+        elif tier == "medium":
+            std = float(rec.config["delta_std"])
+            sampler = _EpisodePerturbed(load_policy(task, tier), std)
+            info["action_noise"] = 0.0  # ARS explores in weight space, not action space
+            info["algorithm"] = (
+                f"ARS linear medium policy, its weights perturbed by N(0, {std}) per episode "
+                "(ARS's own exploration)"
+            )
+            eps = rollout(env, sampler, n_transitions, rng, on_reset=sampler.reset)
         elif tier == "medium-replay" and rec.policy_kind == "mlp":
             info["action_noise"] = 0.0  # the actor's own Gaussian is the exploration
             eps = _mlp_replay(task, env, rec, n_transitions, rng, info)
@@ -380,6 +431,15 @@ def _mlp_replay(
     return eps
 
 
+def _size(size: str, n_transitions: Any) -> int:
+    """The number of transitions of ``size`` (``smoke``/``full``), or ``n_transitions`` checked."""
+    if n_transitions is not None:
+        return _check_n_transitions(n_transitions)
+    if size not in DATASET_SIZES:
+        raise ValueError(f"Unknown size {size!r}. Valid: {', '.join(DATASET_SIZES)}.")
+    return DATASET_SIZES[size]
+
+
 def _check_n_transitions(n: Any) -> int:
     """``n`` as an int, or a ``ValueError`` naming ``n_transitions`` unless it is a whole number ≥ 1
     (``20000.0`` from a YAML ``2e4`` passes)."""
@@ -401,7 +461,8 @@ def generate(
     action_noise: float | None = None,
     overwrite: bool = True,
 ) -> str:
-    """Make one data set and store it as ``thesis/<task>/<tier>-v0``.
+    """Make one data set and store it as ``<size namespace>/<task>/<tier>-v0``
+    (:func:`~thesis_lib.data.tasks.size_namespace`: ``thesis/`` at the smoke size).
 
     Args:
         task: e.g. ``"hopper"``, ``"maze2d-umaze"``.
@@ -420,8 +481,8 @@ def generate(
             An existing set is replaced only once the new one is written whole.
     """
     spec = get_task(task)
-    dataset_id = gen_dataset_id(task, tier)
-    n = DATASET_SIZES[size] if n_transitions is None else _check_n_transitions(n_transitions)
+    n = _size(size, n_transitions)
+    dataset_id = gen_dataset_id(task, tier, n_transitions=n)
     t0 = time.time()
     eps, info = make_episodes(task, tier, n, seed, action_noise)
     rets = np.array([e.episode_return for e in eps])
@@ -474,8 +535,8 @@ def get_dataset(
     Raises:
         ValueError: unknown task or tier, or ``n_transitions < 1``.
     """
-    dataset_id = gen_dataset_id(task, tier)
-    n = DATASET_SIZES[size] if n_transitions is None else _check_n_transitions(n_transitions)
+    n = _size(size, n_transitions)
+    dataset_id = gen_dataset_id(task, tier, n_transitions=n)
     if find_dataset(dataset_id) is not None:
         try:
             ds: OfflineDataset | None = load(dataset_id)

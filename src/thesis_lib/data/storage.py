@@ -31,7 +31,7 @@ import numpy as np
 
 from thesis_lib.book.paths import data_dir, minari_root  # every on-disk location: book.paths
 
-from .tasks import NAMESPACE, TASKS, parse_dataset_id
+from .tasks import NAMESPACE, TASKS, is_our_namespace, parse_dataset_id
 
 
 class EpisodeFormatError(ValueError):
@@ -171,13 +171,21 @@ class OfflineDataset:
         return 100.0 * (r - self.ref_min_score) / (self.ref_max_score - self.ref_min_score)
 
     def recover_environment(self, **kwargs: Any) -> Any:
-        """``gymnasium.make`` of the recorded environment."""
+        """``gymnasium.make`` of the recorded environment; for a set made here, the task's
+        environment as :func:`thesis_lib.data.make_env` makes it (a Maze2D with its fixed
+        target)."""
         import gymnasium as gym
 
-        from .recipe import forget_maze_xml
+        from .recipe import forget_maze_xml, make_env
 
         if self.env_id is None:
             raise ValueError(f"Data set '{self.id}' records no environment.")
+        try:
+            ns, task, _, _ = parse_dataset_id(self.id)
+        except ValueError:
+            ns, task = "", ""
+        if is_our_namespace(ns) and task in TASKS and TASKS[task].env_id == self.env_id:
+            return make_env(task, **kwargs)
         return forget_maze_xml(gym.make(self.env_id, **kwargs))
 
 
@@ -187,12 +195,21 @@ def _generate_command(dataset_id: str) -> str | None:
         ns, task, tier, _ = parse_dataset_id(dataset_id)
     except ValueError:
         return None
-    if ns != NAMESPACE or task not in TASKS:
+    if not is_our_namespace(ns) or task not in TASKS:
         return None
+    size = "" if ns == NAMESPACE else f" --n-transitions {_namespace_size(ns)}"
     return (
-        f"'thesis data generate --task {task} --tier {tier}' "
-        f"(or thesis_lib.data.generate('{task}', '{tier}'))"
+        f"'thesis data generate --task {task} --tier {tier}{size}' "
+        f"(or thesis_lib.data.generate('{task}', '{tier}'"
+        f"{'' if not size else ', n_transitions=' + str(_namespace_size(ns))}))"
     )
+
+
+def _namespace_size(ns: str) -> int:
+    """The transitions a size namespace stands for (``thesis-1m`` -> 1000000)."""
+    tail = ns.removeprefix(f"{NAMESPACE}-")
+    scale = {"k": 1000, "m": 1_000_000}.get(tail[-1:], 1)
+    return int(tail.rstrip("km")) * scale
 
 
 def _missing_message(dataset_id: str) -> str:

@@ -1,7 +1,8 @@
 """Task registry, data-set ids and D4RL reference scores.
 
-Every data set this package makes has an id ``thesis/<task>/<tier>-v0`` (Minari's
-``namespace/dataset_name-vN`` grammar). :func:`parse_dataset_id` and
+Every data set this package makes has an id ``thesis/<task>/<tier>-v0`` at the smoke size
+(``thesis-1m/…`` at D4RL's 1M, :func:`size_namespace`; Minari's ``namespace/dataset_name-vN``
+grammar). :func:`parse_dataset_id` and
 :func:`gen_dataset_id` are the parse/generate pair.
 
 Used by the sequence-model chapters (HDT 5.2, Decision Mamba 5.3) and by DEFENDER 4.3
@@ -162,14 +163,44 @@ def check_tier(task: str, tier: str) -> None:
         )
 
 
-def gen_dataset_id(task: str, tier: str, version: int = VERSION) -> str:
-    """Build the id of a data set made here.
+#: transitions of the smoke-size sets, whose ids keep the plain namespace ``thesis``.
+SMOKE_TRANSITIONS = 20_000
 
-    >>> gen_dataset_id("hopper", "medium")
-    'thesis/hopper/medium-v0'
+
+def size_namespace(n_transitions: int | None = None) -> str:
+    """The namespace of a set of ``n_transitions`` made here, so that sizes never share an id:
+    ``thesis`` at the smoke size (20k, or ``None``), ``thesis-1m`` for D4RL's 1M, else
+    ``thesis-<n>`` (``k``/``m`` where whole).
+
+    >>> size_namespace(), size_namespace(1_000_000), size_namespace(200_000), size_namespace(1234)
+    ('thesis', 'thesis-1m', 'thesis-200k', 'thesis-1234')
+    """
+    n = SMOKE_TRANSITIONS if n_transitions is None else int(n_transitions)
+    if n == SMOKE_TRANSITIONS:
+        return NAMESPACE
+    if n % 1_000_000 == 0:
+        return f"{NAMESPACE}-{n // 1_000_000}m"
+    if n % 1000 == 0:
+        return f"{NAMESPACE}-{n // 1000}k"
+    return f"{NAMESPACE}-{n}"
+
+
+def is_our_namespace(namespace: str) -> bool:
+    """Whether ``namespace`` is one :func:`size_namespace` makes (``thesis``, ``thesis-1m`` …)."""
+    return re.fullmatch(rf"{NAMESPACE}(-\d+[km]?)?", namespace) is not None
+
+
+def gen_dataset_id(
+    task: str, tier: str, version: int = VERSION, n_transitions: int | None = None
+) -> str:
+    """Build the id of a data set made here; the size is in the namespace
+    (:func:`size_namespace`).
+
+    >>> gen_dataset_id("hopper", "medium"), gen_dataset_id("hopper", "medium", n_transitions=10**6)
+    ('thesis/hopper/medium-v0', 'thesis-1m/hopper/medium-v0')
     """
     check_tier(task, tier)
-    return f"{NAMESPACE}/{task}/{tier}-v{version}"
+    return f"{size_namespace(n_transitions)}/{task}/{tier}-v{version}"
 
 
 def parse_dataset_id(dataset_id: str) -> tuple[str, str, str, int]:
