@@ -233,7 +233,7 @@ def test_committed_claims_follow_from_the_committed_rows(monkeypatch):
 READING = re.compile(
     r"\*\*Reading the verdicts\*\* \(study `([^`]+)`, complete: (\d+) runs, ([\d.]+) CPU-hours"
 )
-SAID = re.compile(r"\*\*(C\d+)[ ,]+(holds|fails|inconclusive)\b")
+SAID = re.compile(r"\*\*(C\d+)[ ,]+(holds|fails|inconclusive|untestable)\b")
 READ_BY_HAND = [
     p
     for p in sorted((REPO / "notebooks").glob("*.ipynb"))

@@ -440,7 +440,8 @@ def plot_performance_profiles(
 
 def comparisons_table(ev: Evidence) -> pd.DataFrame:
     """The pre-registered comparisons: claim, x vs y, metric, settings, effect with its 95%
-    interval, P(X > Y), the verdict, and whether it decides the claim; before the study is
+    interval, P(X > Y), the verdict, whether it decides the claim, and its validity gates
+    with their figures (:mod:`thesis_lib.stats.gates`); before the study is
     complete, the comparisons as registered with the verdict ``pending``."""
     cols = [
         "claim",
@@ -458,6 +459,7 @@ def comparisons_table(ev: Evidence) -> pd.DataFrame:
         "settings",
         "verdict",
         "decides the claim",
+        "gates",
     ]
     if not ev.complete or ev.comparisons.empty:
         return pd.DataFrame(
@@ -493,6 +495,7 @@ def comparisons_table(ev: Evidence) -> pd.DataFrame:
             "settings": r["settings"],
             "verdict": r["verdict"],
             "decides the claim": r["counts"] if "counts" in r else True,
+            "gates": r["gates"] if "gates" in r else "",
         },
         columns=cols,
     )

@@ -48,6 +48,8 @@ STUDY_KEYS = {
     "scale_check",
     "reuse",
     "notes",
+    "gates",
+    "interval",
 }
 SCALE_CHECK_KEYS = {"config", "note"}
 REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
@@ -74,15 +76,31 @@ class Study:
     """Chapters whose finished study tasks are copied in when a task is the same (same key)."""
     notes: str = ""
     path: Path | None = None
+    gates: list[dict[str, Any]] = field(default_factory=list)
+    """Validity gates pre-registered with the comparisons (:mod:`thesis_lib.stats.gates`)."""
+    interval: str | None = None
+    """The comparisons' interval (:data:`thesis_lib.stats.INTERVALS`); ``None``: the engine's
+    default, :data:`DEFAULT_INTERVAL`."""
 
     @property
     def hash(self) -> str:
-        """Hash of everything pre-registered (all fields but the file's path)."""
+        """Hash of everything pre-registered (all fields but the file's path; ``gates`` and
+        ``interval`` only where a file sets them, so v1 study files keep their hash)."""
         from thesis_lib.sweep import config_hash
 
         d = dataclasses.asdict(self)
         d.pop("path")
+        if not d["gates"]:
+            d.pop("gates")
+        if d["interval"] is None:
+            d.pop("interval")
         return config_hash(d)
+
+
+#: The interval of every study's comparisons unless its file says otherwise: Welch's t
+#: interval for the mean (it covers 95% at 3-5 seeds, where the percentile bootstrap of the v1
+#: rule covered about 89%; issue #35).
+DEFAULT_INTERVAL = "welch"
 
 
 def study_path(chapter: str) -> Path:
@@ -146,6 +164,22 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     reuse = data.get("reuse") or []
     if isinstance(reuse, str):
         reuse = [reuse]
+    from thesis_lib.stats import INTERVALS
+    from thesis_lib.stats.gates import check_gate
+
+    gates = data.get("gates") or []
+    if not isinstance(gates, list):
+        raise ValueError(f"Expect `gates` to be a list of gates, actually: {gates!r}{where}")
+    for g in gates:
+        try:
+            check_gate(g)
+        except ValueError as e:
+            raise ValueError(f"{e}{where}") from None
+    interval = data.get("interval")
+    if interval is not None and interval not in INTERVALS:
+        raise ValueError(
+            f"Expect `interval` to be one of {INTERVALS}, actually: {interval!r}{where}"
+        )
     return Study(
         study=str(data["study"]),
         chapter=str(data["chapter"]),
@@ -160,6 +194,8 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
         reuse=[str(r) for r in reuse],
         notes=str(data.get("notes", "")),
         path=path,
+        gates=[dict(g) for g in gates],
+        interval=interval,
     )
 
 
@@ -549,6 +585,27 @@ def write_study_summary(
     return info
 
 
+def gates_path(chapter: str) -> Path:
+    """``params/<chapter>.gates.yml``: the post-hoc validity review of a study whose file
+    predates gates (the v1 studies); its gates are applied beside the file's own."""
+    return project_root() / "params" / f"{chapter}.gates.yml"
+
+
+def study_gates(study: Study) -> list[dict[str, Any]]:
+    """The study file's gates, then those of its review file (:func:`gates_path`)."""
+    from thesis_lib.stats.gates import load_gates
+
+    p = gates_path(study.chapter)
+    review = load_gates(p) if p.is_file() else []
+    return [*study.gates, *review]
+
+
+def _parity_table() -> pd.DataFrame | None:
+    """``studies/parity/parity.csv`` (the fidelity gates' evidence), or ``None``."""
+    p = project_root() / "studies" / "parity" / "parity.csv"
+    return pd.read_csv(p) if p.is_file() else None
+
+
 def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
     """The pre-registered comparisons of a finished study (raises if it is incomplete, or if
     a row the comparisons read is wrong: the error names its task file and what is wrong)."""
@@ -577,6 +634,9 @@ def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
         setting_col=c["setting"],
         seed_col=c["seed"],
         reps=reps,
+        interval=study.interval or DEFAULT_INTERVAL,
+        gates=study_gates(study),
+        parity=_parity_table(),
     )
     res.insert(0, "study", study.study)
     res.insert(1, "chapter", chapter)
@@ -596,6 +656,7 @@ CLAIMS_COLUMNS = [
     "seeds",
     "settings",
     "decided_by",
+    "validity",
     "chapter",
     "study",
     "study_commit",

@@ -96,9 +96,29 @@ def link_chapters(ledger: pd.DataFrame, section: str = "evidence-at-study-scale"
 
 
 def verdict_counts(claims: pd.DataFrame) -> pd.Series:
-    """How many claims hold, fail, are inconclusive or pending."""
+    """How many claims hold, fail, are inconclusive, untestable or pending."""
     v = ledger_table(claims)["verdict"]
     return v.value_counts().reindex(list(VERDICT_COLOURS), fill_value=0)
+
+
+def gates_table(claims: pd.DataFrame) -> pd.DataFrame:
+    """Per claim: its validity gates and their figures (``validity`` of ``claims.csv``): why a
+    verdict is trusted, or why it was withheld (``untestable``).
+
+    >>> t = gates_table(pd.DataFrame({"claim": ["C2", "C12"], "verdict": ["holds", "untestable"],
+    ...     "validity": ["no gate", "untestable: CLfD vs TCN: FAILED level: CLfD 0.025 < 0.1"]}))
+    >>> t["gates"].tolist()
+    ['no gate', 'untestable: CLfD vs TCN: FAILED level: CLfD 0.025 < 0.1']
+    """
+    cols = ["claim", "verdict", "validity"]
+    have = claims.reindex(columns=cols)
+    return pd.DataFrame(
+        {
+            "claim": have["claim"],
+            "verdict": have["verdict"].fillna("pending"),
+            "gates": have["validity"].fillna("no study yet").astype(str),
+        }
+    )
 
 
 def headline(comparisons: Any) -> str:
@@ -227,4 +247,5 @@ __all__ = [
     "load_claims",
     "plot_claims",
     "verdict_counts",
+    "gates_table",
 ]

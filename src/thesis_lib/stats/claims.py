@@ -83,6 +83,7 @@ VERDICT_COLOURS = {
     "holds": "#2e7d32",
     "fails": "#c62828",
     "inconclusive": "#f9a825",
+    "untestable": "#5c6bc0",
     "pending": "#9e9e9e",
 }
 
@@ -138,34 +139,86 @@ def evaluate_comparisons(
     setting_col: str = "setting",
     seed_col: str = "seed",
     reps: int = 10_000,
+    interval: str = "bootstrap",
+    gates: Sequence[Mapping[str, Any]] = (),
+    parity: pd.DataFrame | None = None,
 ) -> pd.DataFrame:
-    """One row per comparison: effect, 95% interval, P(X > Y), verdict."""
+    """One row per comparison: effect, 95% interval (``interval``: see
+    :func:`thesis_lib.stats.compare`), P(X > Y), verdict, and its validity gates
+    (:mod:`thesis_lib.stats.gates`).
+
+    A comparison guarded by a gate that fails gets the verdict ``untestable``; ``stat_verdict``
+    keeps what its interval alone says, ``validity`` is ``valid``, ``untestable`` or empty (no
+    gate), and ``gates`` lists each gate's figure.
+    """
+    from .gates import applies, check_gate, evaluate_gate
+
+    for g in gates:
+        check_gate(g)
+    cols = {"method": method_col, "setting": setting_col, "seed": seed_col}
     out = []
     for spec in comparisons:
         check_comparison(spec)
-        c = compare(
+        m = spec.get("metric", metric)
+        interval_here = interval if spec.get("aggregate", "mean") == "mean" else "bootstrap"
+
+        def run(
+            r: pd.DataFrame, x: str, y: str, mt: str, _iv: str = interval_here, **kw: Any
+        ) -> Any:
+            kw.setdefault("claim", "superior")
+            return compare(
+                r,
+                x,
+                y,
+                mt,
+                reps=reps,
+                method_col=method_col,
+                setting_col=setting_col,
+                seed_col=seed_col,
+                interval=_iv,
+                **kw,
+            )
+
+        c = run(
             rows,
             spec["x"],
             spec["y"],
-            spec.get("metric", metric),
+            m,
             settings=spec.get("settings"),
             aggregate=spec.get("aggregate", "mean"),
             claim=spec.get("kind", "superior"),
             margin=float(spec.get("margin", 0.0)),
-            reps=reps,
-            method_col=method_col,
-            setting_col=setting_col,
-            seed_col=seed_col,
         )
-        out.append(
-            {
-                "claim": spec["claim"],
-                "label": spec.get("label", ""),
-                "counts": bool(spec.get("counts", True)),
-                **c.to_dict(),
-            }
-        )
+        settings = spec.get("settings") or _shared_settings(rows, spec["x"], spec["y"], m, cols)
+        results = [
+            evaluate_gate(g, {**spec, "metric": m}, rows, settings, m, cols, run, parity)
+            for g in gates
+            if applies(g, spec, settings)
+        ]
+        passed = all(ok for ok, _ in results)
+        row = {
+            "claim": spec["claim"],
+            "label": spec.get("label", ""),
+            "counts": bool(spec.get("counts", True)),
+            **c.to_dict(),
+            "stat_verdict": c.verdict,
+            "validity": "" if not results else "valid" if passed else "untestable",
+            "gates": "; ".join(f"{'passed' if ok else 'FAILED'} {fig}" for ok, fig in results),
+        }
+        if not passed:
+            row["verdict"] = "untestable"
+        out.append(row)
     return pd.DataFrame(out)
+
+
+def _shared_settings(
+    rows: pd.DataFrame, x: str, y: str, metric: str, cols: Mapping[str, str]
+) -> list[str]:
+    """The settings where both ``x`` and ``y`` have ``metric`` (as :func:`compare` picks them)."""
+    has = rows[rows[metric].notna()] if metric in rows else rows
+    sx = set(has.loc[has[cols["method"]] == x, cols["setting"]])
+    sy = set(has.loc[has[cols["method"]] == y, cols["setting"]])
+    return sorted(str(s) for s in sx & sy)
 
 
 def _name(r: Any) -> str:
@@ -174,11 +227,22 @@ def _name(r: Any) -> str:
     return str(label) if isinstance(label, str) and label else f"{r.x} vs {r.y}"
 
 
+def _validity(counted: pd.DataFrame) -> str:
+    """The gates of a claim's counted comparisons, in one line: the failed ones first."""
+    if "gates" not in counted or not counted["gates"].astype(str).str.len().any():
+        return "no gate"
+    failed = counted[counted["validity"] == "untestable"]
+    shown = failed if len(failed) else counted
+    head = "untestable: " if len(failed) else "gates passed: "
+    return head + " | ".join(f"{_name(r)}: {r.gates}" for r in shown.itertuples() if r.gates)
+
+
 def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
     """Fold comparisons into one row per claim.
 
-    A claim *holds* when every comparison of it holds, *fails* when any fails, and is
-    *inconclusive* otherwise. Its effect, interval, kind and margin are those of its first
+    A claim *holds* when every comparison of it holds, *fails* when any fails, is *untestable*
+    when none fails but one could not have shown the effect (a failed validity gate,
+    :mod:`thesis_lib.stats.gates`), and is *inconclusive* otherwise. Its effect, interval, kind and margin are those of its first
     comparison (the study file lists the headline comparison first); where the verdict is not the
     headline's, ``decided_by`` names the comparisons that gave it (else it is empty).
     Comparisons pre-registered with ``counts: false`` (reported apart, e.g. C3's
@@ -193,6 +257,8 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
         verdict = (
             "fails"
             if "fails" in v
+            else "untestable"
+            if "untestable" in v
             else "holds"
             if all(x == "holds" for x in v)
             else ("inconclusive")
@@ -217,6 +283,7 @@ def claim_verdicts(comparisons: pd.DataFrame) -> pd.DataFrame:
                     f"[{r.ci_low:.3g}, {r.ci_high:.3g}]"
                     for r in deciding.itertuples()
                 ),
+                "validity": _validity(counted),
                 "comparisons": "; ".join(
                     f"{r.x} vs {r.y} ({r.metric}"
                     + ("" if getattr(r, "counts", True) else ", reported apart")

@@ -1,0 +1,197 @@
+"""Validity gates: a verdict only where the study could have shown the effect (issue #35).
+
+A comparison's interval says how sure the difference is; a gate says whether the set-up could
+have shown a difference at all. Each gate is pre-registered (in a study file's ``gates``, or,
+for the v1 studies, in the post-hoc review ``params/<chapter>.gates.yml``) and names the
+comparisons it guards; a comparison with a failed gate gets the verdict ``untestable``, with the
+gate and its figure, whatever its interval says.
+
+Gate kinds (every gate has ``kind``, ``claim`` and ``why``; ``x``, ``y``, ``label`` and
+``setting`` narrow the comparisons it applies to, ``setting`` by substring):
+
+- ``level``: ``method`` (default: both ``x`` and ``y``) scores at least ``low`` and/or at most
+  ``high`` on ``metric`` (default: the comparison's), in *each* setting of the comparison
+  (mean over seeds). ``low``/``high`` may be a number or a ``{setting: number}`` mapping (a floor
+  per setting). With ``relative_to: <method>`` and ``slack``, the bound is that method's mean
+  minus ``slack`` (e.g. DT >= BC - 5). A floor or a ceiling is a ``level`` gate with both bounds
+  (a rate between 10% and 90% of its range).
+- ``control``: ``method`` must beat ``control`` on ``metric`` (its interval above 0; e.g. an
+  untrained encoder, a shuffled-audio control).
+- ``fidelity``: ``method``'s row ``parity`` in ``studies/parity/parity.csv`` is at parity with a
+  peer implementation.
+- ``untestable``: the set-up cannot answer the claim at all (e.g. synthetic data whose rule is
+  ours); it always fails, with its ``why``.
+
+Used by: :func:`thesis_lib.stats.claims.evaluate_comparisons`, the Claims page.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+GATE_KINDS = ("level", "control", "fidelity", "untestable")
+_SELECT = ("claim", "x", "y", "label", "setting")
+_KEYS = {
+    "level": {"method", "metric", "low", "high", "relative_to", "slack"},
+    "control": {"method", "control", "metric"},
+    "fidelity": {"method", "parity"},
+    "untestable": set(),
+}
+
+
+def check_gate(gate: Mapping[str, Any]) -> None:
+    """Raise ``ValueError`` naming what is wrong with one gate spec (read before anything runs)."""
+    kind = gate.get("kind")
+    if kind not in GATE_KINDS:
+        raise ValueError(f"Expect a gate's `kind` to be one of {GATE_KINDS}, actually: {kind!r}")
+    for k in ("claim", "why"):
+        if not isinstance(gate.get(k), str) or not gate[k]:
+            raise ValueError(f"a {kind} gate needs `{k}` (text), got {gate.get(k)!r}")
+    allowed = set(_SELECT) | {"kind", "why"} | _KEYS[kind]
+    unknown = set(gate) - allowed
+    if unknown:
+        raise ValueError(
+            f"unknown key(s) {sorted(unknown)} in a {kind} gate; valid: {sorted(allowed)}"
+        )
+    if kind == "level":
+        if not any(k in gate for k in ("low", "high", "relative_to")):
+            raise ValueError("a level gate needs `low`, `high` or `relative_to`")
+        for k in ("low", "high"):
+            v = gate.get(k)
+            ok = (
+                v is None
+                or _number(v)
+                or (isinstance(v, Mapping) and all(_number(b) for b in v.values()))
+            )
+            if not ok:
+                raise ValueError(
+                    f"Expect a level gate's `{k}` to be a number or {{setting: number}}, actually: {v!r}"
+                )
+    if kind == "control" and not (gate.get("method") and gate.get("control")):
+        raise ValueError("a control gate needs `method` and `control`")
+    if kind == "fidelity" and not (gate.get("method") and gate.get("parity")):
+        raise ValueError("a fidelity gate needs `method` and `parity` (a row of parity.csv)")
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v)
+
+
+def applies(
+    gate: Mapping[str, Any], comparison: Mapping[str, Any], settings: Sequence[str]
+) -> bool:
+    """Whether ``gate`` guards ``comparison`` (whose settings are ``settings``)."""
+    for k in ("claim", "x", "y", "label"):
+        if k in gate and str(comparison.get(k, "")) != str(gate[k]):
+            return False
+    if "setting" in gate and not any(str(gate["setting"]) in s for s in settings):
+        return False
+    return True
+
+
+def _setting_means(
+    rows: pd.DataFrame, method: str, metric: str, settings: Sequence[str], cols: Mapping[str, str]
+) -> dict[str, float]:
+    sub = rows[(rows[cols["method"]] == method) & rows[cols["setting"]].isin(list(settings))]
+    if sub.empty:
+        raise ValueError(f"a gate names method {method!r}, which has no rows in {list(settings)}")
+    values = pd.to_numeric(sub[metric], errors="coerce")
+    return {str(k): float(v) for k, v in values.groupby(sub[cols["setting"]]).mean().items()}
+
+
+def _bound(b: Any, setting: str) -> float | None:
+    if b is None:
+        return None
+    if isinstance(b, Mapping):
+        return float(b[setting]) if setting in b else None
+    return float(b)
+
+
+def evaluate_gate(
+    gate: Mapping[str, Any],
+    comparison: Mapping[str, Any],
+    rows: pd.DataFrame,
+    settings: Sequence[str],
+    metric: str,
+    cols: Mapping[str, str],
+    compare: Callable[..., Any] | None = None,
+    parity: pd.DataFrame | None = None,
+) -> tuple[bool, str]:
+    """``(passed, figure)`` of one gate on one comparison's rows.
+
+    ``figure`` says what was measured against what, e.g.
+    ``"level: CLfD success_final 0.013 < 0.1 in 'RL pick (TCN encoder)'"``.
+    """
+    kind = gate["kind"]
+    if kind == "untestable":
+        return False, f"untestable: {gate['why']}"
+    metric = str(gate.get("metric", comparison.get("metric") or metric))
+    if kind == "level":
+        methods = [gate["method"]] if gate.get("method") else [comparison["x"], comparison["y"]]
+        failed, shown = [], []
+        ref = (
+            _setting_means(rows, gate["relative_to"], metric, settings, cols)
+            if gate.get("relative_to")
+            else None
+        )
+        for m in methods:
+            means = _setting_means(rows, m, metric, settings, cols)
+            for s, v in means.items():
+                low = _bound(gate.get("low"), s)
+                if ref is not None:
+                    rel = ref[s] - float(gate.get("slack", 0.0))
+                    low = rel if low is None else max(low, rel)
+                high = _bound(gate.get("high"), s)
+                shown.append(f"{m} {metric} {v:.3g} in {s!r}")
+                if low is not None and v < low:
+                    failed.append(f"{m} {metric} {v:.3g} < {low:.3g} in {s!r}")
+                if high is not None and v > high:
+                    failed.append(f"{m} {metric} {v:.3g} > {high:.3g} in {s!r}")
+        if failed:
+            return False, "level: " + "; ".join(failed)
+        return True, "level: " + "; ".join(shown)
+    if kind == "control":
+        if compare is None:
+            raise ValueError("a control gate needs the comparison function")
+        c = compare(rows, gate["method"], gate["control"], metric, settings=list(settings))
+        figure = (
+            f"control: {gate['method']} - {gate['control']} on {metric} = {c.effect:.3g} "
+            f"[{c.ci_low:.3g}, {c.ci_high:.3g}]"
+        )
+        return bool(c.ci_low > 0), figure
+    # fidelity
+    name = str(gate["parity"])
+    if parity is None or name not in set(parity.get("comparison", [])):
+        return False, f"fidelity: no parity run {name!r} for {gate['method']} (thesis parity)"
+    row = parity[parity["comparison"] == name].iloc[0]
+    ok = str(row.get("parity")).strip().lower() == "true"
+    figure = (
+        f"fidelity: {gate['method']} {name}: {'at parity' if ok else 'not at parity'} with "
+        f"{row.get('peer_name', 'the peer')}, difference {float(row['difference']):.3g} "
+        f"[{float(row['ci_low']):.3g}, {float(row['ci_high']):.3g}]"
+    )
+    return ok, figure
+
+
+def load_gates(path: str | Path) -> list[dict[str, Any]]:
+    """The gates of a review file (``gates: [...]``), each checked."""
+    import yaml
+
+    p = Path(path)
+    data = yaml.safe_load(p.read_text()) or {}
+    if not isinstance(data, Mapping) or not isinstance(data.get("gates"), list):
+        raise ValueError(f"{p}: expect a mapping with a list `gates`")
+    for g in data["gates"]:
+        try:
+            check_gate(g)
+        except ValueError as e:
+            raise ValueError(f"{e} (in {p})") from None
+    return [dict(g) for g in data["gates"]]
+
+
+__all__ = ["GATE_KINDS", "applies", "check_gate", "evaluate_gate", "load_gates"]
