@@ -646,3 +646,68 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     pd.testing.assert_frame_equal(ex.run_ablation(cfg, runs, progress=False), scores)
     again = ex.run_tables_4_3_4_4(cfg, runs, progress=False)
     pd.testing.assert_frame_equal(again.runs, tables.runs)
+
+
+# --- the counterfactual: what a filtered action would have done (issue #35) ------------------
+
+
+def test_filter_confusion_on_a_walk_with_known_answers(walk_demos):
+    """The filter fires at x >= 3. Stepping +1 from 3 would crash (x = 4 > 3): a saved crash;
+    stepping -1 would not: a false alarm; a walk the filter lets through crashes: a miss."""
+    safe, unsafe = walk_demos
+    env = DefenderWrapper(
+        gym.wrappers.TimeLimit(CountingEnv(), 12),
+        safe,
+        unsafe,
+        safe_method="MinFull",
+        unsafe_method="MinFull",
+        counterfactual=True,
+    )
+    inner = env.unwrapped
+    fire_at_3 = lambda step: -np.inf if step[0] >= 3 else np.inf  # noqa: E731
+    for action, fires in ((1.0, True), (-1.0, True), (1.0, False)):
+        env._unsafe.append = fire_at_3 if fires else (lambda step: np.inf)
+        env.reset()
+        for _ in range(3):  # walk to x = 3 (real steps)
+            env.step(np.array([1.0], np.float32))
+        before = inner.n_steps
+        *_, term, _, info = env.step(np.array([action], np.float32))
+        if fires:
+            assert info["filtered"] and info["would_crash"] == (action > 0) and term
+            assert inner.n_steps == before and inner.x == 3.0  # the real env never moved
+        else:
+            assert not info["filtered"] and term  # the crash happened
+    log = env.episodes
+    assert log.would_crash.tolist() == [True, False, None]
+    assert log.crashed.tolist() == [False, False, True]
+    c = env.filter_confusion()
+    assert (c["tp"], c["fp"], c["fn"], c["crashes_without_filter"]) == (1, 1, 1, 2)
+    assert c["precision"] == 0.5 and c["recall"] == 0.5
+    plain = make_walk(walk_demos)
+    with pytest.raises(RuntimeError, match="counterfactual=True"):
+        plain.filter_confusion()
+
+
+def test_counterfactual_step_leaves_a_mujoco_env_bit_for_bit():
+    from thesis_lib.defender.wrapper import counterfactual_terminates
+
+    a, b = gym.make("Hopper-v5"), gym.make("Hopper-v5")
+    a.reset(seed=0), b.reset(seed=0)
+    rng = np.random.default_rng(0)
+    acts = rng.uniform(-1, 1, (20, 3)).astype(np.float32)
+    for act in acts[:10]:
+        a.step(act), b.step(act)
+    assert counterfactual_terminates(a, np.ones(3, np.float32)) in (True, False)
+    for act in acts[10:]:  # a, probed, continues exactly as b, never probed
+        oa, ra, *_ = a.step(act)
+        ob, rb, *_ = b.step(act)
+        assert np.array_equal(oa, ob) and ra == rb
+    u = a.unwrapped  # a known answer: the torso below Hopper's healthy height ends the episode
+    qpos, qvel = u.data.qpos.copy(), u.data.qvel.copy()
+    low = qpos.copy()
+    low[1] = 0.5  # healthy z range is (0.7, inf)
+    u.set_state(low, qvel)
+    assert counterfactual_terminates(a, np.zeros(3, np.float32)) is True
+    u.set_state(u.init_qpos.copy(), u.init_qvel.copy())
+    assert counterfactual_terminates(a, np.zeros(3, np.float32)) is False
+    a.close(), b.close()

@@ -47,6 +47,30 @@ def test_training_run_numbers_on_a_hand_made_log():
     assert np.isnan(sparse["crash_rate_b2"]) and np.isnan(sparse["return_b3"])
 
 
+def test_training_run_numbers_count_saved_crashes_and_false_alarms():
+    """The counterfactual (issue #35): of 3 filtered episodes 1 would have crashed (saved), 2
+    would not (false alarms); with 2 real crashes the filter caught 1 of 3 would-be crashes."""
+    ep = _log(
+        [
+            (10.0, True, False, 20),
+            (-1.0, False, True, 35),
+            (30.0, True, False, 50),
+            (5.0, False, True, 70),
+            (7.0, False, True, 90),
+            (80.0, False, False, 100),
+        ]
+    ).assign(would_crash=[None, True, None, False, False, None])
+    got = ex.training_run_numbers(ep, total_steps=100, bins=2)
+    assert (got["saved_crashes"], got["false_alarms"]) == (1, 2)
+    assert got["filter_precision"] == pytest.approx(1 / 3)
+    assert got["filter_recall"] == pytest.approx(1 / 3)
+    assert got["crash_rate_without_filter"] == pytest.approx(3 / 6)
+    old = ex.training_run_numbers(ep.drop(columns="would_crash"), total_steps=100, bins=2)
+    assert np.isnan(old["filter_precision"]) and np.isnan(old["saved_crashes"])  # v1 logs
+    for k in ("saved_crashes", "filter_precision", "crash_rate_without_filter"):
+        assert k in ex.STUDY_COLUMNS
+
+
 def test_training_run_numbers_errors():
     with pytest.raises(ValueError, match=r"lacks \['filtered'\]"):
         ex.training_run_numbers(pd.DataFrame(columns=["return", "crashed", "timestep"]), 10)

@@ -657,6 +657,9 @@ def _train(
             max_trajectory=cfg.max_trajectory,
             paper_compat=paper_compat,
             seed=seed,
+            # what each filtered action would have done (a copy of the state is stepped and
+            # restored bit for bit: training is unchanged): saved crashes vs false alarms
+            counterfactual=True,
             dynamics_train_every=cfg.dynamics_train_every,
             # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
             dynamics_kwargs={
@@ -683,7 +686,11 @@ def _train(
         }
     )
     res = train(
-        rl, env=env, callbacks=callbacks, progress=False, info_keys=["filtered", "filter_step"]
+        rl,
+        env=env,
+        callbacks=callbacks,
+        progress=False,
+        info_keys=["filtered", "filter_step", "would_crash"],
     )
     ep = res.episodes
     ep["filtered"] = ep["filtered"].astype("boolean").fillna(False).astype(bool)
@@ -1223,7 +1230,9 @@ def training_run_numbers(
         comparisons); ``crashes_per_1k_steps``; ``return_best`` (the thesis's Acc Reward) and
         ``return_last`` (mean return of the last span's episodes); and per span ``b``
         ``crash_rate_b{b}``, ``filtered_rate_b{b}``, ``return_b{b}`` (NaN where no episode
-        ended in the span).
+        ended in the span); and, where the log has the filter's counterfactual
+        (``would_crash``), ``saved_crashes``, ``false_alarms``, ``filter_precision``,
+        ``filter_recall`` and ``crash_rate_without_filter`` (:func:`_counterfactual_numbers`).
 
     Raises:
         ValueError: a column is missing, or ``total_steps`` / ``bins`` is not positive.
@@ -1261,7 +1270,43 @@ def training_run_numbers(
         out[f"crash_rate_b{b}"] = float(crashed[m].mean()) if k else np.nan
         out[f"filtered_rate_b{b}"] = float(filtered[m].mean()) if k else np.nan
         out[f"return_b{b}"] = float(ret[m].mean()) if k else np.nan
+    out.update(_counterfactual_numbers(ep, crashed, filtered))
     return out
+
+
+def _counterfactual_numbers(
+    ep: pd.DataFrame, crashed: np.ndarray, filtered: np.ndarray
+) -> dict[str, float]:
+    """What the filter saved, from the episode log's ``would_crash`` (a filtered action stepped
+    on a copy of the state, :class:`~thesis_lib.defender.DefenderWrapper`'s counterfactual):
+    ``saved_crashes`` (it would have crashed), ``false_alarms`` (it would not),
+    ``filter_precision`` = saved / filtered, ``filter_recall`` = saved / (saved + real
+    crashes), and ``crash_rate_without_filter`` = (saved + real crashes) / episodes. NaN where
+    the log has no counterfactual (no filter, or a run made before it existed)."""
+    nan = float("nan")
+    names = (
+        "saved_crashes",
+        "false_alarms",
+        "filter_precision",
+        "filter_recall",
+        "crash_rate_without_filter",
+    )
+    if (
+        "would_crash" not in ep
+        or not filtered.any()
+        or ep.loc[filtered, "would_crash"].isna().any()
+    ):
+        return dict.fromkeys(names, nan)
+    saved = int(ep.loc[filtered, "would_crash"].astype(bool).sum())
+    alarms = int(filtered.sum()) - saved
+    real = int(crashed.sum())
+    return {
+        "saved_crashes": saved,
+        "false_alarms": alarms,
+        "filter_precision": saved / (saved + alarms),
+        "filter_recall": saved / (saved + real) if saved + real else nan,
+        "crash_rate_without_filter": (saved + real) / len(ep),
+    }
 
 
 def _demo_lock(task: str) -> Any:
@@ -1361,6 +1406,8 @@ STUDY_COLUMNS = [
     # training_run_numbers
     "episodes", "crashes", "filtered", "crash_rate", "filtered_rate", "crash_free_rate",
     "crashes_per_1k_steps", "return_best", "return_last",
+    "saved_crashes", "false_alarms", "filter_precision", "filter_recall",
+    "crash_rate_without_filter",
     *(f"{k}_b{b}" for b in range(STUDY_CURVE_BINS) for k in ("crash_rate", "filtered_rate", "return")),
     "eval_return", "eval_return_std", "eval_crash_rate", "eval_length", "eval_score",
     "best_score", "steps", "train_wall_s", "train_cpu_s", "log_speed",

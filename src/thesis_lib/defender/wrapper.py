@@ -32,7 +32,13 @@ from thesis_lib.defender.dynamics import DynamicsModel
 from thesis_lib.defender.methods import parse_method
 from thesis_lib.rl.callbacks import find_horizon, is_crash
 
-__all__ = ["DYNAMICS_TRAIN_EVERY", "EPISODE_LOG_COLUMNS", "PAPER_MAX_TRAJECTORY", "DefenderWrapper"]
+__all__ = [
+    "DYNAMICS_TRAIN_EVERY",
+    "EPISODE_LOG_COLUMNS",
+    "PAPER_MAX_TRAJECTORY",
+    "DefenderWrapper",
+    "counterfactual_terminates",
+]
 
 PAPER_MAX_TRAJECTORY = 20
 """The authors' code cut the agent's trajectory to its last 20 steps before every comparison."""
@@ -46,8 +52,39 @@ agent's targets."""
 
 EPISODE_LOG_COLUMNS: tuple[str, ...] = (
     "episode", "return", "length", "terminated", "truncated", "crashed", "filtered", "filter_step",
+    "would_crash",
 )  # fmt: skip
 """Columns of :attr:`DefenderWrapper.episodes`."""
+
+
+def counterfactual_terminates(env: gym.Env, action: Any) -> bool:
+    """Whether stepping ``env`` with ``action`` would end the episode (``terminated``), found
+    on a copy of its state: ``env`` is left exactly as it was.
+
+    A MuJoCo environment (``env.unwrapped.model``/``.data``) is stepped in place and its whole
+    ``MjData`` restored bit for bit (``mujoco.mj_copyData``: positions, velocities, controls,
+    warm start); any other environment is stepped as a ``copy.deepcopy`` of its unwrapped core.
+    Wrappers are not stepped (no ``TimeLimit`` count is spent).
+    """
+    u = env.unwrapped
+    model, data = getattr(u, "model", None), getattr(u, "data", None)
+    try:
+        import mujoco
+    except ImportError:  # pragma: no cover - mujoco is a dependency
+        mujoco = None
+    if mujoco is not None and isinstance(data, mujoco.MjData):
+        saved = mujoco.MjData(model)
+        mujoco.mj_copyData(saved, model, data)
+        try:
+            _, _, terminated, _, _ = u.step(action)
+        finally:
+            mujoco.mj_copyData(data, model, saved)
+        return bool(terminated)
+    import copy
+
+    twin = copy.deepcopy(u)
+    _, _, terminated, _, _ = twin.step(action)
+    return bool(terminated)
 
 
 class DefenderWrapper(gym.Wrapper):
@@ -76,6 +113,11 @@ class DefenderWrapper(gym.Wrapper):
         dynamics_train_every: one update of that model every this many real steps; None =
             :data:`DYNAMICS_TRAIN_EVERY` (4), or 1 (every step, Algorithm 2) with ``paper_compat``.
         seed: seed of the dynamics model.
+        counterfactual: before each filtered action, step a copy of the environment's state with
+            it (:func:`counterfactual_terminates`) and record whether it would have crashed
+            (``info["would_crash"]``, the episode log's ``would_crash``): what the filter saved
+            and what it blocked for nothing (:meth:`filter_confusion`). It measures the claim
+            ("fewer crashes") rather than the filter's own firing rate.
 
     Each step's ``info`` has ``"filtered"`` (bool); a filtered step also has ``"filter_step"``
     (how many real steps the episode had taken), ``"cost_safe"`` and ``"cost_unsafe"``.
@@ -113,8 +155,10 @@ class DefenderWrapper(gym.Wrapper):
         dynamics_kwargs: Mapping[str, Any] | None = None,
         dynamics_train_every: int | None = None,
         seed: int = 0,
+        counterfactual: bool = False,
     ) -> None:
         super().__init__(env)
+        self.counterfactual = bool(counterfactual)
         if trajectory not in TRAJECTORIES:
             raise ValueError(
                 f"Unknown trajectory {trajectory!r}. Valid: {', '.join(TRAJECTORIES)}."
@@ -198,6 +242,7 @@ class DefenderWrapper(gym.Wrapper):
         self._obs: np.ndarray | None = None
         self._ended = False
         self._rows: list[dict[str, Any]] = []
+        self._would_crash: bool | None = None
         self._return, self._length = 0.0, 0
         self.n_filtered_steps = 0
         self.n_real_steps = 0
@@ -212,6 +257,7 @@ class DefenderWrapper(gym.Wrapper):
         self._unsafe.reset()
         self._obs = np.asarray(obs)
         self._ended = False
+        self._would_crash = None
         self._return, self._length = 0.0, 0
         info = dict(info)
         info["filtered"] = False
@@ -233,6 +279,13 @@ class DefenderWrapper(gym.Wrapper):
         fire = cost_safe > cost_unsafe if self.paper_compat else not cost_safe < cost_unsafe
         reward: SupportsFloat
         if fire:
+            would = (
+                is_crash(
+                    counterfactual_terminates(self.env, action), self._length + 1, self.horizon
+                )
+                if self.counterfactual
+                else None
+            )
             next_obs = self.dynamics.predict(self._obs, action_arr).astype(
                 self.observation_space.dtype
             )
@@ -242,7 +295,9 @@ class DefenderWrapper(gym.Wrapper):
                 "filter_step": self._length,
                 "cost_safe": cost_safe,
                 "cost_unsafe": cost_unsafe,
+                "would_crash": would,
             }
+            self._would_crash = would
             self.n_filtered_steps += 1
         else:
             next_obs, reward, terminated, truncated, info = self.env.step(action)
@@ -271,15 +326,51 @@ class DefenderWrapper(gym.Wrapper):
                 "crashed": crashed,
                 "filtered": filtered,
                 "filter_step": self._length - 1 if filtered else None,
+                "would_crash": self._would_crash if filtered else None,
             }
         )
+
+    def filter_confusion(self) -> dict[str, float | int]:
+        """The filter judged against what would have happened (needs ``counterfactual=True``).
+
+        Per finished episode: a filtered step whose action would have crashed is a saved crash
+        (``tp``); one that would not is a false alarm (``fp``); a real crash the filter let
+        through is a miss (``fn``). ``precision = tp / (tp + fp)``, ``recall = tp / (tp + fn)``
+        (NaN where undefined), ``crashes_without_filter = tp + fn``: the crashes the episodes
+        would have had, against the ``fn`` they had.
+
+        Raises:
+            RuntimeError: the wrapper was made without ``counterfactual=True``.
+        """
+        if not self.counterfactual:
+            raise RuntimeError(
+                "filter_confusion needs DefenderWrapper(..., counterfactual=True): without it a "
+                "filtered step's outcome is unknown."
+            )
+        log = self.episodes
+        filt = log[log["filtered"].astype(bool)]
+        tp = int(filt["would_crash"].astype(bool).sum())
+        fp = len(filt) - tp
+        fn = int(log["crashed"].astype(bool).sum())
+        nan = float("nan")
+        return {
+            "episodes": len(log),
+            "tp": tp,
+            "fp": fp,
+            "fn": fn,
+            "precision": tp / (tp + fp) if tp + fp else nan,
+            "recall": tp / (tp + fn) if tp + fn else nan,
+            "crashes_without_filter": tp + fn,
+        }
 
     @property
     def episodes(self) -> pd.DataFrame:
         """One row per finished episode, columns :data:`EPISODE_LOG_COLUMNS`.
 
         ``crashed``: a real termination before the horizon (a filtered episode is never one);
-        ``filter_step``: real steps taken before the filter fired (None if it did not).
+        ``filter_step``: real steps taken before the filter fired (None if it did not);
+        ``would_crash``: with ``counterfactual=True``, whether the filtered action would have
+        crashed (None if the filter did not fire, or without the counterfactual).
         """
         return pd.DataFrame(self._rows, columns=list(EPISODE_LOG_COLUMNS))
 
