@@ -664,7 +664,7 @@ def test_filter_confusion_on_a_walk_with_known_answers(walk_demos):
         counterfactual=True,
     )
     inner = env.unwrapped
-    fire_at_3 = lambda step: -np.inf if step[0] >= 3 else np.inf  # noqa: E731
+    fire_at_3 = lambda step: -np.inf if step[0] >= 3 else np.inf
     for action, fires in ((1.0, True), (-1.0, True), (1.0, False)):
         env._unsafe.append = fire_at_3 if fires else (lambda step: np.inf)
         env.reset()
