@@ -219,3 +219,70 @@ def stats_claims_csv():
     from thesis_lib.book.paths import project_root
 
     return project_root() / "studies" / "claims.csv"
+
+
+# --- TOST for equivalence claims, Holm over the deciding comparisons -------------------------
+
+
+def test_an_equivalence_claim_is_tested_by_tost():
+    rows = _rows({("A", "s"): 0.2, ("B", "s"): 0.0}, seeds=20, sd=0.5)
+    eq = stats.compare(rows, "A", "B", "score", claim="equivalent", margin=1.0, interval="welch")
+    assert eq.verdict == "holds" and -1.0 < eq.ci_low and eq.ci_high < 1.0
+    ni = stats.compare(rows, "A", "B", "score", claim="noninferior", margin=1.0, interval="welch")
+    assert eq.ci_high - eq.ci_low < ni.ci_high - ni.ci_low  # TOST: the 90% interval
+    far = _rows({("A", "s"): 5.0, ("B", "s"): 0.0}, seeds=20, sd=0.5)
+    better = stats.compare(far, "A", "B", "score", claim="equivalent", margin=1.0, interval="welch")
+    assert better.verdict == "fails"  # much better is not "about the same"
+    assert (
+        stats.compare(
+            far, "A", "B", "score", claim="noninferior", margin=1.0, interval="welch"
+        ).verdict
+        == "holds"
+    )
+    assert eq.p_value < 0.05 < better.p_value
+    assert stats.verdict(-0.5, 0.5, "equivalent", 1.0) == "holds"
+    assert stats.verdict(-1.5, 0.5, "equivalent", 1.0) == "inconclusive"
+
+
+def test_holm_matches_statsmodels_style_reference():
+    p = [0.01, 0.04, 0.03, 0.005]
+    # by hand: sorted 0.005*4=0.02, 0.01*3=0.03, 0.03*2=0.06, 0.04*1=0.04 -> running max 0.06
+    assert stats.holm(p).tolist() == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert np.isnan(stats.holm([np.nan])).all()
+
+
+def test_holm_turns_a_marginal_hold_inconclusive():
+    from thesis_lib.stats.claims import _holm_adjust
+
+    res = pd.DataFrame(
+        {
+            "verdict": ["holds", "inconclusive", "holds"],
+            "p_value": [0.03, 0.5, 0.001],
+            "counts": [True, True, False],  # reported apart: outside the family
+        }
+    )
+    out = _holm_adjust(res)
+    assert out.p_holm.tolist()[:2] == pytest.approx([0.06, 0.5]) and np.isnan(out.p_holm[2])
+    assert out.verdict.tolist() == ["inconclusive", "inconclusive", "holds"]
+    rows = _rows({("HDT", "s"): 3.0, ("DT", "s"): 0.0}, seeds=8)
+    one = evaluate_comparisons(
+        rows, [{"claim": "C3", "x": "HDT", "y": "DT"}], metric="score", interval="welch", reps=100
+    )
+    assert (
+        one.iloc[0].p_holm == pytest.approx(one.iloc[0].p_value) and one.iloc[0].verdict == "holds"
+    )
+
+
+def test_a_retest_changes_the_kind_and_says_why(tmp_path):
+    from thesis_lib.stats.gates import apply_retests, load_review
+
+    f = tmp_path / "x.gates.yml"
+    f.write_text(
+        "gates: []\nretest:\n- {claim: C11, kind: equivalent, why: an equivalence claim}\n"
+    )
+    gates, retests = load_review(f)
+    comps = apply_retests([{"claim": "C11", "x": "U", "y": "S", "kind": "noninferior"}], retests)
+    assert comps[0]["kind"] == "equivalent" and "an equivalence claim" in comps[0]["override"]
+    f.write_text("retest:\n- {claim: C11, why: no change named}\n")
+    with pytest.raises(ValueError, match="a retest needs"):
+        load_review(f)

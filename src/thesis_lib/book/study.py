@@ -593,11 +593,21 @@ def gates_path(chapter: str) -> Path:
 
 def study_gates(study: Study) -> list[dict[str, Any]]:
     """The study file's gates, then those of its review file (:func:`gates_path`)."""
-    from thesis_lib.stats.gates import load_gates
+    from thesis_lib.stats.gates import load_review
 
     p = gates_path(study.chapter)
-    review = load_gates(p) if p.is_file() else []
+    review = load_review(p)[0] if p.is_file() else []
     return [*study.gates, *review]
+
+
+def study_comparisons(study: Study) -> list[dict[str, Any]]:
+    """The study's comparisons, with its review file's ``retest`` entries applied
+    (:func:`thesis_lib.stats.gates.apply_retests`: e.g. an equivalence claim retested by TOST)."""
+    from thesis_lib.stats.gates import apply_retests, load_review
+
+    p = gates_path(study.chapter)
+    retests = load_review(p)[1] if p.is_file() else []
+    return apply_retests(study.comparisons, retests)
 
 
 def _parity_table() -> pd.DataFrame | None:
@@ -628,7 +638,7 @@ def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
     c = study.columns
     res = evaluate_comparisons(
         rows,
-        study.comparisons,
+        study_comparisons(study),
         metric=study.metric,
         method_col=c["method"],
         setting_col=c["setting"],

@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats as _st
 
-Claim = Literal["superior", "noninferior"]
+Claim = Literal["superior", "noninferior", "equivalent"]
 VERDICTS = ("holds", "fails", "inconclusive", "untestable")
 
 
@@ -107,6 +107,67 @@ def bootstrap_ci(
     return point, float(lo), float(hi)
 
 
+def welch_test(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """``(effect, standard error, degrees of freedom)`` of the stratified mean difference of
+    :func:`welch_interval`."""
+    mx, my = _matrix(x), _matrix(y)
+    if mx.shape[1] != my.shape[1]:
+        raise ValueError(f"x and y have different settings: {mx.shape[1]} vs {my.shape[1]}")
+    nx, ny, s = mx.shape[0], my.shape[0], mx.shape[1]
+    if nx < 2 or ny < 2:
+        raise ValueError("a Welch interval needs at least 2 runs of each method")
+    effect = float((mx.mean(axis=0) - my.mean(axis=0)).mean())
+    terms = np.concatenate([mx.var(axis=0, ddof=1) / nx, my.var(axis=0, ddof=1) / ny]) / s**2
+    var = float(terms.sum())
+    if var == 0.0:
+        return effect, 0.0, float("inf")
+    dfs = np.concatenate([np.full(s, nx - 1), np.full(s, ny - 1)])
+    return effect, var**0.5, var**2 / float((terms**2 / dfs).sum())
+
+
+def p_value(
+    effect: float, se: float, df: float, claim: Claim = "superior", margin: float = 0.0
+) -> float:
+    """One-sided p of the claim against its null, from a t statistic: ``superior``
+    ``H0: d <= 0``; ``noninferior`` ``H0: d <= -margin``; ``equivalent`` the larger p of the two
+    one-sided tests ``H0: d <= -margin`` and ``H0: d >= margin`` (TOST).
+
+    >>> round(p_value(2.0, 1.0, 10), 4), round(p_value(0.0, 1.0, 10, "equivalent", 3.0), 4)
+    (0.0367, 0.0067)
+    """
+    if se == 0.0:
+        lo_ok = effect > (0.0 if claim == "superior" else -margin)
+        hi_ok = claim != "equivalent" or effect < margin
+        return 0.0 if lo_ok and hi_ok else 1.0
+    if claim == "superior":
+        return float(_st.t.sf(effect / se, df))
+    if claim == "noninferior":
+        return float(_st.t.sf((effect + margin) / se, df))
+    lower = float(_st.t.sf((effect + margin) / se, df))
+    upper = float(_st.t.cdf((effect - margin) / se, df))
+    return max(lower, upper)
+
+
+def holm(pvalues: Sequence[float]) -> np.ndarray:
+    """Holm's step-down adjustment of ``pvalues`` (NaN stays NaN and is left out of the family).
+
+    >>> holm([0.01, 0.04, 0.03, float("nan")]).round(2).tolist()
+    [0.03, 0.06, 0.06, nan]
+    """
+    p = np.asarray(pvalues, dtype=float)
+    out = np.full(p.shape, np.nan)
+    ok = np.flatnonzero(np.isfinite(p))
+    if not len(ok):
+        return out
+    order = ok[np.argsort(p[ok], kind="stable")]
+    m = len(order)
+    running = 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        out[i] = running
+    return out
+
+
 def welch_interval(x: np.ndarray, y: np.ndarray, alpha: float = 0.05) -> tuple[float, float, float]:
     """``(effect, low, high)``: the difference of stratified means ``mean(x) - mean(y)`` over
     ``(runs, settings)`` matrices (each setting weighted equally) with a Welch t interval.
@@ -119,22 +180,12 @@ def welch_interval(x: np.ndarray, y: np.ndarray, alpha: float = 0.05) -> tuple[f
 
     >>> e, lo, hi = welch_interval(np.array([[1.0], [2.0], [3.0]]), np.array([[0.0], [1.0], [2.0]]))
     >>> e, round(lo, 3), round(hi, 3)
-    (1.0, -0.603, 2.603)
+    (1.0, -1.267, 3.267)
     """
-    mx, my = _matrix(x), _matrix(y)
-    if mx.shape[1] != my.shape[1]:
-        raise ValueError(f"x and y have different settings: {mx.shape[1]} vs {my.shape[1]}")
-    nx, ny, s = mx.shape[0], my.shape[0], mx.shape[1]
-    if nx < 2 or ny < 2:
-        raise ValueError("a Welch interval needs at least 2 runs of each method")
-    effect = float((mx.mean(axis=0) - my.mean(axis=0)).mean())
-    terms = np.concatenate([mx.var(axis=0, ddof=1) / nx, my.var(axis=0, ddof=1) / ny]) / s**2
-    var = float(terms.sum())
-    if var == 0.0:
+    effect, se, df = welch_test(x, y)
+    if se == 0.0:
         return effect, effect, effect
-    dfs = np.concatenate([np.full(s, nx - 1), np.full(s, ny - 1)])
-    df = var**2 / float((terms**2 / dfs).sum())
-    half = float(_st.t.ppf(1 - alpha / 2, df)) * var**0.5
+    half = float(_st.t.ppf(1 - alpha / 2, df)) * se
     return effect, effect - half, effect + half
 
 
@@ -196,6 +247,9 @@ def verdict(ci_low: float, ci_high: float, claim: Claim = "superior", margin: fl
     whole interval lies inside ``[-margin, margin]`` (no effect that matters).
     ``noninferior`` claims ``X >= Y - margin`` ("needs no RTG", "at least as good"): holds if
     ``ci_low > -margin``; fails if ``ci_high < -margin``.
+    ``equivalent`` claims ``|X - Y| < margin`` ("about the same"), by two one-sided tests
+    (TOST): give it the 90% interval; holds if it lies inside ``(-margin, margin)``, fails if
+    it lies wholly outside.
 
     >>> verdict(0.5, 2.0), verdict(-2.0, -0.5), verdict(-1.0, 1.0)
     ('holds', 'fails', 'inconclusive')
@@ -218,7 +272,13 @@ def verdict(ci_low: float, ci_high: float, claim: Claim = "superior", margin: fl
         if ci_high < -margin:
             return "fails"
         return "inconclusive"
-    raise ValueError(f"claim must be 'superior' or 'noninferior', got {claim!r}")
+    if claim == "equivalent":  # TOST: the (1 - 2 alpha) interval inside the band
+        if -margin < ci_low and ci_high < margin:
+            return "holds"
+        if ci_low > margin or ci_high < -margin:
+            return "fails"
+        return "inconclusive"
+    raise ValueError(f"claim must be 'superior', 'noninferior' or 'equivalent', got {claim!r}")
 
 
 @dataclass
@@ -245,7 +305,9 @@ class Comparison:
     margin: float
     verdict: str
     interval: str = "bootstrap"
-    """How ``ci_low``/``ci_high`` were made (:data:`INTERVALS`)."""
+    """How ``ci_low``/``ci_high`` were made (:data:`INTERVALS`); 90% for ``equivalent``."""
+    p_value: float = float("nan")
+    """One-sided p of the claim (:func:`p_value`; Welch intervals only, else NaN)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -377,10 +439,16 @@ def compare(
         raise ValueError(f"interval must be one of {', '.join(INTERVALS)}, got {interval!r}")
     if interval == "welch" and aggregate != "mean":
         raise ValueError(f"a Welch interval is for the mean aggregate, not {aggregate!r}")
+    # an equivalence claim is decided by TOST: its two one-sided 5% tests are the 90% interval
+    alpha = 0.10 if claim == "equivalent" else 0.05
+    p = float("nan")
     if interval == "welch":
-        eff, lo, hi = welch_interval(mx, my)
+        eff, lo, hi = welch_interval(mx, my, alpha=alpha)
+        p = p_value(*welch_test(mx, my), claim=claim, margin=margin)
     else:
-        eff, lo, hi = bootstrap_ci(lambda a, b: agg(a) - agg(b), mx, my, reps=reps, seed=seed)
+        eff, lo, hi = bootstrap_ci(
+            lambda a, b: agg(a) - agg(b), mx, my, reps=reps, seed=seed, alpha=alpha
+        )
     pi, pl, ph = bootstrap_ci(probability_of_improvement, mx, my, reps=reps, seed=seed)
     return Comparison(
         x=x,
@@ -401,13 +469,17 @@ def compare(
         margin=float(margin),
         verdict=verdict(lo, hi, claim, margin),
         interval=interval,
+        p_value=p,
     )
 
 
 __all__ = [
     "AGGREGATES",
     "INTERVALS",
+    "holm",
+    "p_value",
     "welch_interval",
+    "welch_test",
     "VERDICTS",
     "Comparison",
     "aggregate_interval",

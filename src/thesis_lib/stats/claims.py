@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from . import AGGREGATES, compare
@@ -88,6 +89,7 @@ VERDICT_COLOURS = {
 }
 
 COMPARISON_KEYS = {
+    "override",
     "claim",
     "x",
     "y",
@@ -115,8 +117,10 @@ def check_comparison(spec: Mapping[str, Any]) -> None:
             raise ValueError(f"comparison {dict(spec)} lacks '{k}'")
     if spec["claim"] not in CLAIMS:
         raise ValueError(f"unknown claim {spec['claim']!r}; valid: {', '.join(CLAIMS)}")
-    if spec.get("kind", "superior") not in ("superior", "noninferior"):
-        raise ValueError(f"kind must be 'superior' or 'noninferior', got {spec['kind']!r}")
+    if spec.get("kind", "superior") not in ("superior", "noninferior", "equivalent"):
+        raise ValueError(
+            f"kind must be 'superior', 'noninferior' or 'equivalent', got {spec['kind']!r}"
+        )
     name = f"{spec['claim']} ({spec['x']} vs {spec['y']})"
     margin = spec.get("margin", 0.0)
     if isinstance(margin, bool) or not isinstance(margin, int | float) or not margin >= 0:
@@ -144,8 +148,10 @@ def evaluate_comparisons(
     parity: pd.DataFrame | None = None,
 ) -> pd.DataFrame:
     """One row per comparison: effect, 95% interval (``interval``: see
-    :func:`thesis_lib.stats.compare`), P(X > Y), verdict, and its validity gates
-    (:mod:`thesis_lib.stats.gates`).
+    :func:`thesis_lib.stats.compare`; 90% for an ``equivalent`` claim, by TOST), P(X > Y), the
+    one-sided ``p_value`` and ``p_holm`` (Holm over the deciding comparisons given here: a
+    comparison that holds only before the adjustment is inconclusive), verdict, and its
+    validity gates (:mod:`thesis_lib.stats.gates`).
 
     A comparison guarded by a gate that fails gets the verdict ``untestable``; ``stat_verdict``
     keeps what its interval alone says, ``validity`` is ``valid``, ``untestable`` or empty (no
@@ -207,8 +213,32 @@ def evaluate_comparisons(
         }
         if not passed:
             row["verdict"] = "untestable"
+        if spec.get("override"):
+            row["override"] = str(spec["override"])
         out.append(row)
-    return pd.DataFrame(out)
+    res = pd.DataFrame(out)
+    return _holm_adjust(res) if len(res) else res
+
+
+#: The family-wise error rate Holm's adjustment keeps over a study's deciding comparisons.
+HOLM_ALPHA = 0.05
+
+
+def _holm_adjust(res: pd.DataFrame) -> pd.DataFrame:
+    """Holm over the comparisons that decide claims (``counts``) with a p-value: ``p_holm``; a
+    comparison that holds by its own interval but not after the adjustment becomes
+    inconclusive (``stat_verdict`` keeps the unadjusted verdict)."""
+    from . import holm
+
+    res = res.copy()
+    counted = res["counts"].astype(bool).to_numpy()
+    p = res["p_value"].astype(float).to_numpy() if "p_value" in res else np.full(len(res), np.nan)
+    adj = np.full(len(res), np.nan)
+    adj[counted] = holm(p[counted])
+    res["p_holm"] = adj
+    weak = (res["verdict"] == "holds") & (res["p_holm"] >= HOLM_ALPHA)
+    res.loc[weak, "verdict"] = "inconclusive"
+    return res
 
 
 def _shared_settings(

@@ -180,18 +180,68 @@ def evaluate_gate(
 
 def load_gates(path: str | Path) -> list[dict[str, Any]]:
     """The gates of a review file (``gates: [...]``), each checked."""
+    return load_review(path)[0]
+
+
+#: What a review file's ``retest`` entry may change in a comparison (and must say why).
+RETEST_KEYS = {"kind", "margin"}
+
+
+def load_review(path: str | Path) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """``(gates, retests)`` of a review file: ``gates`` (each checked by :func:`check_gate`) and
+    ``retest``, post-hoc corrections of a comparison's test (``kind``, ``margin``), each with
+    the selectors of a gate (``claim``, ``x``, ``y``, ``label``) and a ``why``; e.g. an
+    equivalence claim registered one-sided, retested by TOST."""
     import yaml
 
     p = Path(path)
     data = yaml.safe_load(p.read_text()) or {}
-    if not isinstance(data, Mapping) or not isinstance(data.get("gates"), list):
+    if not isinstance(data, Mapping) or not isinstance(data.get("gates", []), list):
         raise ValueError(f"{p}: expect a mapping with a list `gates`")
-    for g in data["gates"]:
+    unknown = set(data) - {"gates", "retest"}
+    if unknown:
+        raise ValueError(f"{p}: unknown key(s) {sorted(unknown)}; valid: gates, retest")
+    for g in data.get("gates", []):
         try:
             check_gate(g)
         except ValueError as e:
             raise ValueError(f"{e} (in {p})") from None
-    return [dict(g) for g in data["gates"]]
+    retests = [dict(r) for r in data.get("retest", []) or []]
+    for r in retests:
+        bad = set(r) - set(_SELECT) - RETEST_KEYS - {"why"}
+        if bad or "claim" not in r or not r.get("why") or not (set(r) & RETEST_KEYS):
+            raise ValueError(
+                f"{p}: a retest needs `claim`, `why` and one of {sorted(RETEST_KEYS)}; "
+                f"selectors {list(_SELECT)}; got {r}"
+            )
+    return [dict(g) for g in data.get("gates", [])], retests
 
 
-__all__ = ["GATE_KINDS", "applies", "check_gate", "evaluate_gate", "load_gates"]
+def apply_retests(
+    comparisons: Sequence[Mapping[str, Any]], retests: Sequence[Mapping[str, Any]]
+) -> list[dict[str, Any]]:
+    """``comparisons`` with each matching retest's ``kind``/``margin`` applied, and its
+    ``why`` kept as the comparison's ``override``."""
+    out = []
+    for c in comparisons:
+        c = dict(c)
+        for r in retests:
+            if all(str(c.get(k, "")) == str(r[k]) for k in ("claim", "x", "y", "label") if k in r):
+                c.update({k: r[k] for k in RETEST_KEYS if k in r})
+                c["override"] = (
+                    f"retested post hoc ({', '.join(f'{k} {r[k]}' for k in RETEST_KEYS if k in r)}): {r['why']}"
+                )
+        out.append(c)
+    return out
+
+
+__all__ = [
+    "GATE_KINDS",
+    "RETEST_KEYS",
+    "applies",
+    "apply_retests",
+    "check_gate",
+    "evaluate_gate",
+    "load_gates",
+    "load_review",
+]
