@@ -651,3 +651,34 @@ def test_mute_features_reach_the_models_and_bad_names_fail():
         scaler.mute == ("tempogram",)
         and (scaler.transform(seqs[2].features)[:, 54:] == np.float32(0.1)).all()
     )
+
+
+def _dance_on(beats: np.ndarray) -> np.ndarray:
+    """A motion swinging between two poses, at rest exactly on each of ``beats``."""
+    T = int(beats[-1] + 20)
+    x, sign = np.zeros(T), 1.0
+    for b0, b1 in zip(beats[:-1], beats[1:]):
+        phase = (np.arange(b0, b1) - b0) / (b1 - b0)
+        x[b0:b1] = sign * np.cos(np.pi * phase)
+        sign = -sign
+    x[beats[-1] :], x[: beats[0]] = sign, x[beats[0]]
+    return np.stack([x, 0.5 * x], 1)
+
+
+def test_the_beat_null_can_fail():
+    """Issue #35: the beat check must be able to fail. A motion at rest on the music's own
+    (irregular) beats follows them; the same motion 13 frames late does not; busy noise scores
+    ~0.95 against any beats yet does not follow them."""
+    from thesis_lib.mdlt.metrics import beat_alignment_null
+
+    rng = np.random.default_rng(1)
+    beats = np.cumsum(rng.integers(20, 45, size=30))
+    dance = _dance_on(beats)
+    on = beat_alignment_null(dance, beats, n=200)
+    assert on["follows_beat"] and on["p_shift"] < 0.01 and on["score"] > 0.9 > on["shift_q95"]
+    late = beat_alignment_null(np.roll(dance, 13, axis=0), beats, n=200)
+    assert not late["follows_beat"] and late["p_shift"] > 0.5
+    busy = beat_alignment_null(rng.standard_normal((len(dance), 4)), beats, n=200)
+    assert busy["score"] > 0.9 and busy["random_beats_mean"] > 0.9 and not busy["follows_beat"]
+    none = beat_alignment_null(dance, np.array([5]), n=10)
+    assert not none["follows_beat"] and np.isnan(none["p_shift"])

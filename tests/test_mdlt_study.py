@@ -282,6 +282,12 @@ def test_recorded_music_check_at_the_files_own_rate(tmp_path):
     assert 400 <= first["speed_limit_frames"] <= 480 and 3.5 <= first["peak_speed_ratio"] <= 4.1
     # the README states the packaged model beats its shuffled controls (and that this check is weak)
     assert bool(first["beat_above_control"]), first.to_dict()
+    # the README: the null that can fail passes on this recording, by a small margin
+    assert first["null_p_shift"] < 0.05 and bool(first["null_follows_beat"])
+    assert (
+        first["null_shift_mean"] < first["beat_align"]
+        and first["null_half_beat"] < first["beat_align"]
+    )
     _, scaler, meta = load_checkpoint(packaged_checkpoint())
     assert meta["variant"] == "mamba_audio" and scaler.mute == ("tempogram",)
 

@@ -1484,14 +1484,17 @@ def beat_check(
     translate: Any,
     shuffles: int = 5,
     seed: int = 0,
-    block_s: float = 0.5,
+    block_s: float = 0.37,
     fps: int = 60,
 ) -> dict[str, float]:
     """Does a translation move with the beat? Bailando's beat-align score of ``angles`` against
     the music's beats (the beat one-hot of the raw ``features``), beside a shuffled-audio
     control: the same translator (``translate: scaled-or-raw features -> angles``) run on the
     features cut into blocks of ``block_s`` seconds in a random order (the music's sounds kept,
-    its beat structure broken), scored against the same beats; ``shuffles`` times.
+    its beat structure broken), scored against the same beats; ``shuffles`` times. The blocks
+    are 0.37 s by default, not a multiple of common beat periods (0.5 s is exactly one beat at
+    120 bpm, so such a "control" keeps the beat's timing). See also
+    :func:`thesis_lib.mdlt.metrics.beat_alignment_null`: a null that can fail.
 
     Returns ``beat_align``, ``beat_align_shuffled`` (mean of the controls),
     ``shuffled_max`` and ``beats`` (music beats found).
@@ -1528,11 +1531,15 @@ def recorded_music_check(
     ``peak_speed_ratio``: the fastest joint over its limit; ``workspace_frames``); how much each
     joint moves, and the beat alignment
     against a shuffled-audio control (:func:`beat_check`); ``beat_above_control``: the score
-    beats every shuffled control.
+    beats every shuffled control (a weak check: busy motion scores high against any beat grid);
+    and the null that can fail (:func:`thesis_lib.mdlt.metrics.beat_alignment_null`, columns
+    ``null_*``): ``null_p_shift``, the motion's own timing shifted against the music, and
+    ``null_follows_beat``.
 
     Used in: MDLT chapter (recorded music).
     """
     from thesis_lib.mdlt.audio import audio_features, load_audio
+    from thesis_lib.mdlt.metrics import beat_alignment_null
     from thesis_lib.mdlt.train import load_checkpoint
     from thesis_lib.mdlt.translate import packaged_checkpoint
     from thesis_lib.ur3.dance import map_dance, prepare_dance
@@ -1569,6 +1576,11 @@ def recorded_music_check(
         **{f"std_{j}": float(angles[:, j].std()) for j in range(angles.shape[1])},
         **(beats := beat_check(angles, raw, translate, shuffles=shuffles, seed=seed, fps=fps)),
         "beat_above_control": bool(beats["beat_align"] > beats["shuffled_max"]),
+        **{
+            f"null_{k}": v
+            for k, v in beat_alignment_null(angles, raw[:, BEAT_COLUMN], seed=seed).items()
+            if k != "score"
+        },
     }
 
 

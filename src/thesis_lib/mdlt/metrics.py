@@ -30,6 +30,7 @@ __all__ = [
     "BASELINES",
     "aje",
     "beat_alignment",
+    "beat_alignment_null",
     "evaluate_songs",
     "frechet_distance",
     "kinematic_beats",
@@ -147,6 +148,86 @@ def beat_alignment(angles: np.ndarray, music_beats: np.ndarray, sigma: float = 3
         return float("nan")
     d = np.abs(beats[:, None] - kin[None, :]).min(axis=1)
     return float(np.mean(np.exp(-(d.astype(np.float64) ** 2) / (2.0 * sigma**2))))
+
+
+def beat_alignment_null(
+    angles: np.ndarray,
+    music_beats: np.ndarray,
+    n: int = 200,
+    seed: int = 0,
+    sigma: float = 3.0,
+    min_shift: int | None = None,
+) -> dict[str, float]:
+    """Does the motion follow *these* beats, more than any busy motion would? The beat-align
+    score of ``angles`` against ``music_beats`` beside three nulls that keep the motion and
+    break only its timing against the music:
+
+    - **shifted motion** (``p_shift``): the motion circularly shifted by ``n`` random offsets of
+      at least ``min_shift`` frames (default: one beat period): the same speed spectrum, so the
+      same density of kinematic beats, but no relation to the music. ``p_shift`` is the share
+      of shifts that score at least as high (with the +1 of a permutation p-value).
+    - **random beats** (``random_beats_mean``): as many beats as the music's, placed uniformly
+      at random. A motion with a speed minimum every few frames scores high here too: that is
+      why a raw beat-align score near 0.9 says little.
+    - **half-beat grid** (``half_beat``): the music's beats moved by half the median beat
+      period: a motion that follows the beat scores lower there.
+
+    ``follows_beat``: ``p_shift < 0.05`` and the score above the half-beat grid's. NaN results
+    (no beats) give ``follows_beat`` False.
+
+    A strictly periodic motion against strictly periodic beats cannot pass the shift test
+    (one shift in a few lands in phase again): the test asks for timing that follows the
+    music's own irregular beats, as real music and dance have.
+
+    >>> beats = np.arange(15, 600, 30)
+    >>> busy = np.random.default_rng(0).standard_normal((600, 4))       # speed minima everywhere
+    >>> r = beat_alignment_null(busy, beats, n=100)
+    >>> r["score"] > 0.5, r["follows_beat"]                             # high score, no following
+    (True, False)
+    """
+    a = np.asarray(angles, dtype=np.float64)
+    beats = np.asarray(music_beats)
+    if beats.ndim == 1 and len(beats) == len(a) and set(np.unique(beats)) <= {0, 1}:
+        beats = np.flatnonzero(beats > 0.5)
+    beats = np.asarray(beats, dtype=np.int64)
+    nan = float("nan")
+    out: dict[str, float] = {
+        "score": beat_alignment(a, beats, sigma),
+        "p_shift": nan,
+        "shift_mean": nan,
+        "shift_q95": nan,
+        "random_beats_mean": nan,
+        "half_beat": nan,
+        "follows_beat": False,
+    }
+    if len(beats) < 2 or len(a) < 3 or not np.isfinite(out["score"]):
+        return out
+    rng = np.random.default_rng(seed)
+    period = float(np.median(np.diff(np.sort(beats))))
+    lo = int(min_shift if min_shift is not None else max(1, round(period)))
+    hi = len(a) - lo
+    shifted = []
+    if hi > lo:
+        for k in rng.integers(lo, hi, size=n):
+            shifted.append(beat_alignment(np.roll(a, int(k), axis=0), beats, sigma))
+    sh = np.asarray(shifted, dtype=np.float64)
+    rand = [
+        beat_alignment(a, np.sort(rng.choice(len(a), size=len(beats), replace=False)), sigma)
+        for _ in range(n)
+    ]
+    half = beats + int(round(period / 2))
+    half = half[half < len(a)]
+    out.update(
+        p_shift=float((1 + np.sum(sh >= out["score"])) / (1 + len(sh))) if len(sh) else nan,
+        shift_mean=float(np.nanmean(sh)) if len(sh) else nan,
+        shift_q95=float(np.nanquantile(sh, 0.95)) if len(sh) else nan,
+        random_beats_mean=float(np.nanmean(rand)),
+        half_beat=beat_alignment(a, half, sigma) if len(half) else nan,
+    )
+    out["follows_beat"] = bool(
+        np.isfinite(out["p_shift"]) and out["p_shift"] < 0.05 and out["score"] > out["half_beat"]
+    )
+    return out
 
 
 def evaluate_songs(
