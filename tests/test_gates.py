@@ -286,3 +286,42 @@ def test_a_retest_changes_the_kind_and_says_why(tmp_path):
     f.write_text("retest:\n- {claim: C11, why: no change named}\n")
     with pytest.raises(ValueError, match="a retest needs"):
         load_review(f)
+
+
+def test_none_gates_selectors_by_metric_and_a_control_from_another_setting():
+    rows = pd.concat(
+        [
+            _rows({("Unseen", "clfd"): 88.0, ("Seen", "clfd"): 72.0}, sd=1.0),
+            _rows({("Unseen", "untrained"): 87.5}, sd=1.0),
+        ]
+    )
+    comps = [{"claim": "C11", "x": "Unseen", "y": "Seen", "settings": ["clfd"]}]
+    ctrl = {
+        "claim": "C11",
+        "kind": "control",
+        "method": "Unseen",
+        "control": "Unseen",
+        "control_setting": "untrained",
+        "why": "beat an untrained encoder",
+    }
+    res = evaluate_comparisons(
+        rows, comps, metric="score", gates=[ctrl], interval="welch", reps=100
+    ).iloc[0]
+    assert res.verdict == "untestable" and "Unseen - Unseen (untrained)" in res.gates
+    none = {"claim": "C11", "kind": "none", "why": "nothing can floor it"}
+    res = evaluate_comparisons(
+        rows, comps, metric="score", gates=[none], interval="welch", reps=100
+    ).iloc[0]
+    assert res.validity == "valid" and "no gate needed: nothing can floor it" in res.gates
+    other = {**none, "kind": "untestable", "comparison_metric": "other"}
+    res = evaluate_comparisons(
+        rows, comps, metric="score", gates=[other], interval="welch", reps=100
+    ).iloc[0]
+    assert res.validity == "" and res.verdict == res.stat_verdict  # not this comparison's metric
+
+
+def test_every_claim_lists_its_gates():
+    """Issue #35: each claim on the Claims page names the gates it was judged by."""
+    claims = pd.read_csv(stats_claims_csv())
+    for r in claims.itertuples():
+        assert isinstance(r.validity, str) and r.validity != "no gate", r.claim

@@ -199,7 +199,7 @@ def evaluate_comparisons(
         results = [
             evaluate_gate(g, {**spec, "metric": m}, rows, settings, m, cols, run, parity)
             for g in gates
-            if applies(g, spec, settings)
+            if applies(g, {**spec, "metric": m}, settings)
         ]
         passed = all(ok for ok, _ in results)
         row = {

@@ -21,6 +21,12 @@ Gate kinds (every gate has ``kind``, ``claim`` and ``why``; ``x``, ``y``, ``labe
   peer implementation.
 - ``untestable``: the set-up cannot answer the claim at all (e.g. synthetic data whose rule is
   ours); it always fails, with its ``why``.
+- ``none``: no gate applies, and ``why`` says why (e.g. a timing on this CPU); it always passes,
+  so that every claim lists its gates.
+
+``comparison_metric`` selects the comparisons on one metric (a claim may compare crashes and
+returns); a ``control`` gate with ``control_setting`` takes the control's rows from that setting
+(e.g. the same classifier on an untrained encoder's features).
 
 Used by: :func:`thesis_lib.stats.claims.evaluate_comparisons`, the Claims page.
 """
@@ -34,13 +40,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-GATE_KINDS = ("level", "control", "fidelity", "untestable")
-_SELECT = ("claim", "x", "y", "label", "setting")
+GATE_KINDS = ("level", "control", "fidelity", "untestable", "none")
+_SELECT = ("claim", "x", "y", "label", "setting", "comparison_metric")
 _KEYS = {
     "level": {"method", "metric", "low", "high", "relative_to", "slack"},
-    "control": {"method", "control", "metric"},
+    "control": {"method", "control", "metric", "control_setting"},
     "fidelity": {"method", "parity"},
     "untestable": set(),
+    "none": set(),
 }
 
 
@@ -89,6 +96,10 @@ def applies(
     for k in ("claim", "x", "y", "label"):
         if k in gate and str(comparison.get(k, "")) != str(gate[k]):
             return False
+    if "comparison_metric" in gate and str(comparison.get("metric")) != str(
+        gate["comparison_metric"]
+    ):
+        return False
     if "setting" in gate and not any(str(gate["setting"]) in s for s in settings):
         return False
     return True
@@ -130,6 +141,8 @@ def evaluate_gate(
     kind = gate["kind"]
     if kind == "untestable":
         return False, f"untestable: {gate['why']}"
+    if kind == "none":
+        return True, f"no gate needed: {gate['why']}"
     metric = str(gate.get("metric", comparison.get("metric") or metric))
     if kind == "level":
         methods = [gate["method"]] if gate.get("method") else [comparison["x"], comparison["y"]]
@@ -158,9 +171,21 @@ def evaluate_gate(
     if kind == "control":
         if compare is None:
             raise ValueError("a control gate needs the comparison function")
-        c = compare(rows, gate["method"], gate["control"], metric, settings=list(settings))
+        control, data = str(gate["control"]), rows
+        if gate.get("control_setting"):  # the control's rows from another setting, as this one
+            if len(settings) != 1:
+                raise ValueError(
+                    "a control gate with control_setting needs a one-setting comparison"
+                )
+            m, st = cols["method"], cols["setting"]
+            twin = rows[(rows[m] == control) & (rows[st] == gate["control_setting"])]
+            if twin.empty:
+                raise ValueError(f"no rows of {control!r} in {gate['control_setting']!r}")
+            control = f"{control} ({gate['control_setting']})"
+            data = pd.concat([rows, twin.assign(**{m: control, st: settings[0]})])
+        c = compare(data, gate["method"], control, metric, settings=list(settings))
         figure = (
-            f"control: {gate['method']} - {gate['control']} on {metric} = {c.effect:.3g} "
+            f"control: {gate['method']} - {control} on {metric} = {c.effect:.3g} "
             f"[{c.ci_low:.3g}, {c.ci_high:.3g}]"
         )
         return bool(c.ci_low > 0), figure
