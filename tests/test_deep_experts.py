@@ -305,3 +305,45 @@ def test_each_shipped_expert_was_trained_by_its_recipe(task):
     assert rec.expert_normalized == pytest.approx(
         data.normalized_score(task, rec.expert_return_mean)
     )
+
+
+def test_a_separate_medium_run_feeds_the_medium_tiers_and_not_the_expert(tmp_path, monkeypatch):
+    """Issue #34: D4RL's medium sets sit above "a third of the expert", so a task may ship a
+    medium run apart from its expert (``<task>-medium``); the medium and medium-replay tiers
+    then come from it, sampled, and the expert tier from the expert run."""
+    run = tmp_path / "run"
+    deep_experts.train_deep_expert("walker2d", TINY, run_dir=run, backend="sb3", log=lambda s: None)
+    out = tmp_path / "policies"
+    deep_experts.ship_deep_expert(
+        "walker2d",
+        run_dir=run,
+        out_dir=out,
+        n_eval_episodes=2,
+        n_select_episodes=1,
+        log=lambda s: None,
+    )
+    monkeypatch.setattr(experts, "POLICY_DIR", out)
+    before = experts.policy_fingerprint("walker2d")
+    assert not experts.has_medium_run("walker2d")
+    rec = deep_experts.ship_medium_run(
+        "walker2d",
+        run,
+        out_dir=out,
+        target_normalized=1.0,
+        n_candidates=2,
+        n_select_episodes=1,
+        n_eval_episodes=2,
+        log=lambda s: None,
+    )
+    assert experts.has_medium_run("walker2d") and rec.role == "medium"
+    assert rec.medium_sampled_normalized is not None and rec.checkpoint_steps[-1] == rec.expert_step
+    assert experts.policy_fingerprint("walker2d") != before  # sets made before are made again
+    assert experts.load_policy_record("walker2d", "medium").role == "medium"
+    assert experts.load_policy_record("walker2d").role == "expert"
+    _, med = recipe.make_episodes("walker2d", "medium", 200, seed=0)
+    _, exp = recipe.make_episodes("walker2d", "expert", 200, seed=0)
+    _, rep = recipe.make_episodes("walker2d", "medium-replay", 300, seed=0)
+    assert med["policy"]["role"] == "medium" and "sampled" in med["algorithm"]
+    assert exp["policy"]["role"] == "expert" and rep["policy"]["role"] == "medium"
+    with pytest.raises(ValueError, match="Unknown role"):
+        experts.load_policy_record("walker2d", "replay")

@@ -133,6 +133,8 @@ def _train_expert(args: argparse.Namespace) -> int:
         train_deep_expert,
     )
 
+    if args.medium:
+        return _train_medium(args)
     if args.task not in DEEP_EXPERT_CONFIGS:
         print(
             f"No TQC/SAC recipe for '{args.task}'. Valid: {', '.join(DEEP_EXPERT_CONFIGS)}.",
@@ -191,6 +193,54 @@ def _train_expert(args: argparse.Namespace) -> int:
                 "expert": rec.expert_return_mean,
                 "expert_normalized": rec.expert_normalized,
                 "medium": rec.medium_return_mean,
+            }
+        )
+    )
+    return 0
+
+
+def _train_medium(args: argparse.Namespace) -> int:
+    """``thesis data train-expert --medium``: train (or resume) the task's medium run, then ship
+    the snapshot whose sampled return is nearest D4RL's medium level (``<task>-medium``)."""
+    from dataclasses import replace
+
+    from .deep_experts import MEDIUM_RUN_CONFIGS, runs_dir, ship_medium_run, train_deep_expert
+
+    if args.task not in MEDIUM_RUN_CONFIGS:
+        print(
+            f"No medium-run recipe for '{args.task}'. Valid: {', '.join(MEDIUM_RUN_CONFIGS)}.",
+            file=sys.stderr,
+        )
+        return 2
+    cfg = MEDIUM_RUN_CONFIGS[args.task]
+    if args.steps is not None:
+        cfg = replace(cfg, total_steps=args.steps)
+    run_dir = args.run_dir or runs_dir() / f"{args.task}-medium"
+    if not args.ship_only:
+        st = train_deep_expert(
+            args.task,
+            cfg,
+            run_dir=run_dir,
+            backend=args.backend,
+            max_wall_s=args.max_wall_s,
+            log=lambda s: print(s, flush=True),
+        )
+        if not st.done and not args.ship:
+            return 0
+    rec = ship_medium_run(
+        args.task,
+        run_dir,
+        out_dir=args.out,
+        n_eval_episodes=args.eval_episodes,
+        log=lambda s: print(s, flush=True),
+    )
+    print(
+        json.dumps(
+            {
+                "task": args.task,
+                "medium_step": rec.expert_step,
+                "medium_normalized": rec.medium_normalized,
+                "medium_sampled_normalized": rec.medium_sampled_normalized,
             }
         )
     )
@@ -307,6 +357,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="ship the run's best snapshot even if the run is not finished",
     )
     te.add_argument("--ship-only", action="store_true", help="ship without training")
+    te.add_argument(
+        "--medium",
+        action="store_true",
+        help="the task's medium run instead (hopper, walker2d, halfcheetah): trained to D4RL's "
+        "published medium level and shipped as policies/<task>-medium (run dir "
+        "$THESIS_CACHE_DIR/expert_runs/<task>-medium)",
+    )
     te.add_argument("--eval-episodes", type=int, default=100)
     te.add_argument("--out", default=None, help="output dir (default: the package's policies/)")
     te.set_defaults(func=_train_expert)

@@ -39,7 +39,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -198,6 +198,28 @@ DEEP_EXPERT_CONFIGS: dict[str, DeepExpertConfig] = {
         learning_rate=ALGORITHM_LEARNING_RATES["crossq"],
         critic_arch=(256, 256),
         target_normalized=100.0,
+    ),
+}
+
+
+#: The medium runs (:func:`ship_medium_run`): a training run apart from the expert's, run only as
+#: far as D4RL's published medium level needs, with checkpoints every 10k steps (or 50k) so that
+#: a stopped session loses little. Hopper's is SAC, as D4RL's medium policies were (its shipped
+#: expert is ARS, whose snapshots jump from ~1,000 to ~3,000 in one iteration: none sits at
+#: D4RL's 1,422); the others reuse their expert's recipe.
+MEDIUM_RUN_CONFIGS: dict[str, DeepExpertConfig] = {
+    "hopper": DeepExpertConfig(algorithm="sac", total_steps=600_000, target_normalized=None),
+    "walker2d": replace(
+        DEEP_EXPERT_CONFIGS["walker2d"],
+        total_steps=400_000,
+        target_normalized=None,
+        checkpoint_every=10_000,
+    ),
+    "halfcheetah": replace(
+        DEEP_EXPERT_CONFIGS["halfcheetah"],
+        total_steps=200_000,
+        target_normalized=None,
+        checkpoint_every=10_000,
     ),
 }
 
@@ -632,6 +654,147 @@ def ship_deep_expert(
     return rec
 
 
+def evaluate_sampled(
+    policy: MLPPolicy, task: str, n_episodes: int = 20, seed: int = 100
+) -> np.ndarray:
+    """Undiscounted returns of ``policy`` acting by its own Gaussian (as the medium tier samples
+    it) over ``n_episodes`` seeded episodes; the action noise is seeded too."""
+    from .recipe import make_env
+
+    env = make_env(task)
+    rng = np.random.default_rng(seed)
+    out = np.empty(n_episodes)
+    for e in range(n_episodes):
+        obs, _ = env.reset(seed=seed + e)
+        ret, done = 0.0, False
+        while not done:
+            obs, r, term, trunc, _ = env.step(policy.sample(obs, rng))
+            ret += float(r)
+            done = term or trunc
+        out[e] = ret
+    env.close()
+    return out
+
+
+def ship_medium_run(
+    task: str,
+    run_dir: Path | str,
+    out_dir: Path | str | None = None,
+    target_normalized: float | None = None,
+    n_candidates: int = 5,
+    n_select_episodes: int = 20,
+    n_eval_episodes: int = 100,
+    eval_seed: int = 10_000,
+    log: Callable[[str], None] = print,
+) -> Any:
+    """Ship a training run's snapshots as ``task``'s **medium** policy, apart from its expert
+    (``policies/<task>-medium.npz`` / ``.json``).
+
+    D4RL's medium sets score above "a third of the expert" (hopper-medium-v2: 44.3 normalised,
+    walker2d 62.1, halfcheetah 40.7; :mod:`thesis_lib.data.d4rl_reference`), and the medium
+    tier samples its policy. So the medium snapshot is the one whose *sampled* roll-outs come
+    closest to ``target_normalized`` (default: D4RL's published medium mean for the task): the
+    ``n_candidates`` snapshots whose quick (deterministic) return is closest are rolled out by
+    their own Gaussian on ``n_select_episodes`` episodes. The snapshots up to it (at most
+    :data:`MAX_REPLAY_SNAPSHOTS`) ship for medium-replay. The expert tier keeps the task's
+    expert run (``policies/<task>.npz``).
+
+    Returns:
+        The :class:`thesis_lib.data.experts.PolicyRecord` written (``role="medium"``).
+    """
+    from .d4rl_reference import d4rl_stats
+    from .experts import MEDIUM_RUN, POLICY_DIR, PolicyRecord
+    from .scores import normalized_score
+
+    spec = get_task(task)
+    folder = Path(run_dir)
+    state_path = folder / "state.json"
+    if not state_path.exists():
+        raise FileNotFoundError(f"No training run for '{task}' in {folder}.")
+    st = RunState(**json.loads(state_path.read_text()))
+    snaps = [s for s in st.snapshots if s["step"] <= max(st.steps, 0)]
+    if len(snaps) < 2:
+        raise ValueError(f"The run in {folder} has {len(snaps)} snapshot(s); train longer.")
+    if target_normalized is None:
+        ref = d4rl_stats(task, "medium")
+        if ref is None or ref.mean is None:
+            raise ValueError(f"No D4RL medium figure for '{task}': give target_normalized.")
+        target_normalized = float(ref.mean)
+    lo_ref, hi_ref = spec.ref_min_score, spec.ref_max_score
+    if lo_ref is None or hi_ref is None:
+        raise ValueError(f"'{task}' has no D4RL reference returns to normalise against.")
+    target_raw = lo_ref + target_normalized * (hi_ref - lo_ref) / 100.0
+    from .recipe import make_env
+
+    env = make_env(task)
+    low = env.action_space.low.astype(np.float64)
+    high = env.action_space.high.astype(np.float64)
+    env.close()
+    near = sorted(snaps[1:], key=lambda s: abs(s["return"] - target_raw))[:n_candidates]
+    sampled = {
+        s["step"]: float(
+            evaluate_sampled(_load_snapshot(folder, s, low, high), task, n_select_episodes).mean()
+        )
+        for s in near
+    }
+    log(f"{task}: medium candidates (step: sampled return) {sampled}; target {target_raw:.0f}")
+    med_step = min(sampled, key=lambda k: abs(sampled[k] - target_raw))
+    med = _load_snapshot(folder, next(s for s in snaps if s["step"] == med_step), low, high)
+    det = evaluate(med, task, n_eval_episodes, eval_seed)
+    smp = evaluate_sampled(med, task, n_eval_episodes, eval_seed)
+    upto = [s for s in snaps if s["step"] < med_step]
+    if len(upto) > MAX_REPLAY_SNAPSHOTS - 1:
+        idx = np.linspace(0, len(upto) - 1, MAX_REPLAY_SNAPSHOTS - 1).round().astype(int)
+        upto = [upto[i] for i in sorted(set(idx.tolist()))]
+    shipped = [*upto, next(s for s in snaps if s["step"] == med_step)]
+    arrays: dict[str, np.ndarray] = {}
+    for i, s in enumerate(shipped):
+        arrays.update(_load_snapshot(folder, s, low, high).to_arrays(f"ckpt{i}_"))
+    out = Path(out_dir) if out_dir is not None else POLICY_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    stem = f"{task}{MEDIUM_RUN}"
+    atomic_write(out / f"{stem}.npz", lambda p: _savez(p, arrays))
+    cfg = dict(st.config)
+    med_norm = normalized_score(task, float(det.mean()), missing="none")
+    rec = PolicyRecord(
+        task=task,
+        env_id=spec.env_id,
+        algorithm=f"{ALGORITHM_NAMES[cfg['algorithm'].lower()]} ({st.backend}), MLP "
+        f"{'x'.join(str(n) for n in cfg['net_arch'])}, exported to NumPy (medium run)",
+        config={**cfg, "backend": st.backend},
+        steps_trained=int(st.steps),
+        wall_s=float(st.wall_s),
+        expert_checkpoint=len(shipped) - 1,
+        medium_checkpoint=len(shipped) - 1,
+        checkpoint_steps=[int(s["step"]) for s in shipped],
+        checkpoint_returns=[float(s["return"]) for s in shipped],
+        expert_return_mean=round(float(det.mean()), 2),
+        expert_return_std=round(float(det.std()), 2),
+        medium_return_mean=round(float(det.mean()), 2),
+        medium_return_std=round(float(det.std()), 2),
+        n_eval_episodes=n_eval_episodes,
+        eval_seed=eval_seed,
+        stopped_by=st.stopped_by or "shipped before the end",
+        medium_target=round(target_raw, 2),
+        expert_normalized=med_norm,
+        medium_normalized=med_norm,
+        versions=_versions(st.backend),
+        policy_kind="mlp",
+        expert_step=int(med_step),
+        snapshot_returns={str(s["step"]): s["return"] for s in snaps},
+        role="medium",
+        medium_sampled_normalized=normalized_score(task, float(smp.mean()), missing="none"),
+    )
+    atomic_write(
+        out / f"{stem}.json", lambda p: p.write_text(json.dumps(asdict(rec), indent=1) + "\n")
+    )
+    log(
+        f"{task}: medium run step {med_step}: deterministic {det.mean():.0f}, sampled "
+        f"{smp.mean():.0f} (target {target_raw:.0f}) -> {out / stem}.npz"
+    )
+    return rec
+
+
 def _savez(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
     kwds: dict[str, Any] = dict(arrays)  # Any: savez_compressed(**dict[str, ndarray]) trips mypy
     with open(path, "wb") as f:
@@ -654,5 +817,8 @@ __all__ = [
     "export_actor",
     "runs_dir",
     "ship_deep_expert",
+    "ship_medium_run",
+    "MEDIUM_RUN_CONFIGS",
+    "evaluate_sampled",
     "train_deep_expert",
 ]

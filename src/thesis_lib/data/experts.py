@@ -130,6 +130,12 @@ class PolicyRecord:
     :class:`thesis_lib.data.deep_experts.MLPPolicy`)."""
     expert_step: int | None = None
     """Training step of the expert snapshot (``mlp`` policies)."""
+    role: str = "expert"
+    """``expert``: the task's expert run (expert, and medium unless a medium run ships);
+    ``medium``: a separate medium run (``<task>-medium``), whose ``expert_*`` fields repeat the
+    medium policy's."""
+    medium_sampled_normalized: float | None = None
+    """A medium run's medium policy, sampled as the data are: its D4RL-normalised return."""
     snapshot_returns: dict[str, float] | None = None
     """Quick return of every snapshot of the training run, by step (``mlp`` policies)."""
 
@@ -164,6 +170,17 @@ def has_policies(task: str) -> bool:
     return (POLICY_DIR / f"{task}.npz").exists()
 
 
+#: The stem suffix of a task's separate medium run (``policies/<task>-medium.npz/.json``).
+MEDIUM_RUN = "-medium"
+
+
+def has_medium_run(task: str) -> bool:
+    """Whether a separate medium run ships for ``task`` (:func:`thesis_lib.data.deep_experts.
+    ship_medium_run`): its medium and medium-replay tiers then come from it, at D4RL's
+    published medium level, and the expert tier from the expert run."""
+    return all((POLICY_DIR / f"{task}{MEDIUM_RUN}{x}").is_file() for x in (".npz", ".json"))
+
+
 def policy_fingerprint(task: str) -> str | None:
     """A hash of the shipped policy files of ``task`` (``policies/<task>.npz`` and ``.json``),
     ``None`` where none ships. Stored with every data set made from them, so that a set made
@@ -177,15 +194,21 @@ def policy_fingerprint(task: str) -> str | None:
     files = [POLICY_DIR / f"{task}.npz", POLICY_DIR / f"{task}.json"]
     if not all(f.is_file() for f in files):
         return None
+    if has_medium_run(task):
+        files += [POLICY_DIR / f"{task}{MEDIUM_RUN}.npz", POLICY_DIR / f"{task}{MEDIUM_RUN}.json"]
     h = hashlib.sha256()
     for f in files:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 
-def load_policy_record(task: str) -> PolicyRecord:
-    """Read ``policies/<task>.json``."""
-    path = POLICY_DIR / f"{task}.json"
+def load_policy_record(task: str, role: str = "expert") -> PolicyRecord:
+    """Read ``policies/<task>.json``; with ``role="medium"``, the separate medium run's record
+    where one ships (:func:`has_medium_run`), else the same."""
+    if role not in ("expert", "medium"):
+        raise ValueError(f"Unknown role {role!r}. Valid: expert, medium.")
+    stem = f"{task}{MEDIUM_RUN}" if role == "medium" and has_medium_run(task) else task
+    path = POLICY_DIR / f"{stem}.json"
     if not path.exists():
         raise FileNotFoundError(
             f"No shipped policy for task '{task}' ({path}). "
@@ -205,14 +228,16 @@ def load_policy(task: str, which: str = "expert") -> Any:
         A :class:`LinearPolicy` (ARS) or :class:`thesis_lib.data.deep_experts.MLPPolicy`
         (TQC/SAC), whichever the task ships; both map observations to actions.
     """
-    path = POLICY_DIR / f"{task}.npz"
+    role = "expert" if which == "expert" else "medium"
+    stem = f"{task}{MEDIUM_RUN}" if role == "medium" and has_medium_run(task) else task
+    path = POLICY_DIR / f"{stem}.npz"
     if not path.exists():
         raise FileNotFoundError(
             f"No shipped policy for task '{task}' ({path}). "
             f"Train it with 'thesis data train-experts --task {task}'."
         )
     z = np.load(path)
-    rec = load_policy_record(task)
+    rec = load_policy_record(task, role)
     if rec.policy_kind == "mlp":
         from .deep_experts import MLPPolicy
 

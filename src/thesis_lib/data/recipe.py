@@ -332,8 +332,11 @@ def make_episodes(
     else:
         from .experts import load_policy, load_policy_record
 
-        rec = load_policy_record(task)
+        rec = load_policy_record(
+            task, "medium" if tier in ("medium", "medium-replay") else "expert"
+        )
         info["policy"] = {
+            "role": rec.role,
             "algorithm": rec.algorithm,
             "steps_trained": rec.steps_trained,
             "seed": rec.config.get("seed"),
