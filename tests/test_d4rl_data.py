@@ -178,3 +178,38 @@ def test_the_card_prints_d4rl_beside_ours(data_home):
     assert "source" in text and "download_d4rl_datasets.py" in text
     for k in ("normalized_std", "normalized_min", "normalized_max", "mean_length"):
         assert np.isfinite(card[k]), k
+
+
+#: Our smoke-size tiers outside D4RL's band today, and why (issue #34): the shipped medium
+#: snapshots sit at about a third of the expert, below D4RL's published medium sets. A medium
+#: run at D4RL's level (`thesis data train-expert --task T --medium`) moves them; this table
+#: must then shrink, and the test says which row changed.
+KNOWN_OUTSIDE = {
+    ("hopper", "medium"): "ARS medium at 22 normalised against D4RL's 44",
+    ("hopper", "medium-expert"): "its medium half",
+    ("walker2d", "medium"): "TQC snapshot at 21 against D4RL's 62",
+    ("walker2d", "medium-replay"): "replay up to that weak medium",
+    ("walker2d", "medium-expert"): "its medium half",
+    ("halfcheetah", "medium"): "sampled TQC medium spreads 1.1 points against D4RL's 2.9",
+}
+
+
+@pytest.mark.slow
+def test_our_tiers_beside_d4rls_band(data_home):
+    """The band test of issue #34 at the smoke size: a normalised mean within 10 points of
+    D4RL's and a std of at least half of D4RL's, for hopper, walker2d and halfcheetah x medium,
+    medium-replay and medium-expert; the rows outside it are named in KNOWN_OUTSIDE."""
+    inside, outside = set(), set()
+    for task in ("hopper", "walker2d", "halfcheetah"):
+        for tier in ("medium", "medium-replay", "medium-expert"):
+            cmp = d4rl_comparison(data_card(get_dataset(task, tier)))
+            assert cmp is not None and isinstance(cmp["in_band"], bool)
+            (inside if cmp["in_band"] else outside).add((task, tier))
+    assert outside == set(KNOWN_OUTSIDE), (
+        f"now outside: {sorted(outside)}; update KNOWN_OUTSIDE (and the README) to match"
+    )
+    assert inside == {
+        ("hopper", "medium-replay"),
+        ("halfcheetah", "medium-replay"),
+        ("halfcheetah", "medium-expert"),
+    }
