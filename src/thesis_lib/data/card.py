@@ -109,6 +109,8 @@ def format_card(card: dict[str, Any]) -> str:
     lines = [f"# {card['id']}  ({card['env_id']})"]
     for k in ("episodes", "transitions"):
         lines.append(f"{k:>16}: {card[k]}")
+    if "mean_length" in card:
+        lines.append(f"{'mean length':>16}: {card['mean_length']:.0f}")
     lines.append(
         f"{'return':>16}: {card['return_mean']:.1f} ± {card['return_std']:.1f} "
         f"[{card['return_min']:.1f}, {card['return_max']:.1f}]"
