@@ -112,6 +112,10 @@ class Comparison:
     train: dict[str, Any] = field(default_factory=dict)
     episodes: int = 10
     peer: bool = True
+    data_recipe: int | None = None
+    """The data recipe (:data:`thesis_lib.data.recipe.GENERATOR_VERSION`) the runs' ``task/tier``
+    set was made by; ``None``: this checkout's. Runs of another recipe cannot be redone (the
+    generator makes only its own); their stored rows stay readable as a record."""
 
     def __post_init__(self) -> None:
         from thesis_lib.seq.registry import check_methods
@@ -158,9 +162,33 @@ def load_parity_file(path: str | Path) -> list[Comparison]:
 # One run of each side
 
 
-def _load(dataset: str, size: str) -> Any:
-    from thesis_lib.data.minari_sets import open_dataset
+#: The data recipe of runs stored before the recipe was part of a run's key (issue #34 made
+#: version 3); a run of this recipe keeps its old key.
+LEGACY_DATA_RECIPE = 2
 
+
+def data_recipe(comparison: Comparison) -> int | None:
+    """The recipe a comparison's runs use: its own, else this checkout's for a ``task/tier``
+    set; ``None`` for a Minari id (not made here)."""
+    from thesis_lib.data.minari_sets import is_minari_id
+    from thesis_lib.data.recipe import GENERATOR_VERSION
+
+    if is_minari_id(comparison.dataset):
+        return None
+    return comparison.data_recipe or GENERATOR_VERSION
+
+
+def _load(dataset: str, size: str, recipe: int | None = LEGACY_DATA_RECIPE) -> Any:
+    """The run's data set; refused where it needs another data recipe than this checkout's."""
+    from thesis_lib.data.minari_sets import is_minari_id, open_dataset
+    from thesis_lib.data.recipe import GENERATOR_VERSION
+
+    if not is_minari_id(dataset) and recipe is not None and recipe != GENERATOR_VERSION:
+        raise ValueError(
+            f"This run needs {dataset} made by data recipe {recipe}, and this checkout makes "
+            f"recipe {GENERATOR_VERSION}: it cannot be redone (its stored rows stay a record). "
+            f"Add a comparison with `data_recipe: {GENERATOR_VERSION}` to run it on today's data."
+        )
     return open_dataset(dataset, size)
 
 
@@ -206,7 +234,9 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 
     torch.set_num_threads(1)
-    ds = _load(config["dataset"], config["dataset_size"])
+    ds = _load(
+        config["dataset"], config["dataset_size"], config.get("data_recipe", LEGACY_DATA_RECIPE)
+    )
     arch = ArchSpec(**config["arch"], init=config["init"])
     train = TrainSpec(**config["train"], eval_every=0)
     ev = EvalSpec(episodes=config["episodes"], targets=("max",), episode_seed="run")
@@ -345,7 +375,9 @@ def run_peer(config: dict[str, Any], ds: Any) -> dict[str, Any]:
 
 def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     """The peer's side of one parity run (a sweep task): :func:`run_peer`; one row."""
-    ds = _load(config["dataset"], config["dataset_size"])
+    ds = _load(
+        config["dataset"], config["dataset_size"], config.get("data_recipe", LEGACY_DATA_RECIPE)
+    )
     res = run_peer(config, ds)
     return [
         _row(
@@ -380,6 +412,9 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
                 "train": {**c.train, "seed": int(seed)},
                 "episodes": c.episodes,
             }
+            recipe = data_recipe(c)
+            if recipe is not None and recipe != LEGACY_DATA_RECIPE:  # old runs keep their keys
+                config["data_recipe"] = recipe
             sides["ours"].append(Task(ours_run, {**config, "init": c.init}))
             if c.peer:
                 sides["peer"].append(Task(peer_run, config))
@@ -457,6 +492,7 @@ def parity_table(
             "peer_name": every[-1]["peer"] if got.get("peer") else "",
             "data_mean": float(every[0]["data_score_mean"]) if every else np.nan,
             "data_sha": every[0]["data_sha"] if every else "",
+            "data_recipe": data_recipe(c),
         }
         if len(ours) >= 2 and len(peer) >= 2:
             d, lo, hi = welch_interval(ours, peer)
