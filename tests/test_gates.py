@@ -264,6 +264,21 @@ def test_holm_turns_a_marginal_hold_inconclusive():
     out = _holm_adjust(res)
     assert out.p_holm.tolist()[:2] == pytest.approx([0.06, 0.5]) and np.isnan(out.p_holm[2])
     assert out.verdict.tolist() == ["inconclusive", "inconclusive", "holds"]
+    # the level is the intervals': one side of a 95% interval (2.5%), TOST's 5% for equivalence
+    two = pd.DataFrame(
+        {
+            "verdict": ["holds", "holds"],
+            "p_value": [0.04, 0.04],
+            "counts": [True, False],
+            "kind": ["superior", "equivalent"],
+        }
+    )
+    assert _holm_adjust(two.assign(counts=True)).verdict.tolist() == [
+        "inconclusive",
+        "inconclusive",
+    ]
+    one_each = [_holm_adjust(two.iloc[[i]].assign(counts=True)).verdict.iloc[0] for i in (0, 1)]
+    assert one_each == ["inconclusive", "holds"]
     rows = _rows({("HDT", "s"): 3.0, ("DT", "s"): 0.0}, seeds=8)
     one = evaluate_comparisons(
         rows, [{"claim": "C3", "x": "HDT", "y": "DT"}], metric="score", interval="welch", reps=100

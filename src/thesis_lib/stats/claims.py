@@ -220,14 +220,18 @@ def evaluate_comparisons(
     return _holm_adjust(res) if len(res) else res
 
 
-#: The family-wise error rate Holm's adjustment keeps over a study's deciding comparisons.
-HOLM_ALPHA = 0.05
+#: The one-sided level Holm's adjustment keeps over a study's deciding comparisons, as the
+#: intervals decide them: 2.5% (a 95% two-sided interval's side), 5% for an equivalence
+#: claim (TOST's two one-sided 5% tests, the 90% interval).
+HOLM_ALPHA = 0.025
+HOLM_ALPHA_EQUIVALENT = 0.05
 
 
 def _holm_adjust(res: pd.DataFrame) -> pd.DataFrame:
     """Holm over the comparisons that decide claims (``counts``) with a p-value: ``p_holm``; a
-    comparison that holds by its own interval but not after the adjustment becomes
-    inconclusive (``stat_verdict`` keeps the unadjusted verdict)."""
+    comparison that holds by its own interval but not after the adjustment (at
+    :data:`HOLM_ALPHA`, or :data:`HOLM_ALPHA_EQUIVALENT`) becomes inconclusive
+    (``stat_verdict`` keeps the unadjusted verdict)."""
     from . import holm
 
     res = res.copy()
@@ -236,7 +240,9 @@ def _holm_adjust(res: pd.DataFrame) -> pd.DataFrame:
     adj = np.full(len(res), np.nan)
     adj[counted] = holm(p[counted])
     res["p_holm"] = adj
-    weak = (res["verdict"] == "holds") & (res["p_holm"] >= HOLM_ALPHA)
+    kind = res["kind"] if "kind" in res else pd.Series("superior", index=res.index)
+    alpha = np.where(kind == "equivalent", HOLM_ALPHA_EQUIVALENT, HOLM_ALPHA)
+    weak = (res["verdict"] == "holds") & (res["p_holm"] >= alpha)
     res.loc[weak, "verdict"] = "inconclusive"
     return res
 
