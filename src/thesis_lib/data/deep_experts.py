@@ -542,6 +542,27 @@ def _load_snapshot(folder: Path, snap: dict[str, Any], low: np.ndarray, high: np
         return MLPPolicy.from_arrays(z, low, high)
 
 
+def _replay_snapshots(snaps: list[dict[str, Any]], med_step: int) -> list[dict[str, Any]]:
+    """The snapshots shipped for medium-replay: at most :data:`MAX_REPLAY_SNAPSHOTS` - 1
+    evenly spaced from the start up to the medium one, then the medium one."""
+    upto = [s for s in snaps if s["step"] < med_step]
+    if len(upto) > MAX_REPLAY_SNAPSHOTS - 1:
+        idx = np.linspace(0, len(upto) - 1, MAX_REPLAY_SNAPSHOTS - 1).round().astype(int)
+        upto = [upto[i] for i in sorted(set(idx.tolist()))]
+    return [*upto, next(s for s in snaps if s["step"] == med_step)]
+
+
+def _action_bounds(task: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` of ``task``'s action space, float64."""
+    from .recipe import make_env
+
+    env = make_env(task)
+    low = env.action_space.low.astype(np.float64)
+    high = env.action_space.high.astype(np.float64)
+    env.close()
+    return low, high
+
+
 def ship_deep_expert(
     task: str,
     run_dir: Path | str | None = None,
@@ -580,12 +601,7 @@ def ship_deep_expert(
     snaps = [s for s in st.snapshots if s["step"] <= max(st.steps, 0)]
     if len(snaps) < 2:
         raise ValueError(f"The run in {folder} has {len(snaps)} snapshot(s); train longer.")
-    from .recipe import make_env
-
-    env = make_env(task)
-    low = env.action_space.low.astype(np.float64)
-    high = env.action_space.high.astype(np.float64)
-    env.close()
+    low, high = _action_bounds(task)
     pol = {s["step"]: _load_snapshot(folder, s, low, high) for s in snaps}
 
     quick = sorted(snaps, key=lambda s: s["return"], reverse=True)[:5]
@@ -617,11 +633,7 @@ def ship_deep_expert(
         f"return {med_r.mean():.0f} (target {target:.0f})"
     )
 
-    upto = [s for s in snaps if s["step"] < med_step]
-    if len(upto) > MAX_REPLAY_SNAPSHOTS - 1:
-        idx = np.linspace(0, len(upto) - 1, MAX_REPLAY_SNAPSHOTS - 1).round().astype(int)
-        upto = [upto[i] for i in sorted(set(idx.tolist()))]
-    shipped = [*upto, next(s for s in snaps if s["step"] == med_step)]
+    shipped = _replay_snapshots(snaps, med_step)
     arrays = pol[exp_step].to_arrays("expert_")
     for i, s in enumerate(shipped):
         arrays.update(pol[s["step"]].to_arrays(f"ckpt{i}_"))
@@ -732,12 +744,7 @@ def ship_medium_run(
     if lo_ref is None or hi_ref is None:
         raise ValueError(f"'{task}' has no D4RL reference returns to normalise against.")
     target_raw = lo_ref + target_normalized * (hi_ref - lo_ref) / 100.0
-    from .recipe import make_env
-
-    env = make_env(task)
-    low = env.action_space.low.astype(np.float64)
-    high = env.action_space.high.astype(np.float64)
-    env.close()
+    low, high = _action_bounds(task)
     near = sorted(snaps[1:], key=lambda s: abs(s["return"] - target_raw))[:n_candidates]
     sampled = {
         s["step"]: float(
@@ -750,11 +757,7 @@ def ship_medium_run(
     med = _load_snapshot(folder, next(s for s in snaps if s["step"] == med_step), low, high)
     det = evaluate(med, task, n_eval_episodes, eval_seed)
     smp = evaluate_sampled(med, task, n_eval_episodes, eval_seed)
-    upto = [s for s in snaps if s["step"] < med_step]
-    if len(upto) > MAX_REPLAY_SNAPSHOTS - 1:
-        idx = np.linspace(0, len(upto) - 1, MAX_REPLAY_SNAPSHOTS - 1).round().astype(int)
-        upto = [upto[i] for i in sorted(set(idx.tolist()))]
-    shipped = [*upto, next(s for s in snaps if s["step"] == med_step)]
+    shipped = _replay_snapshots(snaps, med_step)
     arrays: dict[str, np.ndarray] = {}
     for i, s in enumerate(shipped):
         arrays.update(_load_snapshot(folder, s, low, high).to_arrays(f"ckpt{i}_"))
