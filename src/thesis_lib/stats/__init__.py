@@ -390,6 +390,22 @@ def _source(rows: pd.DataFrame, index: Any) -> str:
     return f"row {index}"
 
 
+def shared_settings(
+    rows: pd.DataFrame,
+    x: str,
+    y: str,
+    metric: str,
+    method_col: str = "method",
+    setting_col: str = "setting",
+) -> list[Any]:
+    """The settings (sorted) where both ``x`` and ``y`` have ``metric``: those :func:`compare`
+    uses when it is given none."""
+    has = rows[rows[metric].notna()] if metric in rows else rows
+    sx = set(has.loc[has[method_col] == x, setting_col])
+    sy = set(has.loc[has[method_col] == y, setting_col])
+    return sorted(sx & sy)
+
+
 def compare(
     rows: pd.DataFrame,
     x: str,
@@ -426,10 +442,7 @@ def compare(
         if m not in known:
             raise ValueError(f"no rows for method {m!r}; methods: {sorted(known)}")
     if settings is None:  # the settings where both methods have the metric
-        has = rows[rows[metric].notna()] if metric in rows else rows
-        sx = set(has.loc[has[method_col] == x, setting_col])
-        sy = set(has.loc[has[method_col] == y, setting_col])
-        settings = sorted(sx & sy)
+        settings = shared_settings(rows, x, y, metric, method_col, setting_col)
         if not settings:
             raise ValueError(f"{x} and {y} share no setting")
     mx, cols = score_matrix(rows, x, metric, settings, **kw)
@@ -490,5 +503,6 @@ __all__ = [
     "performance_profile",
     "probability_of_improvement",
     "score_matrix",
+    "shared_settings",
     "verdict",
 ]

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from . import AGGREGATES, compare
+from . import AGGREGATES, compare, shared_settings
 
 #: id -> (thesis section, statement), as in CLAIMS.md.
 CLAIMS: dict[str, tuple[str, str]] = {
@@ -195,7 +195,9 @@ def evaluate_comparisons(
             claim=spec.get("kind", "superior"),
             margin=float(spec.get("margin", 0.0)),
         )
-        settings = spec.get("settings") or _shared_settings(rows, spec["x"], spec["y"], m, cols)
+        settings = spec.get("settings") or shared_settings(
+            rows, spec["x"], spec["y"], m, method_col, setting_col
+        )
         results = [
             evaluate_gate(g, {**spec, "metric": m}, rows, settings, m, cols, run, parity)
             for g in gates
@@ -245,16 +247,6 @@ def _holm_adjust(res: pd.DataFrame) -> pd.DataFrame:
     weak = (res["verdict"] == "holds") & (res["p_holm"] >= alpha)
     res.loc[weak, "verdict"] = "inconclusive"
     return res
-
-
-def _shared_settings(
-    rows: pd.DataFrame, x: str, y: str, metric: str, cols: Mapping[str, str]
-) -> list[str]:
-    """The settings where both ``x`` and ``y`` have ``metric`` (as :func:`compare` picks them)."""
-    has = rows[rows[metric].notna()] if metric in rows else rows
-    sx = set(has.loc[has[cols["method"]] == x, cols["setting"]])
-    sy = set(has.loc[has[cols["method"]] == y, cols["setting"]])
-    return sorted(str(s) for s in sx & sy)
 
 
 def _name(r: Any) -> str:
