@@ -246,7 +246,7 @@ def test_a_table_and_a_figure_may_not_share_a_name(tmp_path, monkeypatch):
 def test_git_commit_is_dirty_for_code_changes_not_for_the_studies_own_files(tmp_path):
     import subprocess
 
-    from thesis_lib.book.results import git_commit
+    from thesis_lib.provenance import git_commit
 
     def git(*args: str) -> str:
         return subprocess.run(

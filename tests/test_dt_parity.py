@@ -300,8 +300,8 @@ def test_parity_file_merges_common_and_rejects_unknown_keys(tmp_path):
 
 
 def test_the_committed_parity_file_parses_and_peer_runs_are_shared():
-    from thesis_lib.book.paths import project_root
     from thesis_lib.parity import load_parity_file, parity_tasks, unique_tasks
+    from thesis_lib.paths import project_root
 
     comps = load_parity_file(project_root() / "params" / "parity.yml")
     tasks = parity_tasks(comps)

@@ -216,7 +216,7 @@ def test_the_v1_review_withholds_c12_c13_c14_and_the_maze_rows():
 
 
 def stats_claims_csv():
-    from thesis_lib.book.paths import project_root
+    from thesis_lib.paths import project_root
 
     return project_root() / "studies" / "claims.csv"
 

@@ -10,7 +10,6 @@ from thesis_lib.book.compare import (
     reference_tables,
 )
 from thesis_lib.book.params import config_from_namespace, validate_parameters
-from thesis_lib.book.paths import project_root, results_dir
 from thesis_lib.book.results import ChapterResults, run_metadata
 from thesis_lib.book.runner import (
     ChapterFailed,
@@ -23,6 +22,7 @@ from thesis_lib.book.runner import (
     run_chapter,
     run_chapters,
 )
+from thesis_lib.paths import project_root, results_dir
 
 __all__ = [
     "DEVIATION_KINDS",

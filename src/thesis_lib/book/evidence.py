@@ -176,7 +176,7 @@ def study_code_paths(modules: set[str], root: Path | None = None) -> list[str] |
     and ``sweep`` code, but no ``mdlt`` or ``defender`` module: a commit that only changes MDLT
     did not change what the 07 rows depend on.
     """
-    from thesis_lib.book.paths import project_root
+    from thesis_lib.paths import project_root
 
     root = Path(root) if root is not None else project_root()
     src = root / "src"
@@ -209,7 +209,7 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     since: a change listed here did not take part in the verdicts.
     """
     from thesis_lib.book import study as st
-    from thesis_lib.book.results import git_output
+    from thesis_lib.provenance import git_output
 
     cols = ["commit", "date", "subject"]
     commits = [c.removesuffix("-dirty") for c in ev.info.get("commits", [])]

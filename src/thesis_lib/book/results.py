@@ -9,105 +9,15 @@ Used by every chapter notebook.
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import platform
-import subprocess
-import sys
 import time
-from datetime import UTC, datetime
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
-from thesis_lib.book.paths import project_root, results_dir
-
-#: Packages whose versions are recorded in every run.json.
-RECORDED_PACKAGES = (
-    "thesis_lib",
-    "numpy",
-    "scipy",
-    "pandas",
-    "numba",
-    "torch",
-    "gymnasium",
-    "mujoco",
-    "gymnasium-robotics",
-    "minari",
-    "stable-baselines3",
-    "sb3-contrib",
-    "librosa",
-    "fastdtw",
-    "papermill",
-    "jupyter-book",
-)
-
-
-def git_output(args: list[str], path: str | Path | None = None) -> str | None:
-    """``git <args>``'s standard output in the checkout (``path`` or the project root), or
-    ``None`` where git fails or is missing (outside a checkout, an unknown commit)."""
-    try:
-        cwd = Path(path) if path else project_root()
-    except FileNotFoundError:
-        cwd = Path.cwd()
-    try:
-        out = subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=10)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return out.stdout if out.returncode == 0 else None
-
-
-def git_commit(path: str | Path | None = None) -> str:
-    """The checkout's commit hash, suffixed ``-dirty`` when tracked files have uncommitted
-    changes, other than the committed evidence under ``studies/`` (a running study rewrites its
-    own ``rows.csv`` and ``run.json``; that is not a change of the code that ran).
-
-    Returns ``"unknown"`` outside a git checkout.
-    """
-    sha = git_output(["rev-parse", "HEAD"], path)
-    dirty = git_output(
-        ["status", "--porcelain", "--untracked-files=no", "--", ":(top)", ":(top,exclude)studies"],
-        path,
-    )
-    if sha is None or dirty is None:
-        return "unknown"
-    return f"{sha.strip()}-dirty" if dirty.strip() else sha.strip()
-
-
-def package_versions(names: tuple[str, ...] = RECORDED_PACKAGES) -> dict[str, str]:
-    """Installed versions of ``names`` (missing packages are left out)."""
-    out = {"python": platform.python_version()}
-    for name in names:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            continue
-    return out
-
-
-def _jsonable(config: Any) -> Any:
-    if dataclasses.is_dataclass(config) and not isinstance(config, type):
-        return dataclasses.asdict(config)
-    return config
-
-
-def run_metadata(config: Any, seed: int | None, **extra: Any) -> dict[str, Any]:
-    """The provenance record written as ``run.json``: config, seed, commit, versions, platform."""
-    return {
-        "config": _jsonable(config),
-        "seed": seed,
-        "git_commit": git_commit(),
-        "versions": package_versions(),
-        "platform": {
-            "machine": platform.machine(),
-            "system": platform.system(),
-            "argv": sys.argv[:1],
-        },
-        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-        **extra,
-    }
+from thesis_lib.paths import results_dir
+from thesis_lib.provenance import jsonable, run_metadata
 
 
 def _glue(name: str, value: Any) -> None:
@@ -187,7 +97,7 @@ class ChapterResults:
     def json(self, name: str, data: Any) -> Path:
         """Write any JSON-serialisable object to ``<name>.json``."""
         path = self.dir / f"{name}.json"
-        path.write_text(json.dumps(_jsonable(data), indent=2, default=str))
+        path.write_text(json.dumps(jsonable(data), indent=2, default=str))
         self._record(path.name)
         return path
 

@@ -30,7 +30,7 @@ from thesis_lib.book.params import (
     parse_value,
     validate_parameters,
 )
-from thesis_lib.book.paths import project_root
+from thesis_lib.paths import project_root
 
 GENERATED = Path("book") / "generated"
 PROFILES = ("smoke", "full")

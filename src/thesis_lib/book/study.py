@@ -33,7 +33,7 @@ from typing import Any
 import pandas as pd
 
 from thesis_lib._io import atomic_write
-from thesis_lib.book.paths import project_root
+from thesis_lib.paths import project_root
 
 STUDY_KEYS = {
     "study",
@@ -438,7 +438,7 @@ def run_study(
     that another process holds is skipped (said on stderr), so a second run of a study never
     runs a task that the first one is running or will run. The rows returned are those of the
     tasks this run finished or found stored."""
-    from thesis_lib.book.results import git_commit
+    from thesis_lib.provenance import git_commit
     from thesis_lib.sweep import TaskStore, run_tasks
 
     chapter = study_chapter(chapter)
@@ -560,7 +560,7 @@ def write_study_summary(
 ) -> dict[str, Any]:
     """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks
     (``records``, when the caller has read them already)."""
-    from thesis_lib.book.results import package_versions
+    from thesis_lib.provenance import package_versions
 
     out = studies_dir(study.chapter)
     out.mkdir(parents=True, exist_ok=True)

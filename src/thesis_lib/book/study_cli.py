@@ -56,7 +56,7 @@ def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
 
 
 def _checkout(root: Path | None) -> Path:
-    from thesis_lib.book.paths import project_root
+    from thesis_lib.paths import project_root
 
     root = Path(root) if root is not None else project_root()
     if _git(root, "rev-parse", "--is-inside-work-tree").returncode != 0:

@@ -30,7 +30,7 @@ def load_claims(cfg: Config) -> pd.DataFrame:
 
     A missing ``claims.csv`` (no study committed yet) gives every claim ``pending``.
     """
-    from thesis_lib.book.paths import project_root
+    from thesis_lib.paths import project_root
 
     path = Path(cfg.claims_csv) if cfg.claims_csv else project_root() / "studies" / "claims.csv"
     if path.exists():
@@ -182,7 +182,7 @@ def plot_claims(claims: pd.DataFrame) -> Any:
 def load_parity(path: str | Path | None = None) -> pd.DataFrame:
     """The peer-parity table ``studies/parity/parity.csv`` (``thesis parity`` writes it); empty
     where no parity run is committed."""
-    from thesis_lib.book.paths import project_root
+    from thesis_lib.paths import project_root
 
     p = Path(path) if path else project_root() / "studies" / "parity" / "parity.csv"
     return pd.read_csv(p) if p.exists() else pd.DataFrame()

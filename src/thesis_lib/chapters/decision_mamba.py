@@ -371,7 +371,7 @@ def _task(cfg: Config, method: str, dataset: str, seed: int, arch: Any, ev: Eval
 
 
 def _run(cfg: Config, tasks: list[Any], desc: str) -> pd.DataFrame:
-    from thesis_lib.book.paths import results_dir
+    from thesis_lib.paths import results_dir
     from thesis_lib.sweep import run_tasks
 
     if not tasks:

@@ -469,7 +469,7 @@ def _tasks(cfg: Config, datasets: list[str], methods: list[str], compat: bool) -
 
 
 def _run(cfg: Config, tasks: list[Any], desc: str) -> pd.DataFrame:
-    from thesis_lib.book.paths import results_dir
+    from thesis_lib.paths import results_dir
     from thesis_lib.sweep import run_tasks
 
     rows = run_tasks(tasks, store=results_dir(CHAPTER) / "tasks", desc=desc, progress=cfg.progress)

@@ -311,7 +311,7 @@ def run_table_5_4(cfg: Config) -> pd.DataFrame:
 
     Used in: UR3 deployment chapter (Table 5.4).
     """
-    from thesis_lib.book.paths import results_dir
+    from thesis_lib.paths import results_dir
     from thesis_lib.sweep import Task, run_tasks
 
     arch = cfg.arch().task_dict()

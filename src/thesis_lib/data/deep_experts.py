@@ -244,7 +244,7 @@ def runs_dir() -> Path:
     ``THESIS_CACHE_DIR`` defaults to ``~/.cache/thesis_lib``. A run folder holds the model,
     its replay buffer (about 0.1-0.5 GB) and the exported snapshots; nothing there is shipped.
     """
-    from thesis_lib.book.paths import cache_dir
+    from thesis_lib.paths import cache_dir
 
     return cache_dir("expert_runs")
 

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from thesis_lib.book.paths import data_dir, minari_root  # every on-disk location: book.paths
+from thesis_lib.paths import data_dir, minari_root  # every on-disk location: book.paths
 
 from .tasks import NAMESPACE, TASKS, is_our_namespace, parse_dataset_id
 

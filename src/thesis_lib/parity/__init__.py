@@ -258,7 +258,7 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
 
 def peer_python() -> Path:
     """The peer venv's python (``$THESIS_CACHE_DIR/peer-venv``)."""
-    from thesis_lib.book.paths import cache_dir
+    from thesis_lib.paths import cache_dir
 
     return cache_dir() / "peer-venv" / "bin" / "python"
 

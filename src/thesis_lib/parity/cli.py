@@ -14,7 +14,6 @@ from typing import Any
 
 
 def _cmd_parity(args: argparse.Namespace) -> int:
-    from thesis_lib.book.paths import project_root
     from thesis_lib.parity import (
         load_parity_file,
         parity_table,
@@ -22,6 +21,7 @@ def _cmd_parity(args: argparse.Namespace) -> int:
         setup_peer,
         unique_tasks,
     )
+    from thesis_lib.paths import project_root
     from thesis_lib.sweep import TaskStore, run_tasks
 
     root = project_root()

@@ -214,10 +214,10 @@ def require_ray() -> Any:
 def default_provenance() -> dict[str, Any]:
     """What every stored task record carries: the git commit and the package versions.
 
-    The same helpers write ``run.json`` (:mod:`thesis_lib.book.results`), so a task can be
+    The same helpers write ``run.json`` (:mod:`thesis_lib.provenance`), so a task can be
     traced to the code that computed it. Each record also gets ``stored_utc`` when written.
     """
-    from thesis_lib.book.results import RECORDED_PACKAGES, git_commit, package_versions
+    from thesis_lib.provenance import RECORDED_PACKAGES, git_commit, package_versions
 
     versions = package_versions((*RECORDED_PACKAGES, "joblib", "ray"))
     return {"git_commit": git_commit(), "versions": versions}
