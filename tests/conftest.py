@@ -6,6 +6,8 @@ import os
 
 import pytest
 
+from thesis_lib.chapters import CHAPTERS
+
 # MuJoCo picks its OpenGL backend when it is first imported; offscreen rendering (CLfD cameras,
 # UR3 frames) needs EGL on a headless machine, whichever test module imports mujoco first.
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -110,7 +112,7 @@ def unstarted_study(tmp_path, monkeypatch):
     def load(chapter: str) -> evi.Evidence:
         name = f"{chapter}.study.yml"
         (tmp_path / "params" / name).write_text((repo / "params" / name).read_text())
-        ev = evi.load_evidence(chapter, reps=100)
+        ev = evi.load_evidence(CHAPTERS[chapter], reps=100)
         assert "not run yet" in evi.status_line(ev) and ev.rows.empty
         assert set(evi.comparisons_table(ev).verdict) == {"pending"}
         return ev

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from thesis_lib.chapters import CHAPTERS
 from thesis_lib.chapters import clfd as ex
 
 REPO = Path(__file__).resolve().parents[1]
@@ -20,7 +21,7 @@ def test_study_file_parses_and_builds_its_grid(monkeypatch):
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     study = st.load_study("02_clfd")
     assert study.study == "clfd-c10c12-v1" and study.metric == "neg_alignment_error"
-    cfg = st.study_config(study)
+    cfg = st.study_config(study, CHAPTERS["02_clfd"])
     assert cfg.n_demos == 150 and len(cfg.seeds) >= 5
     tasks = ex.study_tasks(cfg)
     by_fn: dict[str, list] = {}
@@ -49,11 +50,11 @@ def test_study_file_parses_and_builds_its_grid(monkeypatch):
         assert c["x"] in methods and c["y"] in methods, c
         assert set(c.get("settings") or []) <= settings, c
     assert {c["claim"] for c in study.comparisons} == {"C10", "C11", "C12"}
-    check = st.study_config(study, "check")
+    check = st.study_config(study, CHAPTERS["02_clfd"], "check")
     assert check.epochs == 2 * cfg.epochs and check.encoders == ["tcn"]
     check_tasks = ex.study_tasks(check)
     assert {t.fn.__name__ for t in check_tasks} == {"study_alignment_task", "study_stage_task"}
-    assert len(st.study_tasks(study)) == len(tasks) + len(check_tasks)
+    assert len(st.study_tasks(study, CHAPTERS["02_clfd"])) == len(tasks) + len(check_tasks)
 
 
 def test_config_rejects_bad_study_fields():
@@ -222,7 +223,9 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
 
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     study = st.load_study("02_clfd")
-    rows = _fake_rows(ex.study_tasks(st.study_config(study)), np.random.default_rng(0))
+    rows = _fake_rows(
+        ex.study_tasks(st.study_config(study, CHAPTERS["02_clfd"])), np.random.default_rng(0)
+    )
     res = evaluate_comparisons(rows, study.comparisons, metric=study.metric, reps=200)
     assert len(res) == len(study.comparisons) and res.verdict.notna().all()
     head = res.iloc[0]  # CLfD vs TCN over both encoders: 7 points less error
@@ -273,7 +276,7 @@ def test_study_tables_render_mid_study_before_any_alignment_row(monkeypatch):
     from thesis_lib.book import study as st
 
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
-    tasks = ex.study_tasks(st.study_config(st.load_study("02_clfd")))
+    tasks = ex.study_tasks(st.study_config(st.load_study("02_clfd"), CHAPTERS["02_clfd"]))
     stage = [t for t in tasks if t.fn is ex.study_stage_task][:1]
     rows = _fake_rows(stage, np.random.default_rng(0))
     assert "encoder" not in rows

@@ -414,7 +414,7 @@ def test_making_and_closing_a_maze_env_leaves_no_file_in_the_temp_dir(tmp_path, 
 
 
 def _cli(argv):
-    from thesis_lib.data.cli import register
+    from thesis_lib.cli.data import register
 
     parser = argparse.ArgumentParser(prog="thesis")
     register(parser.add_subparsers(dest="command"))

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from thesis_lib.chapters import CHAPTERS
 from thesis_lib.chapters import defender as ex
 
 REPO = Path(__file__).resolve().parents[1]
@@ -212,7 +213,7 @@ def test_study_file_parses_and_names_methods_study_tasks_makes(monkeypatch):
 
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     study = st.load_study("03_defender")
-    cfg = st.study_config(study)
+    cfg = st.study_config(study, CHAPTERS["03_defender"])
     tasks = ex.study_tasks(cfg)
     labels = {t.config["label"] for t in tasks}
     settings = {ex.thesis_env_name(t) for t in cfg.tasks}
@@ -222,7 +223,7 @@ def test_study_file_parses_and_names_methods_study_tasks_makes(monkeypatch):
     assert {c["claim"] for c in study.comparisons} == {"C7", "C8", "C9"}
     seeds = {t.config["seed"] for t in tasks}
     assert len(seeds) >= 5
-    check = st.study_config(study, "check")
+    check = st.study_config(study, CHAPTERS["03_defender"], "check")
     assert check.train_timesteps > cfg.train_timesteps
     # the scale check's filtered runs use the study's demonstrations (same recipe, same SAC run)
     recipe = {json.dumps(t.config["demos"], sort_keys=True) for t in tasks if t.config["demos"]}
@@ -318,7 +319,12 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     study = st.load_study("03_defender")
     rng = np.random.default_rng(0)
-    rows = pd.DataFrame([_fake_row(t.config, rng) for t in ex.study_tasks(st.study_config(study))])
+    rows = pd.DataFrame(
+        [
+            _fake_row(t.config, rng)
+            for t in ex.study_tasks(st.study_config(study, CHAPTERS["03_defender"]))
+        ]
+    )
     res = evaluate_comparisons(rows, study.comparisons, metric=study.metric, reps=200)
     assert len(res) == len(study.comparisons) and res.verdict.notna().all()
     c7 = res[(res.claim == "C7") & (res.metric == "crash_free_rate")].iloc[0]
@@ -372,7 +378,11 @@ def test_study_curves_render_while_the_study_has_run_only_some_methods(monkeypat
 
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     study = st.load_study("03_defender")
-    first = next(t for t in ex.study_tasks(st.study_config(study)) if t.config["label"] == "SAC")
+    first = next(
+        t
+        for t in ex.study_tasks(st.study_config(study, CHAPTERS["03_defender"]))
+        if t.config["label"] == "SAC"
+    )
     rows = pd.DataFrame([_fake_row(first.config, np.random.default_rng(0))])
     waiting = ex.plot_study_curves(rows, methods=["TD3", "TD3+MeanDemoW5/MeanDemoW10"])
     assert waiting.axes[0].texts[0].get_text() == "no study rows of these methods yet"

@@ -19,6 +19,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
+from thesis_lib.chapters import CHAPTERS
 from thesis_lib.seq import ArchSpec
 from thesis_lib.seq.models import (
     HDT,
@@ -187,8 +188,8 @@ def test_v1_study_files_keep_their_init_and_task_keys():
     for chapter in ("04_hdt", "05_decision_mamba", "07_ur3_deployment"):
         study = load_study(chapter)
         assert "init" not in study.config
-        assert study_config(study).init == "torch"
-        keys = {t.key for t in study_tasks(study)}
+        assert study_config(study, CHAPTERS[study.chapter]).init == "torch"
+        keys = {t.key for t in study_tasks(study, CHAPTERS[study.chapter])}
         stored = {
             json.loads(p.read_text())["key"]
             for p in (studies_dir(chapter) / "tasks").glob("*.json")

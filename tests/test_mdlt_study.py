@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from thesis_lib.chapters import CHAPTERS
 from thesis_lib.chapters import mdlt as ex
 from thesis_lib.mdlt.train import load_checkpoint
 from thesis_lib.mdlt.translate import (
@@ -63,7 +64,7 @@ def test_study_file_parses_and_builds_its_grid():
 
     study = load_study(REPO / "params" / "06_mdlt.study.yml")
     assert study.chapter == "06_mdlt" and study.metric == "neg_aje"
-    cfg = study_config(study)
+    cfg = study_config(study, CHAPTERS["06_mdlt"])
     assert cfg.data_size == "study" and cfg.n_folds == 6 and len(cfg.study_seeds) >= 3
     cfg = ex.Config(**{**study.config, "genres": ["mBR", "mHO"]})  # no data needed
     tasks = ex.study_tasks(cfg)
@@ -82,7 +83,9 @@ def test_study_file_parses_and_builds_its_grid():
     probe = next(t for t in tasks if t.config["method"] == "probe")
     assert probe.config["cfg"]["mute_features"] == ["tempogram"]
     assert len({t.key for t in tasks}) == len(tasks)
-    assert len(study_tasks(study)) > len(ex.study_tasks(study_config(study)))  # + scale check
+    assert len(study_tasks(study, CHAPTERS["06_mdlt"])) > len(
+        ex.study_tasks(study_config(study, CHAPTERS["06_mdlt"]))
+    )  # + scale check
 
 
 TINY = dict(genres=["mHO"], n_folds=1, iterations=3, d_model=16, d_ff=32, n_layers=1,
@@ -196,7 +199,7 @@ def test_thesis_mdlt_dance_without_checkpoint(tmp_path):
     sf.write(wav, np.stack([y, y], 1), 44100)  # a stereo OGG at 44.1 kHz, as a user's
     out = tmp_path / "angles.csv"
     res = subprocess.run(
-        [sys.executable, "-m", "thesis_lib.mdlt.cli", "dance", "--audio", str(wav),
+        [sys.executable, "-m", "thesis_lib.cli.mdlt", "dance", "--audio", str(wav),
          "--out", str(out), "-q"],
         capture_output=True, text=True, cwd=REPO, timeout=300,
     )  # fmt: skip

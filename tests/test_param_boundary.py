@@ -4,7 +4,6 @@ hints of its chapter's ``Config``, before a kernel starts (``thesis run -p``/``-
 
 from __future__ import annotations
 
-import importlib
 import shutil
 from dataclasses import dataclass, field
 from typing import Literal
@@ -13,13 +12,12 @@ import nbformat
 import pytest
 
 from thesis_lib.book.params import (
-    CHAPTER_MODULES,
-    chapter_hints,
     check_parameters,
     check_value,
     config_from_namespace,
     config_hints,
 )
+from thesis_lib.chapters import CHAPTERS
 
 
 @dataclass
@@ -81,7 +79,7 @@ def test_rl_timesteps_shorter_than_an_episode_is_a_clear_error():
 )
 def test_a_string_for_a_list_field_is_one_item_not_its_characters(chapter, name, value):
     """``-p rl_algos PPO`` gave "Unknown algorithm 'P'": the string was iterated."""
-    cls = importlib.import_module(CHAPTER_MODULES[chapter]).Config
+    cls = CHAPTERS[chapter].Config
     cfg = config_from_namespace(cls, {name: value}, chapter)
     assert getattr(cfg, name) == [value]
 
@@ -168,7 +166,7 @@ def test_a_study_file_is_checked_the_same_way():
 
     study = Study("demo-v1", "04_hdt", {"iterations": 2.5}, "score", [])
     with pytest.raises(ValueError, match=r"Expect `iterations` to be an int, actually: 2\.5"):
-        study_config(study)
+        study_config(study, CHAPTERS["04_hdt"])
 
 
 # --- the check itself --------------------------------------------------------------------------
@@ -226,10 +224,10 @@ def test_check_value_refuses_with_name_value_and_expectation(name, value, expect
     assert str(err.value) == f"Expect `{name}` to be {expected}, actually: {value!r} (in demo.yml)"
 
 
-@pytest.mark.parametrize("chapter", sorted(CHAPTER_MODULES))
+@pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_chapter_hints_read_without_import_match_the_config(chapter):
-    cls = importlib.import_module(CHAPTER_MODULES[chapter]).Config
-    assert list(chapter_hints(chapter).items()) == list(config_hints(cls).items())
+    cls = CHAPTERS[chapter].Config
+    assert list(CHAPTERS[chapter].hints().items()) == list(config_hints(cls).items())
 
 
 @pytest.mark.slow

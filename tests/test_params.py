@@ -4,11 +4,11 @@ and ``params/<chapter>.smoke.yml``; ``params/<chapter>.full.yml`` lists only wha
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
 import shutil
 import subprocess
 import sys
+import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,8 +16,8 @@ import nbformat
 import pytest
 import yaml
 
+from thesis_lib.book.chapter import Chapter
 from thesis_lib.book.params import (
-    CHAPTER_MODULES,
     check_chapter,
     check_full_profile,
     config_defaults,
@@ -30,6 +30,7 @@ from thesis_lib.book.params import (
     smoke_yaml,
     write_chapter,
 )
+from thesis_lib.chapters import CHAPTERS
 
 
 @dataclass
@@ -251,7 +252,8 @@ def test_thesis_params_command(tmp_path, monkeypatch, capsys):
 
     _project(tmp_path)
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
-    monkeypatch.setitem(CHAPTER_MODULES, "99_demo", __name__)
+    this = sys.modules[__name__]
+    monkeypatch.setitem(CHAPTERS, "99_demo", Chapter("99_demo", Path(__file__), lambda: this))
     assert main(["params", "--check", "99_demo"]) == 1
     err = capsys.readouterr().err
     assert "99_demo: notebooks/99_demo.ipynb: the parameters cell differs" in err
@@ -261,23 +263,17 @@ def test_thesis_params_command(tmp_path, monkeypatch, capsys):
     assert main(["params", "--write"]) == 0  # every chapter of _toc.yml
     assert "99_demo: wrote notebooks/99_demo.ipynb" in capsys.readouterr().out
     assert main(["params", "--check"]) == 0
-    monkeypatch.setitem(CHAPTER_MODULES, "99_demo", "thesis_lib.chapters.no_such_chapter")
+    nothing = types.SimpleNamespace()  # a chapter package without a Config
+    monkeypatch.setitem(CHAPTERS, "99_demo", Chapter("99_demo", Path(__file__), lambda: nothing))
     assert main(["params", "--check"]) == 1
-    assert "no module thesis_lib.chapters.no_such_chapter" in capsys.readouterr().err
+    assert "99_demo: its package has no dataclass Config" in capsys.readouterr().err
 
 
 def _chapter_config_or_skip(chapter: str) -> type:
-    name = CHAPTER_MODULES[chapter]
-    try:
-        module = importlib.import_module(name)
-    except ModuleNotFoundError as err:
-        if not (err.name and name.startswith(err.name)):
-            raise
-        pytest.skip(f"{name} is not written yet")
-    return module.Config
+    return CHAPTERS[chapter].Config
 
 
-@pytest.mark.parametrize("chapter", sorted(CHAPTER_MODULES))
+@pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_chapter_configs_generate_valid_cells(chapter):
     cls = _chapter_config_or_skip(chapter)
     src = parameters_source(cls)
@@ -288,7 +284,7 @@ def test_chapter_configs_generate_valid_cells(chapter):
     _assert_ruff_clean(src)
 
 
-@pytest.mark.parametrize("chapter", sorted(CHAPTER_MODULES))
+@pytest.mark.parametrize("chapter", sorted(CHAPTERS))
 def test_chapter_notebook_and_params_match_the_config(chapter):
     """`thesis params --write` has been run: the notebook's parameters cell, the smoke profile
     and the full profile (only differences) agree with the chapter's Config."""

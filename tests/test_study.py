@@ -16,6 +16,8 @@ import pytest
 import yaml
 
 from thesis_lib.book import study as st
+from thesis_lib.book.chapter import Chapter
+from thesis_lib.chapters import CHAPTERS
 from thesis_lib.sweep import Task, TaskFailed
 
 CALLS: list[str] = []
@@ -69,34 +71,35 @@ def project(tmp_path, monkeypatch):
     (tmp_path / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(STUDY))
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
     mod = types.SimpleNamespace(Config=FakeConfig, study_tasks=fake_study_tasks)
-    monkeypatch.setattr(st, "chapter_module", lambda chapter: mod)
+    for name in ("04_hdt", "05_decision_mamba"):  # the fake chapter's code under both names
+        monkeypatch.setitem(CHAPTERS, name, Chapter(name, Path(__file__), lambda: mod))
     CALLS.clear()
     FAIL.clear()
     return tmp_path
 
 
 def test_study_runs_resumes_and_records_its_hash(project):
-    rows = st.run_study("04_hdt", progress=False)
+    rows = st.run_study(CHAPTERS["04_hdt"], progress=False)
     assert len(rows) == 2 * 2 * 5 and len(CALLS) == 20
     info = json.loads((project / "studies" / "04_hdt" / "run.json").read_text())
     assert info["complete"] and info["tasks_done"] == 20
     assert info["study_hash"] == st.load_study("04_hdt").hash
     assert len(list((project / "studies" / "04_hdt" / "tasks").glob("*.json"))) == 20
     # a second run finds every task stored and runs none
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     assert len(CALLS) == 20
     csv = pd.read_csv(project / "studies" / "04_hdt" / "rows.csv")
     assert sorted(csv["method"].unique()) == ["DT", "HDT"]
 
 
 def test_verdicts_follow_from_the_rows(project):
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     res = st.evaluate_study("04_hdt", reps=500)
     c3 = res[res.claim == "C3"].iloc[0]
     assert c3.effect == pytest.approx(10.0) and c3.verdict == "holds"
     c2 = res[res.claim == "C2"].iloc[0]
     assert c2.verdict == "fails"  # DT is 10 worse: far outside the 2-point margin
-    claims = st.write_claims(reps=500)
+    claims = st.write_claims(CHAPTERS, reps=500)
     assert len(claims) == 14 and list(claims.claim[:3]) == ["C1", "C2", "C3"]
     got = claims.set_index("claim").verdict
     assert (got["C3"], got["C2"], got["C1"]) == ("holds", "fails", "pending")
@@ -104,18 +107,18 @@ def test_verdicts_follow_from_the_rows(project):
 
 
 def test_an_unfinished_study_is_pending_not_judged(project, monkeypatch):
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     info_p = project / "studies" / "04_hdt" / "run.json"
     info = json.loads(info_p.read_text())
     info_p.write_text(json.dumps({**info, "complete": False, "tasks_done": 7}))
     with pytest.raises(RuntimeError, match="not complete"):
         st.evaluate_study("04_hdt")
-    claims = st.write_claims(reps=200).set_index("claim")
+    claims = st.write_claims(CHAPTERS, reps=200).set_index("claim")
     assert claims.verdict["C3"] == "pending" and "7/20" in claims.comparisons["C3"]
 
 
 def test_a_changed_study_file_does_not_reuse_old_rows(project):
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     changed = {**STUDY, "config": {**STUDY["config"], "offset": 2.0}}
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(changed))
     new = st.load_study("04_hdt")
@@ -141,7 +144,7 @@ def test_unknown_config_field_is_an_error(project):
     bad = {**STUDY, "config": {"seedz": [0]}}
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(bad))
     with pytest.raises(ValueError, match="Unknown parameter 'seedz'"):
-        st.study_tasks(st.load_study("04_hdt"))
+        st.study_tasks(st.load_study("04_hdt"), CHAPTERS["04_hdt"])
 
 
 def test_scale_check_runs_beside_the_study_and_stays_out_of_the_verdicts(project):
@@ -150,7 +153,7 @@ def test_scale_check_runs_beside_the_study_and_stays_out_of_the_verdicts(project
         "scale_check": {"config": {"settings": ["a"], "seeds": [0, 1, 2], "offset": -40.0}},
     }
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(checked))
-    rows = st.run_study("04_hdt", progress=False)
+    rows = st.run_study(CHAPTERS["04_hdt"], progress=False)
     assert len(CALLS) == 20 + 2 * 3  # the study's 20 runs and the check's 6
     check = rows[rows["scale"] == "check"]
     assert len(check) == 6 and set(check["setting"]) == {"a"}
@@ -160,11 +163,11 @@ def test_scale_check_runs_beside_the_study_and_stays_out_of_the_verdicts(project
 
 
 def test_reuse_copies_the_same_tasks_from_another_study(project, monkeypatch):
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     other = {**STUDY, "study": "fake-05-v1", "chapter": "05_decision_mamba", "reuse": ["04_hdt"]}
     (project / "params" / "05_decision_mamba.study.yml").write_text(yaml.safe_dump(other))
     CALLS.clear()
-    rows = st.run_study("05_decision_mamba", progress=False)
+    rows = st.run_study(CHAPTERS["05_decision_mamba"], progress=False)
     assert CALLS == [] and len(rows) == 20  # every task was the 04 study's: none trained again
     rec = json.loads(
         next((project / "studies" / "05_decision_mamba" / "tasks").glob("*.json")).read_text()
@@ -184,10 +187,10 @@ def test_a_comparison_reported_apart_does_not_decide_the_claim(project):
         ],
     }
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(apart))
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     res = st.evaluate_study("04_hdt", reps=300)
     assert list(res.verdict) == ["holds", "fails"]
-    claims = st.write_claims(reps=300).set_index("claim")
+    claims = st.write_claims(CHAPTERS, reps=300).set_index("claim")
     assert claims.verdict["C3"] == "holds" and "reported apart" in claims.comparisons["C3"]
 
 
@@ -268,13 +271,13 @@ def test_evidence_section_before_during_and_after_the_study(project):
     matplotlib.use("Agg")
     from thesis_lib.book import evidence as evi
 
-    ev = evi.load_evidence("04_hdt", reps=200)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=200)
     assert "not run yet" in evi.status_line(ev) and ev.rows.empty
     assert set(evi.comparisons_table(ev).verdict) == {"pending"}
     evi.plot_per_setting(ev)  # an empty study still draws (a note)
 
-    st.run_study("04_hdt", progress=False)
-    ev = evi.load_evidence("04_hdt", reps=200)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=200)
     assert ev.complete and "20/20 tasks (complete)" in evi.status_line(ev)
     table = evi.per_setting_table(ev)
     hdt_a = table[(table.method == "HDT") & (table.setting == "a")].iloc[0]
@@ -292,11 +295,11 @@ def test_evidence_section_before_during_and_after_the_study(project):
 def test_input_versions_counts_rows_and_seeds_per_hash(project):
     from thesis_lib.book import evidence as evi
 
-    ev = evi.load_evidence("04_hdt", reps=200)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=200)
     assert list(evi.input_versions(ev, "data_sha").columns) == ["data_sha", "rows", "seeds"]
     assert evi.input_versions(ev, "data_sha").empty  # not run yet
-    st.run_study("04_hdt", progress=False)
-    ev = evi.load_evidence("04_hdt", reps=200)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=200)
     assert evi.input_versions(ev, "data_sha").empty  # its rows do not record one
     n = len(ev.rows)
     ev.rows["data_sha"] = np.where(ev.rows["seed"] >= 3, "b", "a")
@@ -316,8 +319,8 @@ def test_scale_check_table_ranks_both_scales(project):
         "scale_check": {"config": {"settings": ["a"], "seeds": [0, 1, 2], "offset": 5.0}},
     }
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(checked))
-    st.run_study("04_hdt", progress=False)
-    t = evi.scale_check_table(evi.load_evidence("04_hdt", reps=200)).set_index("method")
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    t = evi.scale_check_table(evi.load_evidence(CHAPTERS["04_hdt"], reps=200)).set_index("method")
     assert t.loc["HDT", "check"] == pytest.approx(65.0)  # 60 + 5, seeds 0-2 add -1, 0, 1
     assert t.loc["HDT", "rank (study)"] == t.loc["HDT", "rank (check)"] == 1
     assert t.loc["DT", "seeds (check)"] == 3
@@ -401,8 +404,8 @@ def test_thesis_study_commit_every_commits_the_studies_and_nothing_else(project,
     of studies/<chapter>/ and studies/claims.csv only; a user's own staged change stays staged."""
     import subprocess
 
-    from thesis_lib.book import study_cli
     from thesis_lib.cli import main
+    from thesis_lib.cli import study as study_cli
 
     def git(*args: str) -> str:
         return subprocess.run(
@@ -456,14 +459,14 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project, m
             cwd=project, check=True, capture_output=True,
         )  # fmt: skip
 
-    st.run_study("04_hdt", progress=False)  # outside git: commit "unknown"
-    assert evi.code_changes_since(evi.load_evidence("04_hdt", reps=100)) is None
-    assert "changed" not in evi.status_line(evi.load_evidence("04_hdt", reps=100))
+    st.run_study(CHAPTERS["04_hdt"], progress=False)  # outside git: commit "unknown"
+    assert evi.code_changes_since(evi.load_evidence(CHAPTERS["04_hdt"], reps=100)) is None
+    assert "changed" not in evi.status_line(evi.load_evidence(CHAPTERS["04_hdt"], reps=100))
     git("init", "-q")
     git("add", "-A")
     git("commit", "-qm", "study code")
-    st.run_study("04_hdt", progress=False, force=True)  # now at that commit
-    ev = evi.load_evidence("04_hdt", reps=100)
+    st.run_study(CHAPTERS["04_hdt"], progress=False, force=True)  # now at that commit
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=100)
     assert evi.code_changes_since(ev).empty
     assert "The code its tasks run has not changed since." in evi.status_line(ev)
     lib = project / "src" / "thesis_lib"
@@ -499,9 +502,9 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project, m
         for f in ["__init__.py", "chapters/__init__.py", "chapters/fake.py", "m.py",
                   "n/__init__.py", "n/x.py"]
     ]  # fmt: skip
-    st.run_study("04_hdt", progress=False, force=True)  # at HEAD
+    st.run_study(CHAPTERS["04_hdt"], progress=False, force=True)  # at HEAD
     monkeypatch.setattr(st, "study_task_functions", lambda study: {"thesis_lib.chapters.fake:run"})
-    ev = evi.load_evidence("04_hdt", reps=100)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=100)
     for rel, subject in [("n/x.py", "lazily imported"), ("n/unused.py", "not imported"),
                          ("model.py", "not imported either"), ("chapters/fake.py", "the task")]:  # fmt: skip
         write(rel, (lib / rel).read_text() + "# changed\n")
@@ -513,21 +516,27 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project, m
 def test_claim_readings_say_where_we_differ_and_why(project):
     from thesis_lib.book import evidence as evi
 
-    assert set(evi.claim_readings(evi.load_evidence("04_hdt", reps=200)).ours) == {"pending"}
-    st.run_study("04_hdt", progress=False)
-    read = evi.claim_readings(evi.load_evidence("04_hdt", reps=200), reps=200).set_index("claim")
+    assert set(evi.claim_readings(evi.load_evidence(CHAPTERS["04_hdt"], reps=200)).ours) == {
+        "pending"
+    }
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    read = evi.claim_readings(evi.load_evidence(CHAPTERS["04_hdt"], reps=200), reps=200).set_index(
+        "claim"
+    )
     assert read.loc["C3", "ours"] == "holds" and "may differ" not in read.loc["C3", "reading"]
     assert (
         read.loc["C2", "ours"] == "fails" and "may differ because of" in read.loc["C2", "reading"]
     )
     assert "the data" in read.loc["C2", "reading"]
     own = evi.claim_readings(
-        evi.load_evidence("04_hdt", reps=200), reps=200, claim_notes={"C2": "the hardware"}
+        evi.load_evidence(CHAPTERS["04_hdt"], reps=200),
+        reps=200,
+        claim_notes={"C2": "the hardware"},
     ).set_index("claim")
     assert "the hardware" in own.loc["C2", "reading"] and "the data" not in own.loc["C2", "reading"]
     assert own.loc["C3", "reading"] == read.loc["C3", "reading"]
     with pytest.raises(ValueError, match="C9"):
-        evi.claim_readings(evi.load_evidence("04_hdt", reps=200), claim_notes={"C9": "x"})
+        evi.claim_readings(evi.load_evidence(CHAPTERS["04_hdt"], reps=200), claim_notes={"C9": "x"})
 
 
 def test_claim_readings_name_the_comparison_that_decided_the_verdict(project):
@@ -542,8 +551,10 @@ def test_claim_readings_name_the_comparison_that_decided_the_verdict(project):
         ],
     }
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump(two))
-    st.run_study("04_hdt", progress=False)
-    read = evi.claim_readings(evi.load_evidence("04_hdt", reps=200), reps=200).set_index("claim")
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    read = evi.claim_readings(evi.load_evidence(CHAPTERS["04_hdt"], reps=200), reps=200).set_index(
+        "claim"
+    )
     # C3's headline (HDT vs DT, +10) holds, but its second comparison fails: so does C3
     c3 = read.loc["C3", "reading"]
     assert read.loc["C3", "ours"] == "fails" and "effect 10 [" in c3
@@ -552,7 +563,7 @@ def test_claim_readings_name_the_comparison_that_decided_the_verdict(project):
     # claims.csv and the Claims page's ledger say it too
     from thesis_lib.chapters.claims import ledger_table
 
-    claims = st.write_claims(reps=200)
+    claims = st.write_claims(CHAPTERS, reps=200)
     by = pd.read_csv(project / "studies" / "claims.csv").set_index("claim")
     assert by.loc["C3", "decided_by"].startswith("the other way (score): fails, effect -10 [")
     assert pd.isna(by.loc["C2", "decided_by"])
@@ -633,11 +644,11 @@ def test_aggregate_table_and_performance_profiles(project):
     matplotlib.use("Agg")
     from thesis_lib.book import evidence as evi
 
-    ev = evi.load_evidence("04_hdt", reps=200)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=200)
     assert evi.aggregate_table(ev).empty  # nothing ran: nothing to aggregate
     evi.plot_performance_profiles(ev)  # still draws (a note)
-    st.run_study("04_hdt", progress=False)
-    ev = evi.load_evidence("04_hdt", reps=200)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    ev = evi.load_evidence(CHAPTERS["04_hdt"], reps=200)
     t = evi.aggregate_table(ev, reps=200).set_index("method")
     # HDT: 61 + (-1, 0, 1, -1, 0) in both settings: mean 60.8; the IQM drops 2 scores at
     # each end of the 10 (sorted 60 60 60 60 61 61 61 61 62 62): mean of 60 60 61 61 61 61
@@ -653,9 +664,9 @@ def test_aggregate_table_and_performance_profiles(project):
 def test_the_estimate_of_cpu_hours_left_prices_each_task_like_its_finished_kin(project):
     """A grid's tasks differ in cost: an unfinished task is priced at the mean of the finished
     ones of its method (and scale), not at the mean of all of them."""
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     study = st.load_study("04_hdt")
-    tasks = st.study_tasks(study)
+    tasks = st.study_tasks(study, CHAPTERS[study.chapter])
     store = project / "studies" / "04_hdt" / "tasks"
     for t in tasks:  # HDT runs took 360 s, DT runs 36 s
         p = store / f"{t.key}.json"
@@ -684,7 +695,7 @@ def test_a_second_runner_skips_the_tasks_another_holds_and_takes_over_dead_ones(
     import subprocess
     import sys
 
-    keys = [t.key for t in st.study_tasks(st.load_study("04_hdt"))]
+    keys = [t.key for t in st.study_tasks(st.load_study("04_hdt"), CHAPTERS["04_hdt"])]
     store = project / "studies" / "04_hdt" / "tasks"
     store.mkdir(parents=True)
     locks = [str(store / f"{k}.lock") for k in keys[:5]]
@@ -697,7 +708,7 @@ def test_a_second_runner_skips_the_tasks_another_holds_and_takes_over_dead_ones(
     )  # fmt: skip
     try:
         assert holder.stdout.readline().strip() == "held"
-        rows = st.run_study("04_hdt", progress=False)
+        rows = st.run_study(CHAPTERS["04_hdt"], progress=False)
         assert len(CALLS) == 15 and len(rows) == 15  # the other runner's five were not run
         assert f"skipping 5 task(s) another run holds, e.g. {locks[0]} (pid {holder.pid}" in (
             capsys.readouterr().err
@@ -708,7 +719,7 @@ def test_a_second_runner_skips_the_tasks_another_holds_and_takes_over_dead_ones(
         holder.wait()
     assert all(Path(p).exists() for p in locks)
     CALLS.clear()
-    st.run_study("04_hdt", progress=False)  # the dead runner's tasks are taken over
+    st.run_study(CHAPTERS["04_hdt"], progress=False)  # the dead runner's tasks are taken over
     assert len(CALLS) == 5 and not list(store.glob("*.lock"))
     assert json.loads((project / "studies" / "04_hdt" / "run.json").read_text())["complete"]
 
@@ -768,7 +779,7 @@ def test_bad_study_values_name_their_key_before_anything_runs(
         study_tasks=fake_study_tasks,
         STUDY_COLUMNS=["method", "setting", "seed", "offset", "score"],
     )
-    monkeypatch.setattr(st, "chapter_module", lambda chapter: mod)
+    monkeypatch.setitem(CHAPTERS, "04_hdt", Chapter("04_hdt", Path(__file__), lambda: mod))
     (project / "params" / "04_hdt.study.yml").write_text(yaml.safe_dump({**STUDY, **patch}))
     assert main(["study", "04_hdt", "--status"]) == 1
     err = capsys.readouterr().err
@@ -779,13 +790,13 @@ def test_bad_study_values_name_their_key_before_anything_runs(
 def test_the_hdt_study_checks_its_values_and_metrics_against_the_chapter():
     """The real chapter: its Config's types and its declared STUDY_COLUMNS."""
     data = yaml.safe_load((REPO / "params" / "04_hdt.study.yml").read_text())
-    st.study_config(st.parse_study(data))  # the registered study passes
+    st.study_config(st.parse_study(data), CHAPTERS["04_hdt"])  # the registered study passes
     for patch, message in [
         ({"config": {**data["config"], "iterations": "lots"}}, "`iterations` to be an int"),
         ({"metric": "score_finl"}, "`metric` to be a column of the 04_hdt study's rows"),
     ]:
         with pytest.raises(ValueError, match=re.escape(message)):
-            st.study_config(st.parse_study({**data, **patch}))
+            st.study_config(st.parse_study({**data, **patch}), CHAPTERS["04_hdt"])
 
 
 @pytest.mark.parametrize(
@@ -793,9 +804,11 @@ def test_the_hdt_study_checks_its_values_and_metrics_against_the_chapter():
 )
 def test_every_registered_study_declares_its_columns_and_passes_the_check(chapter):
     """Only the HDT chapter declared STUDY_COLUMNS, so no other study's metrics were checked."""
-    columns = st.chapter_module(chapter).STUDY_COLUMNS
+    columns = CHAPTERS[chapter].study_columns
     assert len(columns) == len(set(columns)) and {"method", "setting", "seed"} <= set(columns)
-    st.study_config(st.load_study(chapter))  # the committed study file names real columns
+    st.study_config(
+        st.load_study(chapter), CHAPTERS[chapter]
+    )  # the committed study file names real columns
 
 
 def test_a_misspelt_ur3_metric_is_refused_at_load_naming_it(tmp_path):
@@ -804,7 +817,7 @@ def test_a_misspelt_ur3_metric_is_refused_at_load_naming_it(tmp_path):
     copy = tmp_path / "07_ur3_deployment.study.yml"
     copy.write_text(yaml.safe_dump({**data, "metric": "goals_meen"}))
     with pytest.raises(ValueError) as err:
-        st.study_config(st.load_study(copy))
+        st.study_config(st.load_study(copy), CHAPTERS["07_ur3_deployment"])
     said = str(err.value)
     assert "`metric` to be a column of the 07_ur3_deployment study's rows" in said
     assert "'goals_meen'" in said and str(copy) in said and "goals_mean" in said
@@ -821,23 +834,27 @@ def test_a_misspelt_ur3_metric_is_refused_at_load_naming_it(tmp_path):
     ids=["nan", "missing", "text", "no-seed"],
 )
 def test_claims_name_the_task_file_of_a_bad_row(project, damage, what):
-    st.run_study("04_hdt", progress=False)
-    task = next(t for t in st.study_tasks(st.load_study("04_hdt")) if t.config["method"] == "HDT")
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    task = next(
+        t
+        for t in st.study_tasks(st.load_study("04_hdt"), CHAPTERS["04_hdt"])
+        if t.config["method"] == "HDT"
+    )
     path = project / "studies" / "04_hdt" / "tasks" / f"{task.key}.json"
     rec = json.loads(path.read_text())
     damage(rec["rows"][0])
     path.write_text(json.dumps(rec))
     with pytest.raises(ValueError) as err:
-        st.write_claims(reps=100)  # what `thesis claims` runs
+        st.write_claims(CHAPTERS, reps=100)  # what `thesis claims` runs
     assert f"studies/04_hdt/tasks/{task.key}.json" in str(err.value) and what in str(err.value)
 
 
 def test_claims_refuse_rows_without_a_seed_column(project):
-    st.run_study("04_hdt", progress=False)
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
     for path in (project / "studies" / "04_hdt" / "tasks").glob("*.json"):
         rec = json.loads(path.read_text())
         for row in rec["rows"]:
             del row["seed"]
         path.write_text(json.dumps(rec))
     with pytest.raises(ValueError, match="Expect the rows to have the column 'seed'"):
-        st.write_claims(reps=100)
+        st.write_claims(CHAPTERS, reps=100)

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from thesis_lib.book import study as st
+from thesis_lib.chapters import CHAPTERS
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -116,7 +117,9 @@ def test_evidence_section_renders_on_part_of_the_grid(chapter, which, tmp_path, 
     monkeypatch.setitem(os.environ, "MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
 
     study = st.load_study(chapter)
-    tasks = st.study_tasks(study)  # the grid and its scale check, as `thesis study` runs it
+    tasks = st.study_tasks(
+        study, CHAPTERS[study.chapter]
+    )  # the grid and its scale check, as `thesis study` runs it
     rng = np.random.default_rng(WHICH.index(which))
     done = _share(len(tasks), which, rng)
     store = tmp_path / "studies" / chapter / "tasks"

@@ -239,7 +239,7 @@ def test_cli_check_and_dry_run(tmp_path, capsys):
 
 @pytest.mark.parametrize("first", ["8.218E-02", "1e3", "nan", "inf", "-INF", "1E+00"])
 def test_a_headerless_csv_keeps_its_first_row_whatever_the_float_spelling(tmp_path, first):
-    from thesis_lib.ur3.cli import read_angles
+    from thesis_lib.cli.ur3 import read_angles
 
     a = np.full((10, 4), 0.1)
     path = tmp_path / "angles.csv"

@@ -216,8 +216,8 @@ def test_ur3_play_reads_the_csv_that_mdlt_dance_writes(tmp_path):
     """`thesis mdlt dance --out` writes time_s + four angles; `thesis ur3 play` takes that file as is."""
     import pandas as pd
 
+    from thesis_lib.cli.ur3 import read_angles
     from thesis_lib.mdlt.translate import JOINT_COLUMNS
-    from thesis_lib.ur3.cli import read_angles
 
     t = np.arange(30) / 60
     angles = np.stack([0.1 * np.sin(t + k) for k in range(4)], axis=1)

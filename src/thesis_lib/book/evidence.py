@@ -35,6 +35,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from thesis_lib.book.chapter import Chapter
+
 __all__ = [
     "Evidence",
     "aggregate_table",
@@ -78,18 +80,20 @@ class Evidence:
         return bool(self.info.get("complete")) and self.info.get("study_hash") == self.study.hash
 
 
-def load_evidence(chapter: str, reps: int = 10_000) -> Evidence:
-    """Read ``studies/<chapter>/`` (the rows of this study file's tasks).
+def load_evidence(chapter: Chapter, reps: int = 10_000) -> Evidence:
+    """Read ``studies/<chapter>/`` (the rows of this study file's tasks), for the chapter's
+    registered :class:`~thesis_lib.book.chapter.Chapter`.
 
     Raises:
         FileNotFoundError: the chapter has no study file.
     """
     from thesis_lib.book import study as st
 
+    spec, chapter = chapter, chapter.name
     study = st.load_study(chapter)
     rows = st.study_rows(study)
     if len(rows):  # the grid's order (settings, seeds, methods as registered), not the files'
-        order = {t.key: i for i, t in enumerate(st.study_tasks(study))}
+        order = {t.key: i for i, t in enumerate(st.study_tasks(study, spec))}
         rows = rows.sort_values("task_key", key=lambda k: k.map(order), kind="stable")
     info_p = st.studies_dir(chapter) / "run.json"
     info = json.loads(info_p.read_text()) if info_p.exists() else {}

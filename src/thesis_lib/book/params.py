@@ -135,39 +135,6 @@ def config_hints(cls: type) -> dict[str, Any]:
     return {f.name: hints.get(f.name, Any) for f in dataclasses.fields(cls) if f.init}
 
 
-def chapter_hints(chapter: str) -> dict[str, Any]:
-    """:func:`config_hints` of ``chapter``'s ``Config``, read from its module's source without
-    importing it (a chapter module imports torch: seconds), so ``thesis run`` refuses a bad
-    value at once. Hints that name anything but builtins and ``Literal`` (or a ``Config`` with
-    base classes) are read by importing the module.
-
-    Raises:
-        ValueError: no chapters module for ``chapter``, or it has no ``Config``.
-    """
-    import ast
-    import importlib
-    import importlib.util
-
-    name = chapter_module(chapter)
-    spec = importlib.util.find_spec(name)
-    if spec is None or not spec.origin:
-        raise ValueError(f"{chapter}: no module {name} (its Config defines the parameters)")
-    tree = ast.parse(Path(spec.origin).read_text())
-    node = next((n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Config"), None)
-    if node is None:
-        raise ValueError(f"{chapter}: {name} has no dataclass Config")
-    if not node.bases:
-        fields = [n for n in node.body if isinstance(n, ast.AnnAssign)]
-        try:
-            return {
-                ast.unparse(f.target): eval(ast.unparse(f.annotation), {"Literal": Literal})
-                for f in fields
-            }
-        except NameError:
-            pass
-    return config_hints(importlib.import_module(name).Config)
-
-
 class _Mismatch(Exception):
     """A value does not fit a type hint (turned into a message by :func:`check_value`)."""
 
@@ -306,43 +273,12 @@ def _describe(hint: Any, plural: bool = False) -> str:
 # ``parameters`` cell and ``params/<chapter>.smoke.yml``; ``params/<chapter>.full.yml`` lists
 # only what differs from smoke. ``thesis params --write`` regenerates, ``--check`` compares.
 
-#: The chapters module of each notebook; its ``Config`` dataclass is the one source of the
-#: notebook's parameters (the ``thesis params`` command imports it).
-CHAPTER_MODULES: dict[str, str] = {
-    "01_background": "thesis_lib.chapters.background",
-    "survey": "thesis_lib.chapters.survey",
-    "02_clfd": "thesis_lib.chapters.clfd",
-    "03_defender": "thesis_lib.chapters.defender",
-    "04_hdt": "thesis_lib.chapters.hdt",
-    "05_decision_mamba": "thesis_lib.chapters.decision_mamba",
-    "06_mdlt": "thesis_lib.chapters.mdlt",
-    "07_ur3_deployment": "thesis_lib.chapters.ur3",
-    "claims": "thesis_lib.chapters.claims",
-}
-
 #: Line length of the generated cell (the project's ruff ``line-length``).
 LINE_LENGTH = 100
 
 SMOKE_HEADER = (
     "# Generated from {source} by `thesis params --write`; edit the Config, not this file.\n"
 )
-
-
-def chapter_module(chapter: str) -> str:
-    """The chapters module holding ``chapter``'s ``Config``, e.g. ``thesis_lib.chapters.hdt``.
-
-    >>> chapter_module("04_hdt")
-    'thesis_lib.chapters.hdt'
-
-    Raises:
-        ValueError: ``chapter`` is not in :data:`CHAPTER_MODULES` (the message lists them).
-    """
-    try:
-        return CHAPTER_MODULES[chapter]
-    except KeyError:
-        raise ValueError(
-            f"No chapters module for '{chapter}'. Known: {', '.join(CHAPTER_MODULES)}."
-        ) from None
 
 
 def _plain(value: Any, where: str) -> Any:

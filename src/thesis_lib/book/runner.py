@@ -23,9 +23,8 @@ from typing import Any
 
 import yaml
 
+from thesis_lib.book.chapter import Chapter
 from thesis_lib.book.params import (
-    CHAPTER_MODULES,
-    chapter_hints,
     check_parameters,
     parse_value,
     validate_parameters,
@@ -175,7 +174,7 @@ def _as_typed(name: str, value: Any) -> str:
 
 
 def run_chapter(
-    chapter: str,
+    chapter: str | Chapter,
     parameters: Mapping[str, Any] | None = None,
     *,
     profile: str | Path | None = "smoke",
@@ -184,6 +183,7 @@ def run_chapter(
     progress: bool = True,
     root: Path | None = None,
     env: Mapping[str, str] | None = None,
+    hints: Mapping[str, Any] | None = None,
 ) -> ChapterRun:
     """Execute one chapter notebook with papermill.
 
@@ -192,7 +192,12 @@ def run_chapter(
     (:func:`~thesis_lib.book.params.check_parameters`, as the notebook will check it).
 
     Args:
-        chapter: a chapter name (see :func:`resolve_chapter`).
+        chapter: a chapter name (see :func:`resolve_chapter`), or its registered
+            :class:`~thesis_lib.book.chapter.Chapter` (``thesis_lib.chapters.CHAPTERS``), whose
+            ``Config`` checks the values before papermill starts (given a name, the notebook
+            checks them when it builds its ``Config``).
+        hints: the ``Config``'s type hints where ``chapter`` is a name (a worker process
+            receives them instead of the :class:`Chapter`, whose loader does not pickle).
         parameters: overrides on top of the profile (``thesis run -p``).
         profile: ``'smoke'``, ``'full'``, a YAML path, or ``None`` for the notebook's defaults.
         output: where the executed notebook goes (default ``book/generated/<chapter>.ipynb``).
@@ -210,7 +215,8 @@ def run_chapter(
     import papermill as pm
 
     root = root or project_root()
-    chapter = resolve_chapter(chapter, root)
+    spec = chapter if isinstance(chapter, Chapter) else None
+    chapter = resolve_chapter(spec.name if spec else str(chapter), root)
     params: dict[str, Any] = {}
     where: dict[str, str] = {}
     if profile is not None:
@@ -221,8 +227,8 @@ def run_chapter(
     for name, value in (parameters or {}).items():
         params[name], where[name] = value, f"from {_as_typed(name, value)}"
     validate_parameters(params, notebook_parameters(chapter, root), chapter)
-    if chapter in CHAPTER_MODULES:
-        params = check_parameters(chapter_hints(chapter), params, where)
+    if spec is not None or hints is not None:
+        params = check_parameters(dict(spec.hints() if spec else hints or {}), params, where)
     out = Path(output) if output else root / GENERATED / f"{chapter}.ipynb"
     out.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -371,13 +377,17 @@ def _kernel_environment(env: Mapping[str, str] | None = None) -> Iterator[None]:
 
 
 def _run_one(args: tuple) -> ChapterRun:
-    chapter, parameters, profile, root, env = args
-    return run_chapter(chapter, parameters, profile=profile, root=root, progress=False, env=env)
+    # a name and its Config's hints, not the Chapter: its loader does not pickle
+    chapter, hints, parameters, profile, root, env = args
+    return run_chapter(
+        chapter, parameters, profile=profile, root=root, progress=False, env=env, hints=hints
+    )
 
 
 def run_chapters(
     chapters: Sequence[str] | None = None,
     *,
+    registry: Mapping[str, Chapter] | None = None,
     jobs: int = 1,
     profile: str | Path | None = "smoke",
     parameters: Mapping[str, Mapping[str, Any]] | None = None,
@@ -388,14 +398,25 @@ def run_chapters(
 
     ``jobs`` counts chapters; how each chapter's own task grids run (executor, parallel
     tasks) is set by ``env`` (see :func:`sweep_environment`), given to every chapter's kernel.
+    ``registry`` (``thesis_lib.chapters.CHAPTERS``): each chapter found there has its values
+    checked against its ``Config`` before any chapter starts.
 
     Raises:
         ChapterFailed: after all chapters ran, if any failed (every failure in the message).
     """
     root = root or project_root()
     chapters = [resolve_chapter(c, root) for c in (chapters or list_chapters(root))]
+    registry = registry or {}
     tasks = [
-        (c, dict((parameters or {}).get(c, {})), profile, root, dict(env or {})) for c in chapters
+        (
+            c,
+            registry[c].hints() if c in registry else None,
+            dict((parameters or {}).get(c, {})),
+            profile,
+            root,
+            dict(env or {}),
+        )
+        for c in chapters
     ]
     done: list[ChapterRun] = []
     failures: list[str] = []

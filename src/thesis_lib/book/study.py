@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import importlib
 import json
 import os
 import socket
@@ -33,6 +32,7 @@ from typing import Any
 import pandas as pd
 
 from thesis_lib._io import atomic_write
+from thesis_lib.book.chapter import Chapter
 from thesis_lib.paths import project_root
 
 STUDY_KEYS = {
@@ -248,14 +248,14 @@ def study_chapter(chapter_or_path: str | Path) -> str:
     return study.chapter
 
 
-def chapter_module(chapter: str) -> Any:
-    """The ``thesis_lib.chapters`` module of a chapter notebook name (imported lazily)."""
-    from thesis_lib.book.params import chapter_module as module_name
+def _check_chapter(study: Study, chapter: Chapter) -> None:
+    if chapter.name != study.chapter:
+        raise ValueError(
+            f"study {study.study} is of chapter {study.chapter}, not of {chapter.name}"
+        )
 
-    return importlib.import_module(module_name(chapter))
 
-
-def study_config(study: Study, scale: str = "study") -> Any:
+def study_config(study: Study, chapter: Chapter, scale: str = "study") -> Any:
     """The chapter's ``Config`` with the study's overrides (an unknown field is an error);
     ``scale="check"``: with the scale check's overrides on top.
 
@@ -265,16 +265,16 @@ def study_config(study: Study, scale: str = "study") -> Any:
     file names such fields itself."""
     from thesis_lib.book.params import config_from_namespace
 
-    mod = chapter_module(study.chapter)
-    _check_study_values(study, mod.Config)
-    _check_study_columns(study, getattr(mod, "STUDY_COLUMNS", None))
+    _check_chapter(study, chapter)
+    _check_study_values(study, chapter.Config)
+    _check_study_columns(study, chapter.study_columns)
     # a field added after a study file was written takes the value that study ran with
-    values = {**getattr(mod, "STUDY_FILE_DEFAULTS", {}), **study.config}
+    values = {**chapter.study_file_defaults, **study.config}
     if scale == "check":
         if not study.scale_check or not study.scale_check.get("config"):
             raise ValueError(f"study {study.study} has no scale_check config")
         values.update(study.scale_check["config"])
-    return config_from_namespace(mod.Config, values, f"{study.chapter} (study {study.study})")
+    return config_from_namespace(chapter.Config, values, f"{study.chapter} (study {study.study})")
 
 
 def _check_study_values(study: Study, config_cls: type) -> None:
@@ -320,17 +320,14 @@ def _check_study_columns(study: Study, columns: Any) -> None:
             )
 
 
-def study_tasks(study: Study) -> list[Any]:
-    """The study's tasks, from the chapter module's ``study_tasks(cfg)``: the scale check's
-    first (their configs carry ``scale: check``), then the study's own."""
+def study_tasks(study: Study, chapter: Chapter) -> list[Any]:
+    """The study's tasks, from its chapter's ``study_tasks(cfg)``: the scale check's first
+    (their configs carry ``scale: check``), then the study's own."""
     from thesis_lib.sweep import Task
 
-    mod = chapter_module(study.chapter)
-    if not hasattr(mod, "study_tasks"):
-        raise NotImplementedError(f"{mod.__name__} of {study.chapter} has no study_tasks(cfg) yet")
-    tasks = list(mod.study_tasks(study_config(study)))
+    tasks = chapter.study_tasks(study_config(study, chapter))
     if study.scale_check and study.scale_check.get("config"):
-        check = mod.study_tasks(study_config(study, "check"))
+        check = chapter.study_tasks(study_config(study, chapter, "check"))
         # first: CLAIMS.md asks for the scale check before the study
         tasks = [Task(t.fn, {**t.config, "scale": "check"}, t.resources) for t in check] + tasks
     return tasks
@@ -417,7 +414,7 @@ def task_locks(store: str | Path, keys: list[str]) -> Iterator[list[str]]:
 
 
 def run_study(
-    chapter: str,
+    chapter: Chapter,
     *,
     executor: str | None = None,
     n_jobs: int | None = None,
@@ -426,25 +423,25 @@ def run_study(
     progress: bool | None = None,
     keep_going: bool = False,
 ) -> pd.DataFrame:
-    """Run (or resume) the study of ``chapter``; returns its rows and rewrites its files
+    """Run (or resume) the study of ``chapter`` (its registered
+    :class:`~thesis_lib.book.chapter.Chapter`: ``thesis_lib.chapters.CHAPTERS["04_hdt"]``);
+    returns its rows and rewrites its files
     (``rows.csv``, ``run.json``: also when a task fails, for the tasks that finished).
 
     ``keep_going``: a failed task does not stop the study; the others run, and
     :class:`~thesis_lib.sweep.GridFailed` lists the failures at the end (their tracebacks are in
     ``studies/<chapter>/tasks/failed/``).
 
-    ``chapter`` may also be the path of the chapter's study file (:func:`study_chapter`). The
-    run locks every task it is to run, from its start to its end (:func:`task_locks`); a task
+    The run locks every task it is to run, from its start to its end (:func:`task_locks`); a task
     that another process holds is skipped (said on stderr), so a second run of a study never
     runs a task that the first one is running or will run. The rows returned are those of the
     tasks this run finished or found stored."""
     from thesis_lib.provenance import git_commit
     from thesis_lib.sweep import TaskStore, run_tasks
 
-    chapter = study_chapter(chapter)
-    study = load_study(chapter)
-    tasks = study_tasks(study)
-    out = studies_dir(chapter)
+    study = load_study(chapter.name)
+    tasks = study_tasks(study, chapter)
+    out = studies_dir(chapter.name)
     if study.reuse and not force:
         reuse_tasks(study, [t.key for t in tasks])
     store = TaskStore(out / "tasks")
@@ -674,9 +671,10 @@ CLAIMS_COLUMNS = [
 ]
 
 
-def write_claims(reps: int = 10_000) -> pd.DataFrame:
+def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.DataFrame:
     """``studies/claims.csv``: one row per claim of CLAIMS.md, ``pending`` where no study
-    (or no complete one) answers it yet."""
+    (or no complete one) answers it yet. ``chapters``: the registry
+    (``thesis_lib.chapters.CHAPTERS``), which counts a pending study's tasks."""
     from thesis_lib.stats.claims import CLAIMS, claim_verdicts
 
     root = project_root() / "params"
@@ -695,7 +693,8 @@ def write_claims(reps: int = 10_000) -> pd.DataFrame:
                     "verdict": "pending",
                     "chapter": chapter,
                     "study": study.study,
-                    "comparisons": f"{done}/{len(study_tasks(study))} tasks done",
+                    "comparisons": f"{done}/{len(study_tasks(study, chapters[chapter]))} "
+                    "tasks done",
                 }
             continue
         verdicts = claim_verdicts(evaluate_study(chapter, reps=reps))
@@ -720,7 +719,6 @@ def write_claims(reps: int = 10_000) -> pd.DataFrame:
 
 __all__ = [
     "Study",
-    "chapter_module",
     "evaluate_study",
     "load_study",
     "parse_study",

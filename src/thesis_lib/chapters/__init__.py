@@ -1,7 +1,64 @@
-"""The book's pages, one module per notebook.
+"""The book's chapters, one package per notebook, and their registry :data:`CHAPTERS`.
 
-Each holds its ``Config`` (defaults = the smoke scale), ``run_*(cfg) -> DataFrame`` per table or
-experiment, ``compare_*`` beside the thesis's numbers (through
-:func:`thesis_lib.book.compare_with_paper`) and ``plot_*``. The notebooks and the CLI import them;
-nothing in the method packages does.
+Each package holds its ``Config`` (defaults = the smoke scale), its experiments' task functions
+(one per experiment, run by the notebook's smoke run and by the study alike), the tables beside
+the thesis's numbers (through :func:`thesis_lib.book.compare_with_paper`) and the plots. The
+notebooks, the ``thesis`` command and the tests import them; nothing below this floor does.
+The book machinery (:mod:`thesis_lib.book`) receives a chapter as a
+:class:`~thesis_lib.book.chapter.Chapter` from this registry.
+
+A new chapter is one package here plus one line in :data:`CHAPTERS` (README, "Adding a
+chapter, a method or a study").
 """
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+from thesis_lib.book.chapter import Chapter
+
+__all__ = ["CHAPTERS", "get_chapter"]
+
+_HERE = Path(__file__).resolve().parent
+
+
+def _chapter(name: str, package: str) -> Chapter:
+    folder = _HERE / package
+    config = folder / "config.py"
+    return Chapter(
+        name=name,
+        config_file=config if config.is_file() else folder / "__init__.py",
+        # imported on first use: a chapter package imports torch (seconds), and `thesis run`
+        # reads a Config's hints from its file first
+        load=lambda: importlib.import_module(f"{__name__}.{package}"),
+    )
+
+
+#: Every chapter of the book, by its notebook's name.
+CHAPTERS: dict[str, Chapter] = {
+    c.name: c
+    for c in (
+        _chapter("01_background", "background"),
+        _chapter("survey", "survey"),
+        _chapter("02_clfd", "clfd"),
+        _chapter("03_defender", "defender"),
+        _chapter("04_hdt", "hdt"),
+        _chapter("05_decision_mamba", "decision_mamba"),
+        _chapter("06_mdlt", "mdlt"),
+        _chapter("07_ur3_deployment", "ur3"),
+        _chapter("claims", "claims"),
+    )
+}
+
+
+def get_chapter(name: str) -> Chapter:
+    """The registered chapter ``name`` (e.g. ``04_hdt``).
+
+    Raises:
+        ValueError: no such chapter (the message lists them).
+    """
+    try:
+        return CHAPTERS[name]
+    except KeyError:
+        raise ValueError(f"No chapter '{name}'. Known: {', '.join(CHAPTERS)}.") from None

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from .safety import SafetyReport
+    from thesis_lib.ur3.safety import SafetyReport
 
 
 def read_angles(path: str | Path) -> np.ndarray:
@@ -71,8 +71,13 @@ def _clip_note(before: SafetyReport, changed: int, max_change: float) -> str | N
 
 
 def _trajectory(args: argparse.Namespace):
-    from .dance import prepare_dance
-    from .safety import SafetyLimits, UnsafeTrajectoryError, check_trajectory, clip_trajectory
+    from thesis_lib.ur3.dance import prepare_dance
+    from thesis_lib.ur3.safety import (
+        SafetyLimits,
+        UnsafeTrajectoryError,
+        check_trajectory,
+        clip_trajectory,
+    )
 
     a = read_angles(args.angles)
     limits = SafetyLimits(speed_scale=args.speed_scale)
@@ -91,7 +96,7 @@ def _trajectory(args: argparse.Namespace):
 
 
 def _backend(args: argparse.Namespace):
-    from .driver import RTDEBackend, SimBackend, URScriptBackend
+    from thesis_lib.ur3.driver import RTDEBackend, SimBackend, URScriptBackend
 
     if args.backend == "sim":
         return SimBackend()
@@ -101,8 +106,8 @@ def _backend(args: argparse.Namespace):
 
 
 def _play(args: argparse.Namespace) -> int:
-    from .driver import UR3Driver
-    from .safety import UnsafeTrajectoryError
+    from thesis_lib.ur3.driver import UR3Driver
+    from thesis_lib.ur3.safety import UnsafeTrajectoryError
 
     try:
         q, limits, note = _trajectory(args)
@@ -121,20 +126,20 @@ def _play(args: argparse.Namespace) -> int:
     print(res.report.summary())
     print("\n".join(drv.log))
     if args.gif:
-        from .render import render_frames, save_gif
+        from thesis_lib.ur3.render import render_frames, save_gif
 
         step = max(1, int(round(args.fps / 15)))
         print("wrote", save_gif(render_frames(q[::step]), args.gif, fps=args.fps / step))
     if args.html:
-        from .viewer import save_html, trajectory_html
+        from thesis_lib.ur3.viewer import save_html, trajectory_html
 
         print("wrote", save_html(trajectory_html(q, fps=args.fps), args.html))
     return 0
 
 
 def _check(args: argparse.Namespace) -> int:
-    from .dance import map_dance
-    from .safety import SafetyLimits, check_trajectory
+    from thesis_lib.ur3.dance import map_dance
+    from thesis_lib.ur3.safety import SafetyLimits, check_trajectory
 
     a = read_angles(args.angles)
     q = map_dance(a) if a.shape[1] == 4 else a
@@ -144,7 +149,7 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _demos(args: argparse.Namespace) -> int:
-    from .reach import get_reach_dataset
+    from thesis_lib.ur3.reach import get_reach_dataset
 
     ds = get_reach_dataset(args.n, args.seed, overwrite=True)
     print(f"{ds.id}: {len(ds)} demonstrations, {ds.n_transitions} steps, at {ds.path}")
@@ -152,7 +157,7 @@ def _demos(args: argparse.Namespace) -> int:
 
 
 def _model(args: argparse.Namespace) -> int:
-    from .model import asset_path, build_mjcf
+    from thesis_lib.ur3.model import asset_path, build_mjcf
 
     if args.print:
         print(build_mjcf())

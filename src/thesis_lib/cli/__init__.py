@@ -43,15 +43,17 @@ def _sweep_env(args: argparse.Namespace) -> dict[str, str]:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from thesis_lib.book import ChapterFailed, run_chapter
+    from thesis_lib.book import ChapterFailed, resolve_chapter, run_chapter
     from thesis_lib.book.params import parse_value
+    from thesis_lib.chapters import CHAPTERS
 
     params = {name: parse_value(value) for name, value in (args.param or [])}
     profile: str | Path | None = args.file or args.profile
     try:
         env = _sweep_env(args)
+        chapter = resolve_chapter(args.chapter)
         result = run_chapter(
-            args.chapter,
+            CHAPTERS.get(chapter, chapter),
             params,
             profile=profile,
             output=args.output,
@@ -68,11 +70,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_book(args: argparse.Namespace) -> int:
     from thesis_lib.book import ChapterFailed, run_chapters
     from thesis_lib.book.runner import build_book
+    from thesis_lib.chapters import CHAPTERS
 
     try:
         if not args.no_run:
             env = _sweep_env(args)
-            run_chapters(args.chapters or None, jobs=args.jobs, profile=args.profile, env=env)
+            run_chapters(
+                args.chapters or None,
+                registry=CHAPTERS,
+                jobs=args.jobs,
+                profile=args.profile,
+                env=env,
+            )
         index = build_book(strict=not args.no_strict)
     except (ValueError, FileNotFoundError, ImportError, ChapterFailed, RuntimeError) as err:
         print(f"thesis book: {err}", file=sys.stderr)
@@ -91,46 +100,27 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def chapter_config(chapter: str) -> type:
-    """The ``Config`` dataclass of ``chapter``'s chapters module (the one source of its
-    parameters; see :data:`thesis_lib.book.params.CHAPTER_MODULES`).
+    """The ``Config`` dataclass of the registered ``chapter`` (the one source of its
+    parameters; see :data:`thesis_lib.chapters.CHAPTERS`).
 
     Raises:
-        ValueError: no module for the chapter, the module is missing, or has no dataclass
-            ``Config``.
+        ValueError: no such chapter, or its package has no dataclass ``Config``.
     """
-    import dataclasses
+    from thesis_lib.chapters import get_chapter
 
-    from thesis_lib.book.params import chapter_module
-
-    name = chapter_module(chapter)
-    try:
-        module = importlib.import_module(name)
-    except ModuleNotFoundError as err:
-        if err.name and name.startswith(err.name):
-            raise ValueError(
-                f"{chapter}: no module {name} (its Config defines the parameters)"
-            ) from None
-        raise
-    cls = getattr(module, "Config", None)
-    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls)):
-        raise ValueError(f"{chapter}: {name} has no dataclass Config")
-    return cls
+    return get_chapter(chapter).Config
 
 
 def _cmd_params(args: argparse.Namespace) -> int:
     from thesis_lib.book import list_chapters, project_root, resolve_chapter
-    from thesis_lib.book.params import (
-        CHAPTER_MODULES,
-        check_chapter,
-        parameters_source,
-        write_chapter,
-    )
+    from thesis_lib.book.params import check_chapter, parameters_source, write_chapter
+    from thesis_lib.chapters import CHAPTERS
 
     root = project_root()
     if args.chapters:
         chapters = [resolve_chapter(c, root) for c in args.chapters]
     else:
-        chapters = [c for c in list_chapters(root) if c in CHAPTER_MODULES]
+        chapters = [c for c in list_chapters(root) if c in CHAPTERS]
     status = 0
     for chapter in chapters:
         try:
@@ -154,7 +144,9 @@ def _cmd_params(args: argparse.Namespace) -> int:
             else:
                 print(f"{chapter}: parameters cell and params/ match {cls.__name__}")
         else:
-            print(f"# {chapter}: the parameters cell generated from {CHAPTER_MODULES[chapter]}")
+            print(
+                f"# {chapter}: the parameters cell generated from {CHAPTERS[chapter].config_file}"
+            )
             print(parameters_source(cls))
     return status
 
@@ -296,16 +288,16 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 #: The commands a sub-package registers (``register(subparsers)`` in ``module``), with the help
 #: line ``thesis --help`` shows without importing them. ``study`` also registers ``claims``.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "data": ("thesis_lib.data.cli", "demonstration data sets (Minari format)"),
-    "mdlt": ("thesis_lib.mdlt.cli", "music-to-dance translation (thesis chapter 6)"),
+    "data": ("thesis_lib.cli.data", "demonstration data sets (Minari format)"),
+    "mdlt": ("thesis_lib.cli.mdlt", "music-to-dance translation (thesis chapter 6)"),
     "ur3": (
-        "thesis_lib.ur3.cli",
+        "thesis_lib.cli.ur3",
         "the UR3: play or check a dance, make reaching demonstrations",
     ),
-    "study": ("thesis_lib.book.study_cli", "run or resume a chapter's pre-registered study"),
-    "claims": ("thesis_lib.book.study_cli", "write studies/claims.csv from the studies"),
+    "study": ("thesis_lib.cli.study", "run or resume a chapter's pre-registered study"),
+    "claims": ("thesis_lib.cli.study", "write studies/claims.csv from the studies"),
     "parity": (
-        "thesis_lib.parity.cli",
+        "thesis_lib.cli.parity",
         "our DT and BC against d3rlpy's at equal config (params/parity.yml)",
     ),
 }
@@ -326,7 +318,3 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"thesis {args.command}: {err}", file=sys.stderr)
         return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -185,7 +185,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     t.set_defaults(func=_cmd_train)
 
 
-if __name__ == "__main__":  # python -m thesis_lib.mdlt.cli dance ...
+if __name__ == "__main__":  # python -m thesis_lib.cli.mdlt dance ...
     from thesis_lib.cli import main
 
     sys.exit(main(["mdlt", *sys.argv[1:]]))

@@ -25,11 +25,12 @@ def _status(chapter: str) -> dict:
     """Progress of one study; refreshes its ``rows.csv`` / ``run.json`` once a task has run
     (an unstarted study gets no files)."""
     from thesis_lib.book import study as st
+    from thesis_lib.chapters import get_chapter
     from thesis_lib.sweep import TaskStore
 
     chapter = st.study_chapter(chapter)
     s = st.load_study(chapter)
-    tasks = st.study_tasks(s)
+    tasks = st.study_tasks(s, get_chapter(chapter))
     keys = [t.key for t in tasks]
     failed = [k for k in TaskStore(st.studies_dir(chapter) / "tasks").failures() if k in keys]
     recs = st.task_records(s, keys)  # read once: a large study has thousands of files
@@ -85,8 +86,9 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
         summary.append(f"{s['study']} {s['tasks_done']}/{s['tasks_total']}")
     if chapters:
         from thesis_lib.book.study import write_claims
+        from thesis_lib.chapters import CHAPTERS
 
-        write_claims()
+        write_claims(CHAPTERS)
     paths = [*(f"studies/{c}" for c in chapters), "studies/claims.csv"]
     paths = [p for p in paths if (root / p).exists()]
     if not paths:
@@ -147,11 +149,12 @@ def _cmd_study(args: argparse.Namespace) -> int:
     # chosen, as a chapter's kernel does.
     os.environ.setdefault("MUJOCO_GL", KERNEL_ENV_DEFAULTS["MUJOCO_GL"])
     from thesis_lib.book import study as st
+    from thesis_lib.chapters import get_chapter
 
     # every study file first (names, values, metrics): a typo fails before hours of work
     args.chapter = [st.study_chapter(c) for c in args.chapter]
     for chapter in args.chapter:
-        st.study_config(st.load_study(chapter))
+        st.study_config(st.load_study(chapter), get_chapter(chapter))
     if args.status:
         for chapter in args.chapter:
             print(json.dumps(_status(chapter), indent=1))
@@ -178,13 +181,14 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 def _run_studies(args: argparse.Namespace) -> list[str]:
     from thesis_lib.book import study as st
+    from thesis_lib.chapters import get_chapter
     from thesis_lib.sweep import GridFailed
 
     failed = []
     for chapter in args.chapter:  # in order; a complete study finds every task stored
         try:
             rows = st.run_study(
-                chapter,
+                get_chapter(chapter),
                 executor=args.executor,
                 n_jobs=args.jobs,
                 address=args.address,
@@ -201,8 +205,9 @@ def _run_studies(args: argparse.Namespace) -> list[str]:
 
 def _cmd_claims(args: argparse.Namespace) -> int:
     from thesis_lib.book.study import studies_dir, write_claims
+    from thesis_lib.chapters import CHAPTERS
 
-    df = write_claims(reps=args.reps)
+    df = write_claims(CHAPTERS, reps=args.reps)
     print(df[["claim", "verdict", "effect", "ci_low", "ci_high", "chapter"]].to_string(index=False))
     print(f"-> {studies_dir() / 'claims.csv'}", file=sys.stderr)
     return 0

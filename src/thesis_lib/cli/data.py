@@ -12,8 +12,8 @@ import sys
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from .recipe import generate
-    from .tasks import TASKS, get_task
+    from thesis_lib.data.recipe import generate
+    from thesis_lib.data.tasks import TASKS, get_task
 
     if args.n_transitions is not None and args.n_transitions < 1:
         print(f"--n-transitions must be ≥ 1, got {args.n_transitions}.", file=sys.stderr)
@@ -39,14 +39,14 @@ def _generate(args: argparse.Namespace) -> int:
 
 
 def _has(task: str) -> bool:
-    from .experts import has_policies
+    from thesis_lib.data.experts import has_policies
 
     return has_policies(task)
 
 
 def _list(args: argparse.Namespace) -> int:
-    from .storage import list_datasets, search_dirs
-    from .tasks import TASKS
+    from thesis_lib.data.storage import list_datasets, search_dirs
+    from thesis_lib.data.tasks import TASKS
 
     if args.tasks:
         for name, spec in TASKS.items():
@@ -59,10 +59,10 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def _card(args: argparse.Namespace) -> int:
-    from .card import data_card, expert_quality, format_card
+    from thesis_lib.data.card import data_card, expert_quality, format_card
 
     if args.markdown:
-        from .card import render_markdown
+        from thesis_lib.data.card import render_markdown
 
         print(render_markdown())
         return 0
@@ -72,7 +72,7 @@ def _card(args: argparse.Namespace) -> int:
     if not args.dataset_id:
         print("give a data-set id, or --experts", file=sys.stderr)
         return 2
-    from .storage import DamagedDatasetError
+    from thesis_lib.data.storage import DamagedDatasetError
 
     try:
         card = data_card(args.dataset_id)
@@ -86,12 +86,12 @@ def _card(args: argparse.Namespace) -> int:
 def _train(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from .experts import ARS_CONFIGS, train_experts
+    from thesis_lib.data.experts import ARS_CONFIGS, train_experts
 
     tasks = [*ARS_CONFIGS, "maze2d"] if args.task == "all" else [args.task]
     for task in tasks:
         if task == "maze2d":
-            from .card import record_maze_experts
+            from thesis_lib.data.card import record_maze_experts
 
             print(json.dumps(record_maze_experts(args.eval_episodes, out_dir=args.out), indent=1))
             continue
@@ -125,7 +125,7 @@ def _train(args: argparse.Namespace) -> int:
 def _train_expert(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from .deep_experts import (
+    from thesis_lib.data.deep_experts import (
         ALGORITHM_LEARNING_RATES,
         DEEP_EXPERT_CONFIGS,
         DeepExpertConfig,
@@ -204,7 +204,12 @@ def _train_medium(args: argparse.Namespace) -> int:
     the snapshot whose sampled return is nearest D4RL's medium level (``<task>-medium``)."""
     from dataclasses import replace
 
-    from .deep_experts import MEDIUM_RUN_CONFIGS, runs_dir, ship_medium_run, train_deep_expert
+    from thesis_lib.data.deep_experts import (
+        MEDIUM_RUN_CONFIGS,
+        runs_dir,
+        ship_medium_run,
+        train_deep_expert,
+    )
 
     if args.task not in MEDIUM_RUN_CONFIGS:
         print(
@@ -250,7 +255,7 @@ def _train_medium(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``data`` sub-command (``generate``, ``list``, ``card``, ``train-experts``,
     ``train-expert``)."""
-    from .deep_experts import ALGORITHMS  # loaded with thesis_lib.data already
+    from thesis_lib.data.deep_experts import ALGORITHMS  # loaded with thesis_lib.data already
 
     p = subparsers.add_parser("data", help="demonstration data sets (Minari format)")
     sub = p.add_subparsers(dest="data_command", required=True)
@@ -370,7 +375,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry: ``python -m thesis_lib.data.cli data …``."""
+    """Stand-alone entry: ``python -m thesis_lib.cli.data data …``."""
     parser = argparse.ArgumentParser(prog="thesis")
     sub = parser.add_subparsers(dest="command", required=True)
     register(sub)
