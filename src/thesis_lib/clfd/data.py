@@ -26,6 +26,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from thesis_lib.clfd.env import CAMERAS, Demonstration, MultiViewPickPlace, run_demonstration
+from thesis_lib.paths import data_dir
 
 FORMAT_VERSION = 2
 
@@ -178,7 +179,6 @@ def split_sizes(n_demos: int) -> dict[str, int]:
 
 def default_cache_dir() -> Path:
     """Where rendered data sets are cached: ``<thesis data dir>/thesis/clfd``."""
-    from thesis_lib.data.storage import data_dir
 
     return data_dir() / "thesis" / "clfd"
 
@@ -246,7 +246,9 @@ def make_pick_place_dataset(
     for s in SPLITS:
         out[s] = full.subset(range(start, start + sizes[s]))
         start += sizes[s]
-    if folder is not None:  # write aside, then rename: a concurrent reader never sees half a set
+    # write aside, then rename: a concurrent reader never sees half a set (a folder swap, so
+    # not thesis_lib._io.atomic_write, which writes one file)
+    if folder is not None:
         tmp = folder.with_name(f"{folder.name}.tmp-{os.getpid()}")
         for s in SPLITS:
             out[s].save(tmp / s)

@@ -177,7 +177,7 @@ def train_embedding_agent(
     """
     from stable_baselines3 import HerReplayBuffer
 
-    from thesis_lib.rl import RLConfig, train
+    from thesis_lib.rl import RLConfig, train  # lazy: stable_baselines3
 
     env = EmbeddingRewardEnv(encoder, demo_seed, stage, camera, image_size, max_episode_steps)
     expert = env.expert_return()

@@ -10,12 +10,19 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, Literal, overload
 
 import numpy as np
 
-from .storage import OfflineDataset, load
-from .tasks import TASKS, get_task
+from . import experts  # POLICY_DIR looked up per call, as load_policy does
+from .d4rl_reference import SOURCES, d4rl_stats, in_band
+from .experts import has_policies, load_policy_record
+from .maze import WaypointExpert
+from .recipe import GENERATOR_VERSION, action_noise_for, make_env
+from .scores import normalized_score
+from .storage import OfflineDataset, generate_command, load
+from .tasks import TASKS, get_task, is_our_namespace, parse_dataset_id
 
 #: Expert-tier targets over 100 episodes: the D4RL-normalised score where D4RL defines one
 #: (its expert tier scores about 90-110), else the mean return (Maze2D: the success rate).
@@ -138,8 +145,6 @@ def format_card(card: dict[str, Any]) -> str:
 
 def _our_task_tier(dataset_id: str) -> tuple[str | None, str | None]:
     """``(task, tier)`` of a set made here (any size), else ``(None, None)``."""
-    from .tasks import is_our_namespace, parse_dataset_id
-
     try:
         ns, task, tier, _ = parse_dataset_id(dataset_id)
     except ValueError:
@@ -156,8 +161,6 @@ def d4rl_comparison(card: dict[str, Any]) -> dict[str, Any] | None:
         where D4RL publishes no return statistics (Maze2D), else whether our normalised mean
         is within 10 points of D4RL's and our std at least half of D4RL's.
     """
-    from .d4rl_reference import d4rl_stats, in_band
-
     task, tier = _our_task_tier(card["id"])
     ref = d4rl_stats(task, tier) if task and tier else None
     if ref is None:
@@ -170,22 +173,17 @@ def d4rl_comparison(card: dict[str, Any]) -> dict[str, Any] | None:
 
 def _version_lines(card: dict[str, Any]) -> list[str]:
     """A line saying the set was made by an older recipe, and how to rebuild it."""
-    from .recipe import GENERATOR_VERSION
-    from .storage import _generate_command
-
     made = card["info"].get("generator_version")
     if made is None or made == GENERATOR_VERSION:
         return []
     return [
         f"{'OUT OF DATE':>16}: made by recipe version {made}, this is {GENERATOR_VERSION}: "
-        f"rebuild with {_generate_command(card['id'])}"
+        f"rebuild with {generate_command(card['id'])}"
     ]
 
 
 def _d4rl_lines(card: dict[str, Any]) -> list[str]:
     """The card's lines on D4RL's figures for the same tier."""
-    from .d4rl_reference import SOURCES
-
     cmp = d4rl_comparison(card)
     if cmp is None:
         return []
@@ -246,9 +244,6 @@ def expert_quality() -> Any:
     """
     import pandas as pd
 
-    from .experts import POLICY_DIR, has_policies, load_policy_record
-    from .scores import normalized_score
-
     rows = []
     for task, target in QUALITY_TARGETS.items():
         if not has_policies(task):
@@ -277,7 +272,7 @@ def expert_quality() -> Any:
                 "n_eval_episodes": rec.n_eval_episodes,
             }
         )
-    maze = POLICY_DIR / "maze2d.json"
+    maze = experts.POLICY_DIR / "maze2d.json"
     if maze.exists():
         for task, m in json.loads(maze.read_text()).items():
             rows.append(
@@ -368,8 +363,6 @@ def check_environments(n_steps: int = 50, tasks: Sequence[str] | None = None) ->
     """
     import pandas as pd
 
-    from .recipe import make_env
-
     rows = []
     for t in tasks or list(TASKS):
         spec = get_task(t)
@@ -411,9 +404,6 @@ def maze_success_rate(
         seed: seed of the resets and the action noise.
         return_returns: also return the ``(n_episodes,)`` episode returns.
     """
-    from .maze import WaypointExpert
-    from .recipe import action_noise_for, make_env
-
     env = make_env(task)
     ex = WaypointExpert(noise_std=action_noise_for(task))
     rng = np.random.default_rng(seed)
@@ -440,12 +430,6 @@ def record_maze_experts(n_episodes: int = 100, seed: int = 0, out_dir: Any = Non
         ``{task: {success_rate, return_mean, return_std, normalized, action_noise,
         n_episodes, seed}}``.
     """
-    from pathlib import Path
-
-    from .experts import POLICY_DIR
-    from .recipe import action_noise_for
-    from .scores import normalized_score
-
     out: dict[str, Any] = {}
     for task, spec in TASKS.items():
         if spec.kind != "maze":
@@ -460,7 +444,7 @@ def record_maze_experts(n_episodes: int = 100, seed: int = 0, out_dir: Any = Non
             "n_episodes": n_episodes,
             "seed": seed,
         }
-    path = Path(out_dir) if out_dir is not None else POLICY_DIR
+    path = Path(out_dir) if out_dir is not None else experts.POLICY_DIR
     path.mkdir(parents=True, exist_ok=True)
     (path / "maze2d.json").write_text(json.dumps(out, indent=1) + "\n")
     return out

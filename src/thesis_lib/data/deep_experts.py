@@ -46,75 +46,21 @@ from typing import Any
 import numpy as np
 
 from thesis_lib._io import atomic_write
+from thesis_lib.paths import cache_dir
 
-from .experts import evaluate  # one roll-out loop for ARS and TQC policies
+from . import experts  # POLICY_DIR looked up per call (a test ships into a folder of its own)
+from .d4rl_reference import d4rl_stats
+from .envs import make_env
+from .experts import (  # evaluate: one roll-out loop for ARS and TQC policies
+    MEDIUM_RUN,
+    PolicyRecord,
+    evaluate,
+    medium_target,
+    silent_logger,
+)
+from .policy import LOG_STD_MAX, LOG_STD_MIN, MLPPolicy  # re-exported: they were defined here
+from .scores import normalized_score
 from .tasks import get_task
-
-LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0  # SB3's and sbx's clamp of the actor's log-std
-
-
-@dataclass
-class MLPPolicy:
-    """A squashed-Gaussian MLP actor (SAC / TQC) in NumPy.
-
-    ``h = relu(... relu(o W0 + b0) ...)``, ``mean = h Wm + bm``, ``log_std = h Ws + bs``
-    (clamped to [-20, 2]); the deterministic action is ``tanh(mean)``, a sampled one
-    ``tanh(mean + exp(log_std) * eps)``, both scaled from [-1, 1] to ``[low, high]``.
-
-    Attributes:
-        weights: hidden layers' ``(in, out)`` matrices, then the mean head, then the
-            log-std head.
-        biases: their biases, same order.
-        low: ``(act_dim,)`` lower action bound.
-        high: ``(act_dim,)`` upper action bound.
-    """
-
-    weights: list[np.ndarray]
-    biases: list[np.ndarray]
-    low: np.ndarray
-    high: np.ndarray
-
-    def _heads(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        h = np.asarray(obs, dtype=np.float64)
-        for w, b in zip(self.weights[:-2], self.biases[:-2]):
-            h = np.maximum(h @ w + b, 0.0)
-        mean = h @ self.weights[-2] + self.biases[-2]
-        log_std = np.clip(h @ self.weights[-1] + self.biases[-1], LOG_STD_MIN, LOG_STD_MAX)
-        return mean, log_std
-
-    def _scale(self, u: np.ndarray) -> np.ndarray:
-        return self.low + 0.5 * (np.tanh(u) + 1.0) * (self.high - self.low)
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """Deterministic action for one ``(obs_dim,)`` or a batch ``(n, obs_dim)``."""
-        mean, _ = self._heads(obs)
-        return self._scale(mean)
-
-    def sample(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """An action drawn from the actor's Gaussian (its exploration during training)."""
-        mean, log_std = self._heads(obs)
-        return self._scale(mean + np.exp(log_std) * rng.standard_normal(mean.shape))
-
-    def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
-        """Flat ``{name: array}`` for ``np.savez`` (float32)."""
-        out = {}
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            out[f"{prefix}w{i}"] = w.astype(np.float32)
-            out[f"{prefix}b{i}"] = b.astype(np.float32)
-        return out
-
-    @classmethod
-    def from_arrays(cls, z: Any, low: np.ndarray, high: np.ndarray, prefix: str = "") -> MLPPolicy:
-        """Inverse of :meth:`to_arrays` (``z`` a mapping such as an ``NpzFile``)."""
-        ws, bs, i = [], [], 0
-        while f"{prefix}w{i}" in z:
-            ws.append(np.asarray(z[f"{prefix}w{i}"], dtype=np.float64))
-            bs.append(np.asarray(z[f"{prefix}b{i}"], dtype=np.float64))
-            i += 1
-        if i < 3:
-            raise ValueError(f"No MLP policy with prefix '{prefix}' (found {i} layers, need ≥ 3).")
-        return cls(ws, bs, np.asarray(low, np.float64), np.asarray(high, np.float64))
-
 
 #: the off-policy algorithms a recipe may name, and how records spell them.
 ALGORITHM_NAMES = {"tqc": "TQC", "sac": "SAC", "crossq": "CrossQ"}
@@ -244,8 +190,6 @@ def runs_dir() -> Path:
     ``THESIS_CACHE_DIR`` defaults to ``~/.cache/thesis_lib``. A run folder holds the model,
     its replay buffer (about 0.1-0.5 GB) and the exported snapshots; nothing there is shipped.
     """
-    from thesis_lib.paths import cache_dir
-
     return cache_dir("expert_runs")
 
 
@@ -407,8 +351,6 @@ def train_deep_expert(
     Call :func:`ship_deep_expert` on a finished (or good enough) run to write the
     package's ``policies/<task>.npz`` / ``.json``.
     """
-    from .scores import normalized_score
-
     cfg = config or DEEP_EXPERT_CONFIGS[task]
     spec = get_task(task)
     if spec.kind != "mujoco":
@@ -418,8 +360,6 @@ def train_deep_expert(
     (folder / "snapshots").mkdir(parents=True, exist_ok=True)
     state_path = folder / "state.json"
     algo = _algo_class(cfg.algorithm, backend)
-    from .recipe import make_env
-
     env = make_env(task)
     if state_path.exists():
         st = RunState(**json.loads(state_path.read_text()))
@@ -471,9 +411,7 @@ def train_deep_expert(
         )
         model = algo("MlpPolicy", env, **kw)
         st.steps, st.snapshots = 0, []
-    from .experts import _silent_logger
-
-    model.set_logger(_silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
+    model.set_logger(silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
 
     def checkpoint() -> None:
         atomic_write(folder / "model.zip", model.save)
@@ -554,8 +492,6 @@ def _replay_snapshots(snaps: list[dict[str, Any]], med_step: int) -> list[dict[s
 
 def _action_bounds(task: str) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)`` of ``task``'s action space, float64."""
-    from .recipe import make_env
-
     env = make_env(task)
     low = env.action_space.low.astype(np.float64)
     high = env.action_space.high.astype(np.float64)
@@ -587,9 +523,6 @@ def ship_deep_expert(
     Returns:
         The :class:`thesis_lib.data.experts.PolicyRecord` written.
     """
-    from .experts import POLICY_DIR, PolicyRecord, medium_target
-    from .scores import normalized_score
-
     folder = Path(run_dir) if run_dir is not None else runs_dir() / task
     state_path = folder / "state.json"
     if not state_path.exists():
@@ -637,7 +570,7 @@ def ship_deep_expert(
     arrays = pol[exp_step].to_arrays("expert_")
     for i, s in enumerate(shipped):
         arrays.update(pol[s["step"]].to_arrays(f"ckpt{i}_"))
-    out = Path(out_dir) if out_dir is not None else POLICY_DIR
+    out = Path(out_dir) if out_dir is not None else experts.POLICY_DIR
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / f"{task}.npz", lambda p: _savez(p, arrays))
     cfg = dict(st.config)
@@ -679,8 +612,6 @@ def evaluate_sampled(
 ) -> np.ndarray:
     """Undiscounted returns of ``policy`` acting by its own Gaussian (as the medium tier samples
     it) over ``n_episodes`` seeded episodes; the action noise is seeded too."""
-    from .recipe import make_env
-
     env = make_env(task)
     rng = np.random.default_rng(seed)
     out = np.empty(n_episodes)
@@ -722,10 +653,6 @@ def ship_medium_run(
     Returns:
         The :class:`thesis_lib.data.experts.PolicyRecord` written (``role="medium"``).
     """
-    from .d4rl_reference import d4rl_stats
-    from .experts import MEDIUM_RUN, POLICY_DIR, PolicyRecord
-    from .scores import normalized_score
-
     spec = get_task(task)
     folder = Path(run_dir)
     state_path = folder / "state.json"
@@ -761,7 +688,7 @@ def ship_medium_run(
     arrays: dict[str, np.ndarray] = {}
     for i, s in enumerate(shipped):
         arrays.update(_load_snapshot(folder, s, low, high).to_arrays(f"ckpt{i}_"))
-    out = Path(out_dir) if out_dir is not None else POLICY_DIR
+    out = Path(out_dir) if out_dir is not None else experts.POLICY_DIR
     out.mkdir(parents=True, exist_ok=True)
     stem = f"{task}{MEDIUM_RUN}"
     atomic_write(out / f"{stem}.npz", lambda p: _savez(p, arrays))
@@ -821,6 +748,8 @@ def _write_state(st: RunState, path: Path) -> None:
 
 
 __all__ = [
+    "LOG_STD_MAX",
+    "LOG_STD_MIN",
     "DEEP_EXPERT_CONFIGS",
     "DeepExpertConfig",
     "MLPPolicy",

@@ -22,45 +22,11 @@ from typing import Any
 
 import numpy as np
 
+from .policy import LinearPolicy, MLPPolicy
+from .scores import normalized_score
 from .tasks import get_task
 
 POLICY_DIR = Path(__file__).parent / "policies"
-
-# VecNormalize's defaults (stable-baselines3): obs clipped to ±10 after z-scoring, eps 1e-8.
-_CLIP_OBS = 10.0
-_EPS = 1e-8
-
-
-@dataclass
-class LinearPolicy:
-    """A deterministic linear policy ``a = clip(W · clip((o - mean)/sqrt(var + 1e-8), ±10))``.
-
-    This is exactly sb3-contrib's ``LinearPolicy`` (no bias, clipped output) behind
-    stable-baselines3's ``VecNormalize(norm_obs=True)``, in NumPy.
-
-    Attributes:
-        weights: ``(act_dim, obs_dim)`` float64.
-        obs_mean: ``(obs_dim,)`` running mean of the observations.
-        obs_var: ``(obs_dim,)`` running variance of the observations.
-        low: ``(act_dim,)`` lower action bound.
-        high: ``(act_dim,)`` upper action bound.
-    """
-
-    weights: np.ndarray
-    obs_mean: np.ndarray
-    obs_var: np.ndarray
-    low: np.ndarray
-    high: np.ndarray
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        """Act on one ``(obs_dim,)`` or a batch ``(n, obs_dim)`` of observations."""
-        z = np.clip((obs - self.obs_mean) / np.sqrt(self.obs_var + _EPS), -_CLIP_OBS, _CLIP_OBS)
-        return np.clip(z @ self.weights.T, self.low, self.high)
-
-    def perturbed(self, rng: np.random.Generator, std: float) -> LinearPolicy:
-        """A copy with Gaussian noise of ``std`` on the weights (ARS's exploration)."""
-        w = self.weights + std * rng.standard_normal(self.weights.shape)
-        return LinearPolicy(w, self.obs_mean, self.obs_var, self.low, self.high)
 
 
 @dataclass
@@ -146,9 +112,10 @@ class PolicyRecord:
         return self.algorithm.split(" (")[0].split(",")[0]
 
 
-def _silent_logger() -> Any:
-    """An SB3 logger that writes no file (see :func:`thesis_lib.rl.silent_logger`)."""
-    from stable_baselines3.common.logger import Logger
+def silent_logger() -> Any:
+    """An SB3 logger that writes no file (see :func:`thesis_lib.rl.silent_logger`); ARS's and
+    the deep experts' training set it (SB3's default makes an ``SB3-*`` folder per ``learn``)."""
+    from stable_baselines3.common.logger import Logger  # lazy: stable_baselines3
 
     return Logger(folder=None, output_formats=[])
 
@@ -239,8 +206,6 @@ def load_policy(task: str, which: str = "expert") -> Any:
     z = np.load(path)
     rec = load_policy_record(task, role)
     if rec.policy_kind == "mlp":
-        from .deep_experts import MLPPolicy
-
         low, high = _bounds(task)
         if which == "medium":
             which = f"ckpt{rec.medium_checkpoint}"
@@ -301,8 +266,6 @@ def medium_target(task: str, expert_return: float, fraction: float = 1 / 3) -> f
     >>> round(medium_target("walker2d", 3000.0), 1)   # 1000 is 21.7 normalised: raised to 25
     1149.3
     """
-    from .tasks import get_task
-
     target = fraction * expert_return
     spec = get_task(task)
     if spec.ref_min_score is not None and spec.ref_max_score is not None:
@@ -408,8 +371,6 @@ def _train(
     from sb3_contrib import ARS
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
-    from .scores import normalized_score
-
     venv = VecNormalize(
         DummyVecEnv([lambda: gym.make(spec.env_id)]), norm_obs=True, norm_reward=False
     )
@@ -424,7 +385,7 @@ def _train(
         seed=cfg.seed,
         verbose=0,
     )
-    model.set_logger(_silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
+    model.set_logger(silent_logger())  # SB3's default makes an SB3-* folder in /tmp per learn()
     low, high = _bounds(task)
     ws, ms, vs, steps, rets = [], [], [], [], []
     t0 = time.time()

@@ -22,6 +22,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from .robotics import forget_maze_xml, register_robotics
+
 #: D4RL's evaluation target per layout: the ``G`` cell (row, column) of its maze strings
 #: (``U_MAZE``, ``MEDIUM_MAZE``, ``LARGE_MAZE``, ``OPEN`` in ``d4rl/pointmaze/maze_model.py``),
 #: in gymnasium-robotics' maps of the same layouts.
@@ -109,11 +111,9 @@ def fixed_target_maze(env_id: str, **kwargs: Any) -> Any:
     Raises:
         ValueError: ``env_id`` has no D4RL target (:data:`D4RL_TARGET_CELLS`).
     """
-    from .recipe import _register_robotics, forget_maze_xml
-
     if env_id not in D4RL_TARGET_CELLS:
         raise ValueError(f"No D4RL target for '{env_id}'. Known: {', '.join(D4RL_TARGET_CELLS)}.")
-    _register_robotics()
+    register_robotics()
     kw = {"continuing_task": True, "reset_target": False, **kwargs}
     env = forget_maze_xml(gym.make(env_id, **kw))
     return FixedTarget(env, D4RL_TARGET_CELLS[env_id])

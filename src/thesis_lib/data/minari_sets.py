@@ -17,14 +17,31 @@ so their rows land in the same tables; :func:`open_dataset` loads either;
 the id itself for a Minari id), and :func:`make_minari_env`, :func:`reference_returns` and
 :func:`minari_step_cap` are what the runner does with an id.
 
+Reading an id and its reference returns (:func:`is_minari_id`, :func:`reference_returns`,
+:data:`D4RL_REFERENCES`) live in :mod:`thesis_lib.data.minari_ids`, below the score
+normalisation, and are re-exported here.
+
 Used by HDT 5.2 (Table 5.3: Adroit, Kitchen) and Decision Mamba 5.3 (Table 5.5: Kitchen,
 AntMaze).
 """
 
 from __future__ import annotations
 
-import re
 from typing import Any, cast
+
+import gymnasium as gym
+from gymnasium.envs.registration import EnvSpec
+
+from .minari_ids import (
+    D4RL_REFERENCES,
+    is_minari_id,
+    minari_id_parts,
+    minari_metadata,
+    reference_returns,
+)
+from .recipe import get_dataset
+from .robotics import forget_maze_xml, register_robotics
+from .storage import load
 
 __all__ = [
     "D4RL_REFERENCES",
@@ -39,45 +56,6 @@ __all__ = [
     "reference_returns",
 ]
 
-_ID = re.compile(r"^(?P<ns>[\w\-]+)/(?P<task>[\w\-]+)/(?P<tier>[\w\-]+)-v(?P<version>\d+)$")
-
-_ADROIT_MIN = {"pen": 96.262799, "hammer": -274.856578, "relocate": -6.425911, "door": -56.512833}
-_ADROIT_MAX = {
-    "pen": 3076.8331017826877,
-    "hammer": 12794.134825156867,
-    "relocate": 4233.877797728884,
-    "door": 2880.5693087298737,
-}
-
-#: D4RL's reference returns (normalised score 0 and 100) of the Minari ``D4RL/…`` ids, as
-#: ``{"D4RL/<task>/<tier>": (ref_min, ref_max, d4rl_name)}`` (any version of the id).
-#: Carried over from D4RL's ``d4rl/infos.py`` (``REF_MIN_SCORE`` / ``REF_MAX_SCORE``; the
-#: Adroit v1 entries copy the ``<task>-human-v0`` numbers, the AntMaze v2 and Kitchen v0
-#: entries are 0 and 1, 0 and 4): Minari's D4RL sets are the D4RL data re-recorded, and the
-#: thesis's Tables 5.3 and 5.5 are in D4RL's terms.
-D4RL_REFERENCES: dict[str, tuple[float, float, str]] = {
-    **{
-        f"D4RL/{t}/{tier}": (_ADROIT_MIN[t], _ADROIT_MAX[t], f"{t}-{tier}-v1")
-        for t in ("pen", "door", "hammer", "relocate")
-        for tier in ("human", "cloned", "expert")
-    },
-    **{
-        f"D4RL/kitchen/{tier}": (0.0, 4.0, f"kitchen-{tier}-v0")
-        for tier in ("complete", "mixed", "partial")
-    },
-    **{
-        f"D4RL/antmaze/{tier}": (0.0, 1.0, f"antmaze-{tier}-v2")
-        for tier in (
-            "umaze",
-            "umaze-diverse",
-            "medium-play",
-            "medium-diverse",
-            "large-play",
-            "large-diverse",
-        )
-    },
-}
-
 #: Task families whose reward is sparse (a sub-task done, the goal reached): evaluated over
 #: whole episodes, as Maze2D (:func:`thesis_lib.seq.evaluation.eval_step_cap`), since D4RL's
 #: references assume them and a capped episode scores 0.
@@ -87,26 +65,6 @@ SPARSE_FAMILIES: tuple[str, ...] = ("antmaze", "kitchen", "pointmaze")
 #: the episode ends at the goal, so the return is the success (0 or 1) as D4RL scores it
 #: (Minari records ``continuing_task=True``, under which the return counts steps at the goal).
 _EVAL_KWARGS: dict[str, dict[str, Any]] = {"antmaze": {"continuing_task": False}}
-
-
-def is_minari_id(name: str) -> bool:
-    """Whether ``name`` reads as a Minari id ``namespace/task/tier-vN`` (not ``task/tier``).
-
-    Example:
-        >>> is_minari_id("D4RL/door/human-v2"), is_minari_id("hopper/medium")
-        (True, False)
-    """
-    return isinstance(name, str) and _ID.match(name) is not None
-
-
-def _parts(dataset_id: str) -> tuple[str, str, str, int]:
-    m = _ID.match(dataset_id)
-    if m is None:
-        raise ValueError(
-            f"Data set {dataset_id!r} is neither 'task/tier' (e.g. 'hopper/medium') nor a Minari "
-            "id 'namespace/task/tier-vN' (e.g. 'D4RL/door/human-v2')."
-        )
-    return m["ns"], m["task"], m["tier"], int(m["version"])
 
 
 def dataset_key(name: str) -> tuple[str, str]:
@@ -123,7 +81,7 @@ def dataset_key(name: str) -> tuple[str, str]:
         ValueError: neither kind of name.
     """
     if is_minari_id(name):
-        _, task, tier, _ = _parts(name)
+        _, task, tier, _ = minari_id_parts(name)
         return task, tier
     if not isinstance(name, str) or name.count("/") != 1:
         raise ValueError(
@@ -139,27 +97,6 @@ def env_name(name: str) -> str:
     return name if is_minari_id(name) else dataset_key(name)[0]
 
 
-def reference_returns(
-    dataset_id: str, metadata: dict[str, Any] | None = None
-) -> tuple[float, float] | None:
-    """``(ref_min, ref_max)`` of a Minari id: D4RL's (:data:`D4RL_REFERENCES`) when listed, else
-    the data set's own ``ref_min_score``/``ref_max_score`` metadata, else ``None``.
-
-    Example:
-        >>> reference_returns("D4RL/door/human-v2")
-        (-56.512833, 2880.5693087298737)
-    """
-    ns, task, tier, _ = _parts(dataset_id)
-    ref = D4RL_REFERENCES.get(f"{ns}/{task}/{tier}")
-    if ref is not None:
-        return ref[0], ref[1]
-    md = metadata if metadata is not None else _metadata(dataset_id)
-    lo, hi = md.get("ref_min_score"), md.get("ref_max_score")
-    if lo is None or hi is None:
-        return None
-    return float(lo), float(hi)
-
-
 def minari_step_cap(dataset_id: str, cap: int | None) -> int | None:
     """The evaluation step cap of a Minari id: ``None`` (whole episodes) for a sparse family
     (:data:`SPARSE_FAMILIES`), else ``cap``.
@@ -168,23 +105,8 @@ def minari_step_cap(dataset_id: str, cap: int | None) -> int | None:
         >>> minari_step_cap("D4RL/door/human-v2", 100), minari_step_cap("D4RL/kitchen/mixed-v2", 100)
         (100, None)
     """
-    _, task, _, _ = _parts(dataset_id)
+    _, task, _, _ = minari_id_parts(dataset_id)
     return None if task in SPARSE_FAMILIES else cap
-
-
-def _storage(dataset_id: str) -> Any:
-    from minari.dataset.minari_storage import MinariStorage
-
-    from .storage import _missing_message, find_dataset
-
-    path = find_dataset(dataset_id)
-    if path is None:
-        raise FileNotFoundError(_missing_message(dataset_id))
-    return MinariStorage.read(path / "data")
-
-
-def _metadata(dataset_id: str) -> dict[str, Any]:
-    return dict(_storage(dataset_id).metadata)
 
 
 def make_minari_env(dataset_id: str, **kwargs: Any) -> Any:
@@ -198,13 +120,8 @@ def make_minari_env(dataset_id: str, **kwargs: Any) -> Any:
         FileNotFoundError: the data set is not downloaded; names the id and where Minari looks.
         ValueError: the data set records no environment.
     """
-    import gymnasium as gym
-    from gymnasium.envs.registration import EnvSpec
-
-    from .recipe import _register_robotics, forget_maze_xml
-
-    _register_robotics()
-    md = _metadata(dataset_id)
+    register_robotics()
+    md = minari_metadata(dataset_id)
     spec_json = md.get("eval_env_spec") or md.get("env_spec")
     if not spec_json:
         raise ValueError(f"Data set '{dataset_id}' records no environment to evaluate in.")
@@ -215,7 +132,7 @@ def make_minari_env(dataset_id: str, **kwargs: Any) -> Any:
         .replace('"autoreset": false, ', "")
     )
     spec = EnvSpec.from_json(spec_json)
-    _, task, _, _ = _parts(dataset_id)
+    _, task, _, _ = minari_id_parts(dataset_id)
     return forget_maze_xml(gym.make(spec, **(_EVAL_KWARGS.get(task, {}) | kwargs)))
 
 
@@ -232,9 +149,6 @@ def open_dataset(name: str, dataset_size: str = "smoke", n_transitions: int | No
         FileNotFoundError: a Minari id that is not downloaded; the message names the id, the
             folders searched and ``minari download``.
     """
-    from .recipe import get_dataset
-    from .storage import load
-
     if not is_minari_id(name):
         task, tier = dataset_key(name)
         return get_dataset(task, tier, cast(Any, dataset_size), n_transitions=n_transitions)

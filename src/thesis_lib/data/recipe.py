@@ -37,14 +37,18 @@ Used by HDT 5.2, Decision Mamba 5.3 and DEFENDER 4.3 (InvertedDoublePendulum).
 
 from __future__ import annotations
 
-import contextlib
 import time
 import warnings
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any, Literal
 
 import numpy as np
 
+from . import experts  # its functions looked up per call, so a swapped one is seen
+from .envs import make_env
+from .maze import D4RL_TARGET_CELLS, WaypointExpert
+from .robotics import forget_maze_xml, register_robotics
 from .storage import (
     DamagedDatasetError,
     Episode,
@@ -95,63 +99,8 @@ def action_noise_for(task: str) -> float:
     return TASK_NOISE.get(task, DEFAULT_NOISE[get_task(task).kind])
 
 
-def make_env(task: str, **kwargs: object):  # -> gym.Env
-    """``gymnasium.make`` for ``task``, with its episode limit (and robotics envs registered);
-    a Maze2D task as D4RL's maze2d, with its layout's fixed target
-    (:func:`thesis_lib.data.maze.fixed_target_maze`)."""
-    import gymnasium as gym
-
-    spec = get_task(task)
-    if spec.kind in ("maze", "robotics"):
-        _register_robotics()
-        if spec.env_id.startswith("AdroitHand") and _ROBOTICS_NOTICE:
-            warnings.warn(_ROBOTICS_NOTICE, stacklevel=2)
-    kw = {**spec.env_kwargs, **kwargs}
-    if spec.kind == "maze":  # D4RL's maze2d: one fixed target per layout (data and evaluation)
-        from .maze import fixed_target_maze
-
-        return fixed_target_maze(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw)
-    return forget_maze_xml(gym.make(spec.env_id, max_episode_steps=spec.max_episode_steps, **kw))
-
-
-def forget_maze_xml(env: Any) -> Any:
-    """Delete the model file a gymnasium-robotics maze (PointMaze, AntMaze) wrote; return ``env``.
-
-    Each maze env writes its MuJoCo model to ``<temp dir>/ant_maze<time>.xml`` and never
-    removes it (hundreds per book build). The model is loaded once the env is made, so the
-    file is removed here; other envs are returned untouched.
-    """
-    import os
-
-    xml = getattr(getattr(env, "unwrapped", env), "tmp_xml_file_path", None)
-    if isinstance(xml, str) and os.path.basename(xml).startswith("ant_maze"):
-        with contextlib.suppress(FileNotFoundError):
-            os.remove(xml)
-    return env
-
-
-_ROBOTICS_NOTICE = ""
-
-
-def _register_robotics() -> None:
-    """Register gymnasium-robotics' environments once.
-
-    Its import prints a notice about the Adroit-v1 reward change to stderr; it would appear in
-    every chapter that makes a maze, so it is kept and raised as a warning for Adroit tasks only.
-    """
-    global _ROBOTICS_NOTICE
-    import io
-
-    import gymnasium as gym
-
-    buf = io.StringIO()
-    with warnings.catch_warnings(), contextlib.redirect_stderr(buf):
-        warnings.simplefilter("ignore")
-        import gymnasium_robotics
-
-        gym.register_envs(gymnasium_robotics)
-    _ROBOTICS_NOTICE = _ROBOTICS_NOTICE or buf.getvalue().strip()
-
+#: the old name, kept for ``tests/fixtures/make_minari_fixtures.py``
+_register_robotics = register_robotics
 
 Policy = Callable[[Any, np.random.Generator], np.ndarray]
 
@@ -266,8 +215,6 @@ class _EpisodePerturbed:
 
 
 def _renumber(episodes: list[Episode]) -> list[Episode]:
-    from dataclasses import replace
-
     return [replace(e, id=i) for i, e in enumerate(episodes)]
 
 
@@ -313,8 +260,6 @@ def make_episodes(
         info["action_noise"] = 0.0
         eps = rollout(env, _random_policy(env), n_transitions, rng)
     elif spec.kind == "maze":
-        from .maze import D4RL_TARGET_CELLS, WaypointExpert
-
         ex = WaypointExpert(noise_std=noise, random_goals=True, rng=rng)
         info["algorithm"] = (
             f"BFS waypoints + PD (p={ex.p_gain}, d={ex.d_gain}) + N(0, {noise}) action noise, "
@@ -330,9 +275,8 @@ def make_episodes(
         info["algorithm"] = "the medium set's episodes, then the expert set's"
         return _renumber(med + exp), info
     else:
-        from .experts import load_policy, load_policy_record
-
-        rec = load_policy_record(
+        load_policy = experts.load_policy
+        rec = experts.load_policy_record(
             task, "medium" if tier in ("medium", "medium-replay") else "expert"
         )
         info["policy"] = {
@@ -411,8 +355,6 @@ def _mlp_replay(
     task: str, env: object, rec: object, n_transitions: int, rng: np.random.Generator, info: dict
 ) -> list[Episode]:
     """medium-replay for a TQC/SAC run: warm-up random actions, then the snapshots sampled."""
-    from .experts import load_policy
-
     steps = list(rec.checkpoint_steps)  # type: ignore[attr-defined]
     warm = int(rec.config.get("learning_starts", 0))  # type: ignore[attr-defined]
     edges = [0, min(warm, steps[0]), *steps]
@@ -421,7 +363,7 @@ def _mlp_replay(
     share[-1] += n_transitions - share.sum()
     pols: list[Policy] = [_random_policy(env)]
     for i in range(len(steps)):
-        p = load_policy(task, f"ckpt{i}")
+        p = experts.load_policy(task, f"ckpt{i}")
         pols.append(p.sample)
     info["algorithm"] = (
         f"training replay: {warm} warm-up steps of uniform random actions, then snapshots "
@@ -515,9 +457,7 @@ def _policy_fingerprint(task: str, tier: str) -> str | None:
     for the random tier and the Maze2D planner, which use no shipped policy)."""
     if tier == "random" or get_task(task).kind != "mujoco":
         return None
-    from .experts import policy_fingerprint
-
-    return policy_fingerprint(task)
+    return experts.policy_fingerprint(task)
 
 
 def get_dataset(
@@ -565,6 +505,7 @@ def get_dataset(
 
 __all__ = [
     "GENERATOR_VERSION",
+    "forget_maze_xml",
     "DATASET_SIZES",
     "generate",
     "get_dataset",

@@ -2,7 +2,7 @@
 
 The reference returns are D4RL's (``d4rl/infos.py``), listed in
 :data:`thesis_lib.data.tasks.TASKS` (our ``task/tier`` sets) and
-:data:`thesis_lib.data.minari_sets.D4RL_REFERENCES` (real Minari ``D4RL/…`` ids). HDT 5.2
+:data:`thesis_lib.data.minari_ids.D4RL_REFERENCES` (real Minari ``D4RL/…`` ids). HDT 5.2
 and Decision Mamba 5.3 report scores this way.
 """
 
@@ -12,6 +12,7 @@ from typing import Literal, overload
 
 import numpy as np
 
+from .minari_ids import is_minari_id, reference_returns
 from .tasks import get_task
 
 
@@ -37,7 +38,7 @@ def normalized_score(
 
     Args:
         task: task name (``hopper``, ``maze2d-umaze`` …) or a Minari id
-            (``D4RL/door/human-v2``: :func:`thesis_lib.data.minari_sets.reference_returns`).
+            (``D4RL/door/human-v2``: :func:`thesis_lib.data.minari_ids.reference_returns`).
         returns: undiscounted episode return(s), any shape.
         missing: what to do when the task has no D4RL reference
             (``inverted-double-pendulum``): raise or return ``None``.
@@ -49,8 +50,6 @@ def normalized_score(
     Raises:
         ValueError: unknown task, or no reference and ``missing="raise"``.
     """
-    from .minari_sets import is_minari_id, reference_returns
-
     if is_minari_id(task):  # a real Minari set: D4RL's references for its id
         ref = reference_returns(task)
         lo, hi = ref if ref is not None else (None, None)

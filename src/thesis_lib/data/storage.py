@@ -22,15 +22,19 @@ import os
 import re
 import shutil
 import tempfile
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from thesis_lib.paths import data_dir, minari_root  # every on-disk location: book.paths
 
+from .envs import make_env
+from .robotics import forget_maze_xml
 from .tasks import NAMESPACE, TASKS, is_our_namespace, parse_dataset_id
 
 
@@ -174,10 +178,6 @@ class OfflineDataset:
         """``gymnasium.make`` of the recorded environment; for a set made here, the task's
         environment as :func:`thesis_lib.data.make_env` makes it (a Maze2D with its fixed
         target)."""
-        import gymnasium as gym
-
-        from .recipe import forget_maze_xml, make_env
-
         if self.env_id is None:
             raise ValueError(f"Data set '{self.id}' records no environment.")
         try:
@@ -189,8 +189,14 @@ class OfflineDataset:
         return forget_maze_xml(gym.make(self.env_id, **kwargs))
 
 
-def _generate_command(dataset_id: str) -> str | None:
-    """How to make ``dataset_id`` here (one of ours), or ``None`` (a real Minari/D4RL set)."""
+def generate_command(dataset_id: str) -> str | None:
+    """How to make ``dataset_id`` here (one of ours), or ``None`` (a real Minari/D4RL set).
+
+    >>> generate_command("thesis/hopper/medium-v0")
+    "'thesis data generate --task hopper --tier medium' (or thesis_lib.data.generate('hopper', 'medium'))"
+    >>> generate_command("D4RL/door/human-v2") is None
+    True
+    """
     try:
         ns, task, tier, _ = parse_dataset_id(dataset_id)
     except ValueError:
@@ -212,10 +218,12 @@ def _namespace_size(ns: str) -> int:
     return int(tail.rstrip("km")) * scale
 
 
-def _missing_message(dataset_id: str) -> str:
+def missing_message(dataset_id: str) -> str:
+    """The ``FileNotFoundError`` text for a data set not found: where it was looked for, and
+    how to make it (:func:`generate_command`) or where to put a downloaded copy."""
     roots = " or ".join(str(r) for r in search_dirs())
     msg = f"No Minari dataset '{dataset_id}' under {roots}."
-    command = _generate_command(dataset_id)
+    command = generate_command(dataset_id)
     if command:
         msg += f" Create it with {command}, or set MINARI_DATASETS_PATH to an existing copy."
     else:
@@ -264,7 +272,7 @@ def load(dataset_id: str, validate: bool = True) -> OfflineDataset:
 
     path = find_dataset(dataset_id)
     if path is None:
-        raise FileNotFoundError(_missing_message(dataset_id))
+        raise FileNotFoundError(missing_message(dataset_id))
     try:
         _check_metadata(path)
         return _read(dataset_id, path, validate)
@@ -301,7 +309,7 @@ def _check_metadata(path: Path) -> None:
 
 def _damaged_message(dataset_id: str, path: Path, err: BaseException) -> str:
     msg = f"Data set '{dataset_id}' at {path} is damaged and cannot be read ({err})."
-    command = _generate_command(dataset_id)
+    command = generate_command(dataset_id)
     if command:
         msg += f" Rebuild it with {command}."
     else:
@@ -310,7 +318,7 @@ def _damaged_message(dataset_id: str, path: Path, err: BaseException) -> str:
 
 
 def _read(dataset_id: str, path: Path, validate: bool) -> OfflineDataset:
-    from minari import MinariDataset
+    from minari import MinariDataset  # lazy: minari
 
     mds = MinariDataset(path / "data")
     md = dict(mds.storage.metadata)
@@ -404,7 +412,8 @@ def write_dataset(
     if path.exists() and not overwrite:
         raise FileExistsError(f"Data set '{dataset_id}' exists at {path}.")
     # Written into a staging root, then renamed into place: an interrupted write never
-    # leaves a half-written data set under its id.
+    # leaves a half-written data set under its id. A folder swap, so not
+    # thesis_lib._io.atomic_write (which writes one file).
     staging_root = Path(tempfile.mkdtemp(prefix=".staging-", dir=_mkdirs(root)))
     try:
         _write(
@@ -465,11 +474,8 @@ def _write(
     description: str,
     info: dict[str, Any] | None,
 ) -> None:
-    import gymnasium as gym
-    from minari import create_dataset_from_buffers
-    from minari.data_collector import EpisodeBuffer
-
-    from .recipe import forget_maze_xml
+    from minari import create_dataset_from_buffers  # lazy: minari
+    from minari.data_collector import EpisodeBuffer  # lazy: minari
 
     path = root / dataset_id
     env = forget_maze_xml(gym.make(env_id))
@@ -496,8 +502,6 @@ def _write(
             )
         )
     has_ref = ref_min_score is not None and ref_max_score is not None
-    import warnings
-
     # Minari makes the env (twice, with reference scores) and never closes it: a maze env's
     # model file goes to a temp folder of its own, removed after.
     maze = hasattr(env.unwrapped, "tmp_xml_file_path")
@@ -521,7 +525,7 @@ def _write(
             data_format="hdf5",
         )
     if info is not None:
-        from minari.dataset.minari_storage import MinariStorage
+        from minari.dataset.minari_storage import MinariStorage  # lazy: minari
 
         MinariStorage.read(path / "data").update_metadata(
             {"thesis_info": json.dumps(info, default=float)}

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from thesis_lib import dtw as _dtw
-from thesis_lib.defender.methods import Method, parse_method
+from thesis_lib.defender.methods import METHODS, Method, parse_method
 from thesis_lib.dtw._validation import as_sequence
 
 __all__ = ["BACKENDS", "GroupCost", "WindowedCosts", "cost_curves"]
@@ -259,7 +259,6 @@ def cost_curves(
 
     Used in: DEFENDER strategy ablation (thesis 4.3.2).
     """
-    from thesis_lib.defender.methods import METHODS
 
     x = as_sequence(trajectory, "trajectory")
     packed = (

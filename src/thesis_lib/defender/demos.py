@@ -30,6 +30,9 @@ import gymnasium as gym
 import numpy as np
 
 from thesis_lib import dtw as _dtw
+from thesis_lib.data.experts import has_policies, load_policy, load_policy_record
+from thesis_lib.data.storage import Episode, load, write_dataset
+from thesis_lib.data.tasks import TASKS
 
 __all__ = [
     "TRAJECTORIES",
@@ -300,7 +303,7 @@ def collect_demonstrations(
     """
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from thesis_lib.rl import RLConfig, config_from_params, train
+    from thesis_lib.rl import RLConfig, config_from_params, train  # lazy: stable_baselines3
 
     make = (
         (lambda: gym.make(env_id, max_episode_steps=max_episode_steps))
@@ -511,7 +514,6 @@ def expert_demonstrations(
 
     Used in: DEFENDER (thesis 4.3).
     """
-    from thesis_lib.data.experts import load_policy
 
     return policy_demonstrations(
         env_id,
@@ -624,7 +626,6 @@ def save_demonstrations_minari(
 
     Used in: DEFENDER (thesis 4.3).
     """
-    from thesis_lib.data.storage import Episode, write_dataset
 
     ids = _minari_ids(demoset.env_id, name)
     for group, dataset_id in ids.items():
@@ -667,7 +668,6 @@ def load_demonstrations_minari(
 
     Used in: DEFENDER (thesis 4.3).
     """
-    from thesis_lib.data.storage import load
 
     groups = {}
     with _DataDir(root):
@@ -689,8 +689,6 @@ def _features_list(demos: Sequence[Any], trajectory: Trajectory, group: str) -> 
 
 def _expert_task(env_id: str) -> str:
     """The :mod:`thesis_lib.data` task whose shipped expert plays ``env_id``."""
-    from thesis_lib.data.experts import has_policies
-    from thesis_lib.data.tasks import TASKS
 
     names = [name for name, spec in TASKS.items() if spec.env_id == env_id and has_policies(name)]
     if not names:
@@ -708,6 +706,5 @@ def shipped_expert_label(env_id: str) -> str:
     Raises:
         ValueError: no shipped expert for ``env_id``.
     """
-    from thesis_lib.data.experts import load_policy_record
 
     return f"{load_policy_record(_expert_task(env_id)).algorithm_name} expert"

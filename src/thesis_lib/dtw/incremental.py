@@ -9,7 +9,7 @@ from numpy.typing import ArrayLike
 
 from thesis_lib.dtw import _kernels
 from thesis_lib.dtw._validation import Metric, as_sequence, metric_code, window_size
-from thesis_lib.dtw.core import PackedReferences, _packed
+from thesis_lib.dtw.core import PackedReferences, pack_references
 
 __all__ = ["IncrementalDTW"]
 
@@ -61,7 +61,7 @@ class IncrementalDTW:
         self._code = metric_code(metric)
         self.y_window = y_window
         self._y_window = window_size(y_window, "y_window")
-        self.references = _packed(references, "references")
+        self.references = pack_references(references)
         self._rows = np.empty(self.references.data.shape[0])  # D[i, 1:] of every reference
         self._costs = np.empty(self.references.n_sequences)
         self._obs = np.empty((1, self.references.n_features))

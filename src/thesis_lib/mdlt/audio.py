@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from thesis_lib._io import atomic_write
+from thesis_lib.paths import data_dir
 
 HOP_LENGTH = 512
 """Samples between feature frames (the authors' value); the sample rate is ``fps * HOP_LENGTH``."""
@@ -265,7 +266,6 @@ def default_cache_dir() -> Path:
     p = os.environ.get("THESIS_MDLT_CACHE")
     if p:
         return Path(p)
-    from ..data.storage import data_dir
 
     return data_dir() / "thesis-mdlt" / "feature-cache"
 

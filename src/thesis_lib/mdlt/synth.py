@@ -62,7 +62,10 @@ from typing import cast
 
 import numpy as np
 
+from thesis_lib.paths import data_dir
+
 from .angles import forward_kinematics, upper_arm_direction
+from .readers import PHANTOM_BONES, PHANTOM_FPS, smpl_to_phantom
 
 GENERATOR_VERSION = "mdlt-synth-v7"
 """Changes whenever the generated data change; a cached default set of another version is remade."""
@@ -663,7 +666,6 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
     poses at exactly 30 fps, in the official format (:func:`readers.smpl_to_phantom`): world
     rotations as (x, y, z, w) quaternions and root positions in Unity's left-handed frame.
     """
-    from .readers import PHANTOM_BONES, PHANTOM_FPS, smpl_to_phantom
 
     root = Path(root)
     (root / "motion").mkdir(parents=True, exist_ok=True)
@@ -700,7 +702,6 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
 
 def default_root(layout: str = "aist", size: str = "smoke", seed: int = 0) -> Path:
     """Where :func:`default_dataset` keeps a set: ``<data dir>/thesis-mdlt/<layout>-<size>-seed<seed>``."""
-    from ..data.storage import data_dir
 
     return data_dir() / "thesis-mdlt" / f"{layout}-{size}-seed{seed}"
 
@@ -784,7 +785,9 @@ def default_dataset(layout: str = "aist", size: str = "smoke", seed: int = 0, ro
         if root.exists():
             root.rmdir()
         try:
-            os.replace(tmp, root)  # atomic: a concurrent maker either wins or finds it complete
+            # atomic: a concurrent maker either wins or finds it complete (a folder swap, so
+            # not thesis_lib._io.atomic_write, which writes one file)
+            os.replace(tmp, root)
         except OSError:
             if not marker.is_file():
                 raise

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from thesis_lib.mdlt.audio import FeatureScaler
 from thesis_lib.mdlt.models import MDLTConfig, MDLTMamba, MDLTTransformer, build_model
 from thesis_lib.seq.trainer import TrainConfig, Trainer
 
@@ -323,7 +324,6 @@ def load_checkpoint(
     model = build_model(MDLTConfig(**cfg)).to(device)
     model.load_state_dict(ckpt["model"])
     model.eval()
-    from thesis_lib.mdlt.audio import FeatureScaler
 
     scaler = FeatureScaler.from_state_dict(_from_safe(ckpt["scaler"]))
     return model, scaler, _from_safe(ckpt.get("meta") or {})

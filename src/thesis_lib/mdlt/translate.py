@@ -23,6 +23,9 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
+from thesis_lib.mdlt import train  # train.load_checkpoint looked up per call (a test swaps it)
+from thesis_lib.mdlt.audio import audio_features
+
 __all__ = [
     "JOINT_COLUMNS",
     "DanceResult",
@@ -155,10 +158,7 @@ def dance(
         ValueError: An unusable ``device`` or ``animation`` suffix (both checked before any
             work), unreadable/silent audio, or a checkpoint that is not MDLT's.
     """
-    from thesis_lib.mdlt.audio import audio_features
-    from thesis_lib.mdlt.train import check_device, load_checkpoint
-
-    check_device(device)  # the cheap checks first: nothing is computed or written before them
+    train.check_device(device)  # the cheap checks first: nothing is computed or written before them
     if animation is not None:
         _check_animation_path(animation)
     audio = Path(audio)
@@ -166,7 +166,7 @@ def dance(
         raise FileNotFoundError(f"No audio file at '{audio}'.")
     if checkpoint is None:
         checkpoint = packaged_checkpoint()
-    model, scaler, meta = load_checkpoint(checkpoint, device=device)
+    model, scaler, meta = train.load_checkpoint(checkpoint, device=device)
     fps = int(meta.get("fps", 60))
     feats = scaler.transform(audio_features(audio, fps=fps))
     angles = np.asarray(model.generate(feats, progress=progress), dtype=np.float64)

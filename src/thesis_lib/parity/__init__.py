@@ -36,6 +36,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from thesis_lib._io import hash_arrays
+from thesis_lib.data import normalized_score
+from thesis_lib.data.minari_sets import is_minari_id, open_dataset
+from thesis_lib.data.recipe import GENERATOR_VERSION
+from thesis_lib.paths import cache_dir
+from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
+from thesis_lib.seq.evaluation import target_returns
+from thesis_lib.seq.registry import check_methods
+from thesis_lib.seq.trainer import TrainConfig
+from thesis_lib.sweep import Task
+
 __all__ = [
     "KNOWN_DIFFERENCES",
     "NO_PEER",
@@ -118,7 +129,6 @@ class Comparison:
     generator makes only its own); their stored rows stay readable as a record."""
 
     def __post_init__(self) -> None:
-        from thesis_lib.seq.registry import check_methods
 
         check_methods([self.method])
         if self.peer and self.method not in PEER_METHODS:
@@ -170,8 +180,6 @@ LEGACY_DATA_RECIPE = 2
 def data_recipe(comparison: Comparison) -> int | None:
     """The recipe a comparison's runs use: its own, else this checkout's for a ``task/tier``
     set; ``None`` for a Minari id (not made here)."""
-    from thesis_lib.data.minari_sets import is_minari_id
-    from thesis_lib.data.recipe import GENERATOR_VERSION
 
     if is_minari_id(comparison.dataset):
         return None
@@ -180,8 +188,6 @@ def data_recipe(comparison: Comparison) -> int | None:
 
 def _load(dataset: str, size: str, recipe: int | None = LEGACY_DATA_RECIPE) -> Any:
     """The run's data set; refused where it needs another data recipe than this checkout's."""
-    from thesis_lib.data.minari_sets import is_minari_id, open_dataset
-    from thesis_lib.data.recipe import GENERATOR_VERSION
 
     if not is_minari_id(dataset) and recipe is not None and recipe != GENERATOR_VERSION:
         raise ValueError(
@@ -195,8 +201,6 @@ def _load(dataset: str, size: str, recipe: int | None = LEGACY_DATA_RECIPE) -> A
 def _data_sha(ds: Any) -> str:
     import hashlib
 
-    from thesis_lib._io import hash_arrays
-
     h = hashlib.sha256()
     for ep in ds.episodes:
         hash_arrays(h, (ep.observations, ep.actions, ep.rewards))
@@ -205,7 +209,6 @@ def _data_sha(ds: Any) -> str:
 
 def _row(config: dict[str, Any], side: str, returns: Any, lengths: Any, ds: Any, **extra: Any):
     """One parity row: the run's D4RL-normalised score (of the mean return), the data set's."""
-    from thesis_lib.data import normalized_score
 
     task = config["dataset"].split("/")[0]
     r = float(np.mean(returns))
@@ -230,8 +233,6 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     import time
 
     import torch
-
-    from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 
     torch.set_num_threads(1)
     ds = _load(
@@ -258,7 +259,6 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
 
 def peer_python() -> Path:
     """The peer venv's python (``$THESIS_CACHE_DIR/peer-venv``)."""
-    from thesis_lib.paths import cache_dir
 
     return cache_dir() / "peer-venv" / "bin" / "python"
 
@@ -303,9 +303,6 @@ def export_npz(ds: Any, path: str | Path) -> Path:
 
 def peer_config(config: dict[str, Any], ds: Any) -> dict[str, Any]:
     """The JSON the peer script reads: the run's settings in plain numbers."""
-    from thesis_lib.seq import ArchSpec
-    from thesis_lib.seq.evaluation import target_returns
-    from thesis_lib.seq.trainer import TrainConfig
 
     arch = ArchSpec(**config["arch"])
     tr = config["train"]
@@ -398,7 +395,6 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
     A peer run's config holds no ``init`` (it is ours to vary), so comparisons that differ only
     there share their peer runs (the same task keys: run and stored once).
     """
-    from thesis_lib.sweep import Task
 
     out: dict[str, dict[str, list[Any]]] = {}
     for c in comparisons:

@@ -22,14 +22,19 @@ NOISE_KINDS: tuple[str, ...] = get_args(NoiseKind)
 AUTO_NOISE: dict[str, str | None] = {"SAC": None, "TD3": "normal", "DDPG": "ornstein-uhlenbeck"}
 
 
-def _algo_class(algo: str) -> type[Any]:
+def algo_class(algo: str) -> type[Any]:
     """The stable-baselines3 class for `algo` (imported lazily: SB3 imports torch)."""
     import stable_baselines3
 
     return getattr(stable_baselines3, algo)
 
 
-def _did_you_mean(name: str, valid: list[str] | tuple[str, ...]) -> str:
+def did_you_mean(name: str, valid: list[str] | tuple[str, ...]) -> str:
+    """`` Did you mean: 'x'?`` for the closest of ``valid`` to ``name``, or ``""``.
+
+    >>> did_you_mean("SAX", ["SAC", "TD3"])
+    " Did you mean: 'SAC'?"
+    """
     close = difflib.get_close_matches(name, valid, n=1)
     return f" Did you mean: {close[0]!r}?" if close else ""
 
@@ -101,7 +106,7 @@ class RLConfig:
     def __post_init__(self) -> None:
         if self.algo not in ALGOS:
             raise ValueError(
-                f"Unknown algo {self.algo!r}.{_did_you_mean(str(self.algo), ALGOS)} "
+                f"Unknown algo {self.algo!r}.{did_you_mean(str(self.algo), ALGOS)} "
                 f"Valid: {', '.join(ALGOS)}."
             )
         for name in ("total_timesteps", "n_envs", "batch_size", "buffer_size", "train_freq"):
@@ -129,7 +134,7 @@ class RLConfig:
         if self.action_noise is not None and self.action_noise not in NOISE_KINDS:
             raise ValueError(
                 f"Unknown action_noise {self.action_noise!r}."
-                f"{_did_you_mean(str(self.action_noise), NOISE_KINDS)} "
+                f"{did_you_mean(str(self.action_noise), NOISE_KINDS)} "
                 f"Valid: {', '.join(NOISE_KINDS)} or None."
             )
         if self.action_noise_sigma < 0:
@@ -152,13 +157,13 @@ class RLConfig:
                 f"RLConfig.extra sets {clash}, which RLConfig fields own; set the field instead."
             )
         params = [
-            p for p in inspect.signature(_algo_class(self.algo).__init__).parameters if p != "self"
+            p for p in inspect.signature(algo_class(self.algo).__init__).parameters if p != "self"
         ]
         for key in self.extra:
             if key not in params:
                 raise ValueError(
                     f"RLConfig.extra has {key!r}, which {self.algo} does not accept."
-                    f"{_did_you_mean(key, params)} Valid: {', '.join(p for p in params if p not in owned)}."
+                    f"{did_you_mean(key, params)} Valid: {', '.join(p for p in params if p not in owned)}."
                 )
 
     def sb3_kwargs(self) -> dict[str, Any]:

@@ -36,7 +36,7 @@ from thesis_lib.rl.callbacks import (
     find_horizon,
     is_crash,
 )
-from thesis_lib.rl.config import RLConfig, _algo_class, _did_you_mean
+from thesis_lib.rl.config import RLConfig, algo_class, did_you_mean
 
 CURVE_COLUMNS: tuple[str, ...] = ("algo", "seed", *EPISODE_COLUMNS)
 """Columns of `learning_curves`, in order."""
@@ -98,7 +98,7 @@ def config_from_params(params: Mapping[str, Any]) -> RLConfig:
     for name in params:
         if name not in valid:
             raise ValueError(
-                f"Unknown RLConfig parameter {name!r}.{_did_you_mean(name, valid)} Valid: {', '.join(valid)}."
+                f"Unknown RLConfig parameter {name!r}.{did_you_mean(name, valid)} Valid: {', '.join(valid)}."
             )
     return RLConfig(**params)
 
@@ -165,7 +165,7 @@ def make_model(config: RLConfig, env: gym.Env | VecEnv | None = None) -> BaseAlg
         int(np.prod(env.action_space.shape)),
         n_envs,
     )
-    cls = _algo_class(config.algo)
+    cls = algo_class(config.algo)
     model = cls(_policy_for(env), env, action_noise=noise, **config.sb3_kwargs())
     model.set_logger(silent_logger())
     return model

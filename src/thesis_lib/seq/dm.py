@@ -44,14 +44,14 @@ import torch.nn as nn
 
 from thesis_lib.seq.mamba import Mamba, MambaConfig, MambaState
 from thesis_lib.seq.models import (
+    ModelConfig,
     SeqOutput,
-    _action_head,
-    _action_key,
-    _action_output,
-    _check_inputs,
-    _ModelConfig,
-    _rsa_tokens,
-    _TwoLevel,
+    TwoLevel,
+    action_head,
+    action_key,
+    action_output,
+    check_inputs,
+    rsa_tokens,
 )
 from thesis_lib.seq.tokens import deinterleave_embeddings, interleave_embeddings
 
@@ -74,7 +74,7 @@ EVAL_MODES: tuple[str, ...] = ("auto", "recurrent", "window")
 
 
 @dataclass
-class _MambaModelConfig(_ModelConfig):
+class _MambaModelConfig(ModelConfig):
     d_model: int = 128
     """Token embedding size (128 in the thesis)."""
     n_layers: int = 6
@@ -219,18 +219,18 @@ class DecisionMamba(nn.Module):
         self.embed_state = nn.Linear(config.state_dim, d)
         self.embed_action = nn.Linear(config.act_dim, d)
         self.trunk = TokenMamba(config)
-        self.predict_action = _action_head(d, config.act_dim)
+        self.predict_action = action_head(d, config.act_dim)
 
-    def _keys(self) -> tuple[str, ...]:
-        action_key = _action_key(self.config.paper_compat)
-        return ("states", action_key) + (("returns_to_go",) if self.config.use_rtg else ())
+    def input_keys(self) -> tuple[str, ...]:
+        a_key = action_key(self.config.paper_compat)
+        return ("states", a_key) + (("returns_to_go",) if self.config.use_rtg else ())
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the masked MSE."""
-        _check_inputs(self, batch, self._keys())
-        h = self.trunk(_rsa_tokens(self, batch))
+        check_inputs(self, batch, self.input_keys())
+        h = self.trunk(rsa_tokens(self, batch))
         actions = self.predict_action(h[-2]) * self.config.max_action  # read at s_t
-        return _action_output(actions, batch, targets)
+        return action_output(actions, batch, targets)
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -247,7 +247,7 @@ class DecisionMamba(nn.Module):
         )
 
 
-class HDM(_TwoLevel):
+class HDM(TwoLevel):
     """Hierarchical Decision Mamba (thesis 5.3.2): HDT's two levels with Mamba trunks.
 
     * high level: tokens ``(g_{t-1}, s_t)``, the sub-goal ``g_t`` read at ``s_t``;
@@ -275,11 +275,11 @@ class HDM(_TwoLevel):
         self.low_embed_state = nn.Linear(sd, d)
         self.low_embed_action = nn.Linear(config.act_dim, d)
         self.low = TokenMamba(config)
-        self.predict_action = _action_head(d, config.act_dim)
+        self.predict_action = action_head(d, config.act_dim)
 
-    def _keys(self) -> tuple[str, ...]:
-        action_key = _action_key(self.config.paper_compat)
-        return ("states", action_key, "subgoals", "prev_subgoals")
+    def input_keys(self) -> tuple[str, ...]:
+        a_key = action_key(self.config.paper_compat)
+        return ("states", a_key, "subgoals", "prev_subgoals")
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
         """Sub-goals ``g_t`` ``(B, T, state_dim)`` from ``(g_{t-1}, s_t)`` tokens."""
@@ -292,7 +292,7 @@ class HDM(_TwoLevel):
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
         """Actions ``a_t`` ``(B, T, act_dim)`` from ``(g_t, s_t, a_t)`` tokens."""
-        a_tok = batch[_action_key(self.config.paper_compat)]
+        a_tok = batch[action_key(self.config.paper_compat)]
         tokens = [
             self.low_embed_subgoal(subgoals),
             self.low_embed_state(batch["states"]),

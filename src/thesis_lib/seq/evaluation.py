@@ -30,6 +30,11 @@ import torch
 import torch.nn as nn
 from tqdm.auto import tqdm
 
+from thesis_lib.data import make_env, normalized_score
+from thesis_lib.data.minari_sets import is_minari_id, minari_step_cap
+from thesis_lib.data.robotics import forget_maze_xml
+from thesis_lib.data.tasks import get_task
+
 __all__ = ["EvalResult", "evaluate", "target_returns"]
 
 
@@ -100,8 +105,6 @@ def eval_step_cap(task: str, cap: int | None) -> int | None:
         >>> eval_step_cap("D4RL/door/human-v2", 100), eval_step_cap("D4RL/antmaze/umaze-v1", 100)
         (100, None)
     """
-    from thesis_lib.data.minari_sets import is_minari_id, minari_step_cap
-    from thesis_lib.data.tasks import get_task
 
     if is_minari_id(task):  # a real Minari set: AntMaze and Kitchen are sparse too
         return minari_step_cap(task, cap)
@@ -113,9 +116,6 @@ def _env_factory(env: Any) -> tuple[Callable[[], Any] | None, Any, str | None]:
     import gymnasium as gym
 
     if isinstance(env, str):
-        from thesis_lib.data import make_env
-        from thesis_lib.data.tasks import get_task
-
         get_task(env)  # unknown task -> ValueError listing the valid ones
         return (lambda: make_env(env)), None, env
     if isinstance(env, gym.vector.VectorEnv):
@@ -126,7 +126,6 @@ def _env_factory(env: Any) -> tuple[Callable[[], Any] | None, Any, str | None]:
                 "evaluate needs several copies of the environment: pass a task name, a factory "
                 "(lambda: gym.make(...)), a gymnasium VectorEnv, or an env made by gym.make (with a spec)."
             )
-        from thesis_lib.data.recipe import forget_maze_xml
 
         spec = env.spec
         return (lambda: forget_maze_xml(gym.make(spec))), None, None
@@ -292,8 +291,6 @@ def evaluate(
     ret, lens = np.concatenate(returns), np.concatenate(lengths)
     scores: np.ndarray | None = None
     if task is not None:
-        from thesis_lib.data import normalized_score
-
         norm = normalized_score(task, ret, missing="none")
         scores = None if norm is None else np.atleast_1d(np.asarray(norm, dtype=np.float64))
     return EvalResult(ret, lens, scores)

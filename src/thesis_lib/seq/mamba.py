@@ -48,7 +48,7 @@ from torch import nn
 
 from thesis_lib.seq._scan import SelectiveScanCPU, SelectiveScanTorch, scan_cpu_forward
 from thesis_lib.seq._scan_step import pack_weights, stack_step_kernel
-from thesis_lib.seq.ssm import _check_scan_inputs, selective_scan_reference, selective_scan_step
+from thesis_lib.seq.ssm import check_scan_inputs, selective_scan_reference, selective_scan_step
 
 ScanBackend = Literal["auto", "numba", "torch", "mamba_ssm", "reference"]
 SCAN_BACKENDS: tuple[str, ...] = ("auto", "numba", "torch", "mamba_ssm", "reference")
@@ -153,7 +153,7 @@ def selective_scan(
         [0.5, 0.5, 0.5]
     """
     if check:
-        _check_scan_inputs(u, delta, A, B, C, D, z, delta_bias)
+        check_scan_inputs(u, delta, A, B, C, D, z, delta_bias)
     which = resolve_scan_backend(u.device, backend)
     if which == "mamba_ssm":
         return _scan_with_mamba_ssm(

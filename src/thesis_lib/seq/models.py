@@ -59,10 +59,17 @@ __all__ = [
     "HDT",
     "HDTConfig",
     "INIT_SCHEMES",
+    "ModelConfig",
     "SeqOutput",
+    "TwoLevel",
     "TokenTransformer",
+    "action_head",
+    "action_key",
+    "action_output",
+    "check_inputs",
     "init_transformer",
     "masked_mse",
+    "rsa_tokens",
 ]
 
 Tensors = Mapping[str, torch.Tensor]
@@ -115,7 +122,11 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
 
 
 @dataclass
-class _ModelConfig:
+class ModelConfig:
+    """What every sequence model's config holds: the data's sizes, the action bound and the
+    context length ``K``. The base of :class:`BCConfig`, :class:`DTConfig`, :class:`HDTConfig`
+    and of the Mamba configs (:mod:`thesis_lib.seq.dm`)."""
+
     state_dim: int
     """Size of a state (observation) vector; must match the data set."""
     act_dim: int
@@ -152,7 +163,7 @@ class _ModelConfig:
 
 
 @dataclass
-class BCConfig(_ModelConfig):
+class BCConfig(ModelConfig):
     """Configuration of :class:`BC` (thesis 5.2.5.3: "an MLP with two fully connected layers").
 
     Used in: HDT chapter (Table 5.3).
@@ -174,7 +185,7 @@ class BCConfig(_ModelConfig):
 
 
 @dataclass
-class _TransformerConfig(_ModelConfig):
+class _TransformerConfig(ModelConfig):
     d_model: int = 128
     """Token embedding size (128 in the authors' code)."""
     n_layers: int = 3
@@ -254,7 +265,10 @@ class HDTConfig(_TransformerConfig):
 # Input checks: fail at the door with both shapes, not deep inside a matmul.
 
 
-def _check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tuple[int, int]:
+def check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tuple[int, int]:
+    """``(B, T)`` of ``batch`` after checking it holds ``keys`` with the shapes ``model``'s
+    config expects (states, actions, sub-goals, returns-to-go, time steps); a ``KeyError`` or
+    ``ValueError`` naming the model and both shapes otherwise. Every model calls it first."""
     cfg: Any = model.config  # every sequence model keeps its config as ``.config``
     name = type(model).__name__
     missing = [k for k in keys if k not in batch]
@@ -302,27 +316,34 @@ def _check_inputs(model: nn.Module, batch: Tensors, keys: tuple[str, ...]) -> tu
     return B, T
 
 
-def _action_head(d_in: int, act_dim: int) -> nn.Sequential:
+#: the name the models here call (``benchmarks/bench_ensemble.py`` swaps it to skip the check
+#: under ``vmap``, which cannot read a value)
+_check_inputs = check_inputs
+
+
+def action_head(d_in: int, act_dim: int) -> nn.Sequential:
+    """``Linear(d_in, act_dim) + Tanh``: the action head of the DT, HDT and the Mambas (the
+    model scales it by ``max_action``)."""
     return nn.Sequential(nn.Linear(d_in, act_dim), nn.Tanh())
 
 
-def _action_key(paper_compat: bool) -> str:
+def action_key(paper_compat: bool) -> str:
     """The batch entry in the action slot: ``a_t`` (correct), or ``a_{t-1}`` as the authors' code."""
     return "prev_actions" if paper_compat else "actions"
 
 
-def _rsa_tokens(model: Any, batch: Tensors) -> list[torch.Tensor]:
+def rsa_tokens(model: Any, batch: Tensors) -> list[torch.Tensor]:
     """``[rtg_t,] s_t, a_t`` embeddings of a DT-style model (``embed_rtg``/``embed_state``/``embed_action``)."""
     tokens = [
         model.embed_state(batch["states"]),
-        model.embed_action(batch[_action_key(model.config.paper_compat)]),
+        model.embed_action(batch[action_key(model.config.paper_compat)]),
     ]
     if model.embed_rtg is not None:
         tokens.insert(0, model.embed_rtg(batch["returns_to_go"]))  # (rtg_t, s_t, a_t)
     return tokens
 
 
-def _action_output(actions: torch.Tensor, batch: Tensors, targets: Tensors | None) -> SeqOutput:
+def action_output(actions: torch.Tensor, batch: Tensors, targets: Tensors | None) -> SeqOutput:
     """``SeqOutput`` of a model that predicts actions only; with ``targets`` the masked MSE."""
     if targets is None:
         return SeqOutput(actions)
@@ -484,7 +505,7 @@ class BC(nn.Module):
         """Predict ``a_t`` from ``s_t``; with ``targets`` (``targets["actions"]``) also the loss."""
         _check_inputs(self, batch, ("states",))
         actions = self.net(batch["states"]) * self.config.max_action  # (B, T, act_dim)
-        return _action_output(actions, batch, targets)
+        return action_output(actions, batch, targets)
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -511,22 +532,20 @@ class DecisionTransformer(nn.Module):
         self.embed_state = nn.Linear(config.state_dim, d)
         self.embed_action = nn.Linear(config.act_dim, d)
         self.transformer = TokenTransformer(config)
-        self.predict_action = _action_head(d, config.act_dim)
+        self.predict_action = action_head(d, config.act_dim)
         init_transformer(self, config.resolved_init, config.n_layers)
 
-    def _keys(self) -> tuple[str, ...]:
-        action_key = _action_key(self.config.paper_compat)
-        return ("states", action_key, "timesteps") + (
-            ("returns_to_go",) if self.config.use_rtg else ()
-        )
+    def input_keys(self) -> tuple[str, ...]:
+        a_key = action_key(self.config.paper_compat)
+        return ("states", a_key, "timesteps") + (("returns_to_go",) if self.config.use_rtg else ())
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the loss."""
-        _check_inputs(self, batch, self._keys())
-        h = self.transformer(_rsa_tokens(self, batch), batch["timesteps"], batch.get("mask"))
+        _check_inputs(self, batch, self.input_keys())
+        h = self.transformer(rsa_tokens(self, batch), batch["timesteps"], batch.get("mask"))
         h_state = h[-2]  # (B, T, d): output at the s_t tokens
         actions = self.predict_action(h_state) * self.config.max_action
-        return _action_output(actions, batch, targets)
+        return action_output(actions, batch, targets)
 
     @torch.no_grad()
     def act(self, history: Tensors) -> SeqOutput:
@@ -538,14 +557,15 @@ class DecisionTransformer(nn.Module):
         return SeqOutput(self.forward(history).actions[:, -1])
 
 
-class _TwoLevel(nn.Module):
+class TwoLevel(nn.Module):
     """What HDT and HDM share: per-level gradient clipping, teacher-forced training on
     ``L_high + L_low``, and windowed acting. A subclass builds its two levels in
-    ``__init__`` and gives :meth:`_keys`, :meth:`high_forward` and :meth:`low_forward`; this
+    ``__init__`` and gives :meth:`input_keys`, :meth:`high_forward` and :meth:`low_forward`; this
     class holds no parameters, so it does not change a model's initialisation.
     """
 
-    def _keys(self) -> tuple[str, ...]:
+    def input_keys(self) -> tuple[str, ...]:
+        """The batch entries :meth:`forward` reads (checked by :func:`check_inputs`)."""
         raise NotImplementedError
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
@@ -564,7 +584,7 @@ class _TwoLevel(nn.Module):
 
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``g_t`` (high) and ``a_t`` (low, on ``batch["subgoals"]``); with targets, ``L_high + L_low``."""
-        _check_inputs(self, batch, self._keys())
+        _check_inputs(self, batch, self.input_keys())
         subgoals = self.high_forward(batch)  # (B, T, state_dim)
         actions = self.low_forward(batch, batch["subgoals"])  # teacher forcing
         if targets is None:
@@ -585,7 +605,7 @@ class _TwoLevel(nn.Module):
         (zero at the episode start); ``history["subgoals"][:, -1]`` is overwritten with the
         new prediction. Returns ``SeqOutput(actions (B, act_dim), subgoals (B, state_dim))``.
         """
-        _check_inputs(self, history, self._keys())
+        _check_inputs(self, history, self.input_keys())
         g = self.high_forward(history)[:, -1]  # (B, state_dim)
         subgoals = history["subgoals"].clone()
         subgoals[:, -1] = g
@@ -593,7 +613,7 @@ class _TwoLevel(nn.Module):
         return SeqOutput(actions, g)
 
 
-class HDT(_TwoLevel):
+class HDT(TwoLevel):
     """Hierarchical Decision Transformer (thesis 5.2): a high level proposes sub-goals, a low level acts.
 
     * high level: tokens ``(s_t, g_{t-1})``; ``g_t`` is read at the ``g_{t-1}`` token
@@ -624,7 +644,7 @@ class HDT(_TwoLevel):
         self.low_embed_state = nn.Linear(sd, d)
         self.low_embed_action = nn.Linear(config.act_dim, d)
         self.low = TokenTransformer(config)
-        self.predict_action = _action_head(d, config.act_dim)
+        self.predict_action = action_head(d, config.act_dim)
         init_transformer(self, config.resolved_init, config.n_layers)
 
     def high_forward(self, batch: Tensors) -> torch.Tensor:
@@ -638,7 +658,7 @@ class HDT(_TwoLevel):
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
         """Actions ``a_t`` ``(B, T, act_dim)`` from ``([rtg_t,] g_t, s_t, a_t)`` tokens."""
-        a_tok = batch[_action_key(self.config.paper_compat)]
+        a_tok = batch[action_key(self.config.paper_compat)]
         tokens = [
             self.low_embed_subgoal(subgoals),
             self.low_embed_state(batch["states"]),
@@ -649,7 +669,7 @@ class HDT(_TwoLevel):
         h = self.low(tokens, batch["timesteps"], batch.get("mask"))
         return self.predict_action(h[-2]) * self.config.max_action  # read at s_t
 
-    def _keys(self) -> tuple[str, ...]:
-        action_key = _action_key(self.config.paper_compat)
-        keys = ("states", action_key, "timesteps", "subgoals", "prev_subgoals")
+    def input_keys(self) -> tuple[str, ...]:
+        a_key = action_key(self.config.paper_compat)
+        keys = ("states", a_key, "timesteps", "subgoals", "prev_subgoals")
         return keys + (("returns_to_go",) if self.config.low_use_rtg else ())

@@ -27,6 +27,8 @@ from typing import Any, cast
 import numpy as np
 import torch
 
+from thesis_lib.data import SequenceDataset, make_env
+from thesis_lib.data.minari_sets import is_minari_id, make_minari_env
 from thesis_lib.seq.evaluation import eval_step_cap, evaluate, target_returns
 from thesis_lib.seq.registry import (
     HIERARCHICAL_METHODS,
@@ -127,9 +129,6 @@ class VectorEnvPool:
         :func:`~thesis_lib.data.minari_sets.make_minari_env`)."""
         import gymnasium as gym
 
-        from thesis_lib.data import make_env
-        from thesis_lib.data.minari_sets import is_minari_id, make_minari_env
-
         make = make_minari_env if is_minari_id(self.task) else make_env
         if n not in self.envs:
             self.envs[n] = gym.vector.SyncVectorEnv([lambda: make(self.task)] * n)
@@ -179,7 +178,6 @@ def run_offline(
         target_return, iteration, return_mean, return_std, score_mean, length_mean, loss``
         (``episode`` and the ``episode_info`` keys with ``episode_info``).
     """
-    from thesis_lib.data import SequenceDataset
 
     check_methods([method])
     if envs is None and task is None:

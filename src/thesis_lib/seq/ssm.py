@@ -426,7 +426,7 @@ def selective_scan_reference(
         >>> selective_scan_reference(u, 0.5 * u, A, B, C).flatten().tolist()
         [0.5, 0.5, 0.5]
     """
-    _check_scan_inputs(u, delta, A, B, C, D, z, delta_bias)
+    check_scan_inputs(u, delta, A, B, C, D, z, delta_bias)
     dtype = _compute_dtype(u, delta, A, B, C, D, z, delta_bias)
     u_, dl, A_, B_, C_ = (t.to(dtype) for t in (u, delta, A, B, C))
     D_ = None if D is None else D.to(dtype)
@@ -446,7 +446,9 @@ def selective_scan_reference(
     return torch.stack(ys, dim=1).to(u.dtype)  # (B, L, Din)
 
 
-def _check_scan_inputs(u, delta, A, B, C, D, z, delta_bias) -> None:
+def check_scan_inputs(u, delta, A, B, C, D, z, delta_bias) -> None:
+    """Raise a ``ValueError`` naming the input unless the selective scan's inputs have the
+    shapes and dtypes it needs (used by every scan: the reference, the step and Mamba's)."""
     named = {
         "u": u,
         "delta": delta,

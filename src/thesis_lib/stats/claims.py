@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from . import AGGREGATES, compare, shared_settings
+from . import AGGREGATES, compare, holm, shared_settings
+from .gates import applies, check_gate, evaluate_gate
 
 #: id -> (thesis section, statement), as in CLAIMS.md.
 CLAIMS: dict[str, tuple[str, str]] = {
@@ -157,7 +158,6 @@ def evaluate_comparisons(
     keeps what its interval alone says, ``validity`` is ``valid``, ``untestable`` or empty (no
     gate), and ``gates`` lists each gate's figure.
     """
-    from .gates import applies, check_gate, evaluate_gate
 
     for g in gates:
         check_gate(g)
@@ -234,7 +234,6 @@ def _holm_adjust(res: pd.DataFrame) -> pd.DataFrame:
     comparison that holds by its own interval but not after the adjustment (at
     :data:`HOLM_ALPHA`, or :data:`HOLM_ALPHA_EQUIVALENT`) becomes inconclusive
     (``stat_verdict`` keeps the unadjusted verdict)."""
-    from . import holm
 
     res = res.copy()
     counted = res["counts"].astype(bool).to_numpy()

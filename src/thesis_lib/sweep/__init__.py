@@ -53,162 +53,25 @@ from typing import Any, TypeAlias
 import pandas as pd
 
 from thesis_lib._io import atomic_write
+from thesis_lib.provenance import RECORDED_PACKAGES, git_commit, package_versions
 
-#: result rows a task function returns: a DataFrame or a list of flat dicts.
-Rows: TypeAlias = pd.DataFrame | list[dict[str, Any]]
-
-EXECUTORS = ("inprocess", "local", "ray")
-
-
-def canonical_json(obj: Any) -> str:
-    """JSON with sorted keys and no spaces: the text a config hash is taken of.
-
-    Tuples become lists and numpy scalars plain numbers, so equal configs hash equal.
-
-    >>> canonical_json({"b": (1, 2), "a": 0.5})
-    '{"a":0.5,"b":[1,2]}'
-    """
-    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
-
-
-def _json_default(o: Any) -> Any:
-    import numpy as np
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"config value {o!r} ({type(o).__name__}) is not JSON-able")
-
-
-def config_hash(obj: Any, n: int = 16) -> str:
-    """First ``n`` hex digits of the SHA-256 of :func:`canonical_json` of ``obj``.
-
-    >>> config_hash({"a": 1, "b": [2]}) == config_hash({"b": (2,), "a": 1})
-    True
-    >>> config_hash({"a": 1}) == config_hash({"a": 1.0})  # 1 and 1.0 are different configs
-    False
-    """
-    return hashlib.sha256(canonical_json(obj).encode()).hexdigest()[:n]
-
-
-def _fn_path(fn: Callable[..., Any]) -> str:
-    mod, qual = getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)
-    if not mod or not qual or "<" in qual:
-        raise ValueError(f"a task function must be a module-level function (picklable), got {fn!r}")
-    return f"{mod}:{qual}"
-
-
-@dataclass(frozen=True)
-class Task:
-    """One independent unit of a grid.
-
-    Attributes:
-        fn: a module-level function ``fn(config) -> rows`` (a DataFrame or a list of dicts).
-        config: everything the task depends on, JSON-able (method, setting, seed, sizes …).
-        resources: what one run of the task needs on a Ray cluster: ``num_cpus``,
-            ``num_gpus`` (fractions allowed), ``memory`` (bytes) and any custom Ray resource
-            (``ray.remote`` options). The in-process and local executors ignore them. Not
-            part of the key.
-    """
-
-    fn: Callable[[dict[str, Any]], Rows]
-    config: Mapping[str, Any]
-    resources: Mapping[str, float] = field(default_factory=lambda: {"num_cpus": 1})
-
-    @property
-    def key(self) -> str:
-        """Hash of the function's import path and the config."""
-        return config_hash({"fn": _fn_path(self.fn), "config": dict(self.config)})
-
-
-class TaskFailed(RuntimeError):
-    """A task of a grid raised.
-
-    The message names the task (key, function, config) and the original error; where the task
-    ran in this process the original exception is the ``__cause__``, where it ran in another
-    process or on a Ray node the message carries its traceback. Tasks that finished before the
-    failure are already in the store, so a rerun resumes after them. The exception is also an
-    instance of the original error's type where possible (``TaskFailed[ValueError]``).
-    """
-
-    def __init__(self, task: Task, error: str, traceback_text: str = "") -> None:
-        self.key = task.key
-        self.fn = _fn_path(task.fn)
-        self.config = dict(task.config)
-        self.error = error
-        msg = f"Task {self.key} failed: {self.fn}({canonical_json(self.config)}) raised {error}"
-        if traceback_text:
-            msg += f"\n\nTraceback of the task:\n{traceback_text.rstrip()}"
-        super().__init__(msg)
-
-    def __str__(self) -> str:
-        return str(self.args[0]) if self.args else ""
-
-    def __reduce__(self) -> tuple[Any, ...]:  # picklable as a plain RuntimeError
-        return (RuntimeError, (str(self),))
-
-    @classmethod
-    def of(
-        cls, task: Task, error: BaseException, message: str | None = None, traceback_text: str = ""
-    ) -> TaskFailed:
-        """The failure of ``task`` with ``error``, also an instance of ``error``'s type where
-        Python allows it, so ``except ValueError`` still catches a task's ``ValueError``."""
-        kind: type[TaskFailed] = cls
-        etype = type(error)
-        if not issubclass(etype, cls):
-            if etype not in _FAILED_TYPES:
-                try:
-                    _FAILED_TYPES[etype] = type(
-                        f"TaskFailed[{etype.__name__}]", (cls, etype), {"__module__": __name__}
-                    )
-                except TypeError:  # incompatible layouts (e.g. OSError): plain TaskFailed
-                    _FAILED_TYPES[etype] = cls
-            kind = _FAILED_TYPES[etype]
-        exc = kind(task, message or f"{etype.__name__}: {error}", traceback_text)
-        exc.__cause__ = error
-        return exc
-
-
-_FAILED_TYPES: dict[type, type[TaskFailed]] = {}
-
-
-class GridFailed(TaskFailed):
-    """Tasks of a grid run with ``keep_going=True`` raised; every other task ran and is stored.
-
-    ``failures`` holds each failed task's :class:`TaskFailed`, in the order they failed; the
-    first one's ``key``, ``fn``, ``config`` and ``error`` are also this exception's.
-    """
-
-    def __init__(self, failures: Sequence[TaskFailed], n_total: int, store: Path | None = None):
-        first = failures[0]
-        self.failures = list(failures)
-        self.key, self.fn, self.config, self.error = first.key, first.fn, first.config, first.error
-        where = f"; their tracebacks are in {store / 'failed'}" if store is not None else ""
-        lines = [f"{len(failures)} of {n_total} task(s) failed; the others ran{where}:"]
-        lines += [f"- {f.key}: {f.fn} raised {f.error}" for f in self.failures]
-        RuntimeError.__init__(self, "\n".join(lines) + f"\n\nThe first: {first}")
-
-
-RAY_MISSING = (
-    'The Ray executor needs Ray, an optional extra of thesis_lib: pip install ".[ray]" '
-    '(from the checkout) or pip install "ray>=2.9".'
+from ._executors import run_pending
+from ._tasks import (
+    RAY_MISSING,
+    GridFailed,
+    Rows,
+    Task,
+    TaskFailed,
+    canonical_json,
+    config_hash,
+    execute,
+    fn_path,
+    json_default,
+    require_ray,
+    task_id,
 )
 
-
-def require_ray() -> Any:
-    """Import and return :mod:`ray`.
-
-    Raises:
-        ImportError: Ray is not installed; the message says ``pip install ".[ray]"``.
-    """
-    try:
-        import ray
-    except ImportError as e:
-        raise ImportError(RAY_MISSING) from e
-    return ray
+EXECUTORS = ("inprocess", "local", "ray")
 
 
 def default_provenance() -> dict[str, Any]:
@@ -217,31 +80,8 @@ def default_provenance() -> dict[str, Any]:
     The same helpers write ``run.json`` (:mod:`thesis_lib.provenance`), so a task can be
     traced to the code that computed it. Each record also gets ``stored_utc`` when written.
     """
-    from thesis_lib.provenance import RECORDED_PACKAGES, git_commit, package_versions
-
     versions = package_versions((*RECORDED_PACKAGES, "joblib", "ray"))
     return {"git_commit": git_commit(), "versions": versions}
-
-
-def _rows_to_records(rows: Rows) -> list[dict[str, Any]]:
-    recs = rows.to_dict(orient="records") if isinstance(rows, pd.DataFrame) else list(rows)
-    return json.loads(json.dumps(recs, default=_json_default))
-
-
-def execute(task: Task) -> dict[str, Any]:
-    """Run one task and return its record (rows, config, timing). Used by every executor."""
-    t0, c0 = time.time(), time.process_time()
-    rows = task.fn(dict(task.config))
-    return {
-        "key": task.key,
-        "fn": _fn_path(task.fn),
-        "config": json.loads(canonical_json(dict(task.config))),
-        "rows": _rows_to_records(rows),
-        "wall_s": round(time.time() - t0, 3),
-        "cpu_s": round(time.process_time() - c0, 3),
-        "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-        "host": socket.gethostname(),
-    }
 
 
 class TaskStore:
@@ -293,7 +133,7 @@ class TaskStore:
         """Store a finished task's record (and forget an earlier failure of it)."""
         self.root.mkdir(parents=True, exist_ok=True)
         rec = {**record, **(extra or {})}
-        text = json.dumps(rec, indent=1, default=_json_default) + "\n"
+        text = json.dumps(rec, indent=1, default=json_default) + "\n"
         out = atomic_write(self.path(rec["key"]), lambda tmp: tmp.write_text(text))
         self.failure_path(rec["key"]).unlink(missing_ok=True)
         return out
@@ -389,7 +229,7 @@ def run_tasks(
         first = tasks[keys.index(dup[0])]
         raise ValueError(
             f"{len(dup)} task(s) appear twice in the grid, e.g. "
-            f"{_fn_path(first.fn)}({canonical_json(dict(first.config))}) (key {dup[0]})"
+            f"{fn_path(first.fn)}({canonical_json(dict(first.config))}) (key {dup[0]})"
         )
     if force is None:
         force = _env_default("THESIS_SWEEP_FORCE", "0") not in ("0", "false", "False")
@@ -416,8 +256,6 @@ def run_tasks(
     def failed(exc: TaskFailed, traceback_text: str) -> None:
         if st is not None:
             st.write_failure(exc, traceback_text)
-
-    from ._executors import run_pending
 
     failures = run_pending(
         todo,
@@ -462,6 +300,8 @@ def probe(config: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
+_fn_path = fn_path  # the old name, imported by thesis_lib.book.study
+
 __all__ = [
     "EXECUTORS",
     "GridFailed",
@@ -477,4 +317,5 @@ __all__ = [
     "require_ray",
     "resolve_executor",
     "run_tasks",
+    "task_id",
 ]

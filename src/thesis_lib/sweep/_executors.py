@@ -18,12 +18,11 @@ import tempfile
 import traceback
 import warnings
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from tqdm.auto import tqdm
 
-if TYPE_CHECKING:
-    from . import Task, TaskFailed
+from ._tasks import Task, TaskFailed, execute, require_ray
 
 Failed = Callable[["TaskFailed", str], None]
 #: what the executors call on a failure: record it; ``True`` where the grid goes on
@@ -105,8 +104,6 @@ def run_pending(
 
 
 def _run_inprocess(todo: list[Task], finished: Callable[..., None], fail: Fail, bar: Any) -> None:
-    from . import TaskFailed, execute
-
     for t in todo:
         try:
             rec = execute(t)
@@ -124,8 +121,6 @@ def _guarded(task: Task) -> dict[str, Any]:
 
     A worker returns its failure instead of raising it, so the parent knows which task failed.
     """
-    from . import execute
-
     try:
         return {"key": task.key, "record": execute(task)}
     except Exception as e:
@@ -168,8 +163,6 @@ def _run_joblib(
 
     from joblib import cpu_count
     from joblib.executor import get_memmapping_executor
-
-    from . import TaskFailed
 
     threads = str(max(cpu_count() // n_jobs, 1))
     env = {var: os.environ.get(var, threads) for var in THREAD_VARS}
@@ -276,8 +269,6 @@ def _run_ray(
     they finish. Uses the Ray this process is connected to; otherwise connects to ``address``
     or starts a local instance (``n_jobs`` CPUs when > 1, else all), and disconnects (stops the
     local instance and removes its session folder) when the grid ends."""
-    from . import TaskFailed, require_ray
-
     ray = require_ray()
     started, session_dir = False, None
     if not ray.is_initialized():

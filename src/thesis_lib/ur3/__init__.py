@@ -49,14 +49,7 @@ from .safety import (
     check_trajectory,
     clip_trajectory,
 )
-
-
-def trajectory_html(*args, **kwargs):
-    """:func:`thesis_lib.ur3.viewer.trajectory_html` (meshcat imported only when used)."""
-    from .viewer import trajectory_html as _f
-
-    return _f(*args, **kwargs)
-
+from .viewer import trajectory_html  # meshcat is imported only when it is called
 
 __all__ = [
     "DATASET_ID",

@@ -35,6 +35,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from .model import UR3Kinematics
+from .reach import HOME
 from .safety import SafetyLimits, SafetyReport, UnsafeTrajectoryError, check_trajectory
 
 __all__ = [
@@ -80,8 +82,6 @@ class SimBackend:
     name = "sim"
 
     def __init__(self, q0: np.ndarray | None = None, realtime: bool = False) -> None:
-        from .model import UR3Kinematics
-        from .reach import HOME
 
         self.kin = UR3Kinematics()
         self.q = np.array(HOME if q0 is None else q0, dtype=np.float64)

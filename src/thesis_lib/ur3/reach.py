@@ -36,6 +36,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from thesis_lib.data import Episode, load, write_dataset
+from thesis_lib.data.storage import OfflineDataset, find_dataset
+
+from .model import POSITION_LIMITS
+from .render import render_frames
+
 __all__ = [
     "DATASET_ID",
     "ENV_ID",
@@ -119,7 +125,6 @@ class UR3ReachEnv(gym.Env):
         terminate_on_success: bool = True,
         render_mode: str | None = None,
     ) -> None:
-        from .model import POSITION_LIMITS
 
         self.goals = np.array(GOALS if goals is None else goals, dtype=np.float64)
         if self.goals.ndim != 2 or self.goals.shape[1] != 6:
@@ -202,7 +207,6 @@ class UR3ReachEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        from .render import render_frames
 
         return render_frames(self.q[None])[0]
 
@@ -275,7 +279,6 @@ def make_demonstrations(
 
     Used in: UR3 deployment chapter (Table 5.4).
     """
-    from thesis_lib.data import Episode
 
     if n < 1:
         raise ValueError(f"Expect n >= 1 demonstrations, got {n}.")
@@ -321,8 +324,6 @@ def get_reach_dataset(n_demos: int = 100, seed: int = 0, overwrite: bool = False
 
     Used in: UR3 deployment chapter (Table 5.4).
     """
-    from thesis_lib.data import load, write_dataset
-    from thesis_lib.data.storage import find_dataset
 
     ctrl = TeleopController(seed=seed)
     info = {
@@ -349,8 +350,6 @@ def get_reach_dataset(n_demos: int = 100, seed: int = 0, overwrite: bool = False
         root=root,
     )
     if root is not None:
-        from thesis_lib.data.storage import OfflineDataset
-
         return OfflineDataset(
             id=DATASET_ID,
             episodes=episodes,

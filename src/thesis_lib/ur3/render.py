@@ -16,6 +16,8 @@ from typing import Literal
 
 import numpy as np
 
+from .model import UR3Kinematics, load_model
+
 __all__ = ["plot_arm", "render_frames", "save_gif"]
 
 
@@ -28,7 +30,6 @@ def plot_arm(
     kin=None,
 ) -> None:
     """Draw the arm at ``q (6,)`` as its DH skeleton (base → joint origins → flange) on a 3-D axis."""
-    from .model import UR3Kinematics
 
     kin = kin or UR3Kinematics()
     p = kin.points(q)
@@ -45,8 +46,6 @@ def _setup_axis(ax) -> None:
 def _mpl_frames(q: np.ndarray, width: int, height: int) -> np.ndarray:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
-
-    from .model import UR3Kinematics
 
     kin = UR3Kinematics()
     fig = Figure(figsize=(width / 100, height / 100), dpi=100)
@@ -65,8 +64,6 @@ def _mpl_frames(q: np.ndarray, width: int, height: int) -> np.ndarray:
 
 def _mujoco_frames(q: np.ndarray, width: int, height: int, camera: str) -> np.ndarray:
     import mujoco
-
-    from .model import load_model
 
     model = load_model()
     data = mujoco.MjData(model)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import MAX_SPEED, POSITION_LIMITS
+from .model import MAX_SPEED, POSITION_LIMITS, UR3Kinematics
 
 __all__ = [
     "SafetyLimits",
@@ -181,7 +181,6 @@ def check_trajectory(
 
     Used in: UR3 deployment chapter.
     """
-    from .model import UR3Kinematics
 
     q, dt, lim = _as_traj(q), _check_dt(dt), limits or SafetyLimits()
     pos_bad = np.flatnonzero(((q < lim.position[:, 0]) | (q > lim.position[:, 1])).any(axis=1))

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .model import load_model
+
 __all__ = ["iframe", "save_html", "trajectory_html"]
 
 
@@ -95,8 +97,6 @@ def trajectory_html(
     except ImportError as err:  # pragma: no cover - meshcat is in requirements.txt
         raise ImportError("The 3-D viewer needs meshcat: pip install meshcat==0.3.2") from err
     import mujoco
-
-    from .model import load_model
 
     q = np.atleast_2d(np.asarray(q, dtype=np.float64))
     if q.ndim != 2 or q.shape[1] != 6 or not np.all(np.isfinite(q)):
