@@ -35,7 +35,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from thesis_lib.book import study as st
 from thesis_lib.book.chapter import Chapter
+from thesis_lib.paths import project_root
+from thesis_lib.provenance import git_output
+from thesis_lib.stats import aggregate_interval, bootstrap_ci, performance_profile, score_matrix
+from thesis_lib.stats.claims import CLAIMS, VERDICT_COLOURS, claim_verdicts, evaluate_comparisons
 
 __all__ = [
     "Evidence",
@@ -87,7 +92,6 @@ def load_evidence(chapter: Chapter, reps: int = 10_000) -> Evidence:
     Raises:
         FileNotFoundError: the chapter has no study file.
     """
-    from thesis_lib.book import study as st
 
     spec, chapter = chapter, chapter.name
     study = st.load_study(chapter)
@@ -180,7 +184,6 @@ def study_code_paths(modules: set[str], root: Path | None = None) -> list[str] |
     and ``sweep`` code, but no ``mdlt`` or ``defender`` module: a commit that only changes MDLT
     did not change what the 07 rows depend on.
     """
-    from thesis_lib.paths import project_root
 
     root = Path(root) if root is not None else project_root()
     src = root / "src"
@@ -212,8 +215,6 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     CLAIMS.md asks each page to say at which commit a study was computed and what changed
     since: a change listed here did not take part in the verdicts.
     """
-    from thesis_lib.book import study as st
-    from thesis_lib.provenance import git_output
 
     cols = ["commit", "date", "subject"]
     commits = [c.removesuffix("-dirty") for c in ev.info.get("commits", [])]
@@ -236,7 +237,6 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
 
 
 def _mean_ci(values: np.ndarray, reps: int, seed: int = 0) -> tuple[float, float, float]:
-    from thesis_lib.stats import bootstrap_ci
 
     v = np.asarray(values, dtype=float)
     if len(v) < 2:
@@ -361,7 +361,6 @@ def _complete_methods(ev: Evidence, metric: str, settings: list[str] | None) -> 
     """Per method, its ``(seeds, settings)`` matrix over ``settings`` (default: every setting
     the method ran), once the study is complete (``{}`` before: like the verdicts, the
     aggregates wait for the full grid)."""
-    from thesis_lib.stats import score_matrix
 
     c = ev.study.columns
     if not ev.complete or metric not in ev.rows or c["method"] not in ev.rows:
@@ -388,7 +387,6 @@ def aggregate_table(
     """Per method, over ``settings`` (default: all the method ran): the IQM and the mean of
     every (seed, setting) score, each with its 95% interval from a bootstrap stratified over
     settings (rliable's aggregate estimates). Empty until the study is complete."""
-    from thesis_lib.stats import aggregate_interval
 
     metric = metric or ev.study.metric
     cols = ["method", "settings", "runs", "iqm", "iqm_low", "iqm_high"]
@@ -416,8 +414,6 @@ def plot_performance_profiles(
     score above ``tau``, against ``tau``, with a 95% stratified bootstrap band. A curve that
     lies above another everywhere dominates it stochastically."""
     import matplotlib.pyplot as plt
-
-    from thesis_lib.stats import performance_profile
 
     metric = metric or ev.study.metric
     mats = _complete_methods(ev, metric, settings)
@@ -510,8 +506,6 @@ def plot_comparisons(ev: Evidence, metric: str | None = None, ax: Any = None) ->
     interval, coloured by verdict, the margin shaded; a note while the study is incomplete."""
     import matplotlib.pyplot as plt
 
-    from thesis_lib.stats.claims import VERDICT_COLOURS
-
     metric = metric or ev.study.metric
     t = comparisons_table(ev)
     t = t[t["metric"] == metric].reset_index(drop=True)
@@ -562,7 +556,6 @@ def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
     """The comparisons registered on the primary metric, recomputed on the secondary one (the
     thesis's best evaluation during training): does the verdict depend on the metric?
     Empty until the study is complete or when the study names no secondary metric."""
-    from thesis_lib.stats.claims import evaluate_comparisons
 
     sec = ev.study.secondary
     if not ev.complete or not sec or sec not in ev.rows:
@@ -612,7 +605,6 @@ def claim_readings(
     Raises:
         ValueError: ``claim_notes`` names a claim the study does not answer.
     """
-    from thesis_lib.stats.claims import CLAIMS, claim_verdicts
 
     claims = list(dict.fromkeys(s["claim"] for s in ev.study.comparisons))
     claim_notes = dict(claim_notes or {})

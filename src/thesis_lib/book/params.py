@@ -167,7 +167,7 @@ def check_value(name: str, value: Any, hint: Any, where: str = "") -> Any:
     except _Mismatch:
         at = f" ({where})" if where else ""
         raise ValueError(
-            f"Expect `{name}` to be {_describe(hint)}, actually: {value!r}{at}"
+            f"Expect `{name}` to be {describe_hint(hint)}, actually: {value!r}{at}"
         ) from None
 
 
@@ -249,7 +249,7 @@ _NAMES = {
 }
 
 
-def _describe(hint: Any, plural: bool = False) -> str:
+def describe_hint(hint: Any, plural: bool = False) -> str:
     """What ``hint`` expects, in words: ``a list of strings``, ``one of 'smoke', 'full'``."""
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if hint is None or hint in _NAMES:
@@ -257,12 +257,14 @@ def _describe(hint: Any, plural: bool = False) -> str:
     if origin is Literal:
         return "one of " + ", ".join(repr(a) for a in args)
     if origin in (Union, types.UnionType):
-        return " or ".join(_describe(a, plural) for a in args)
+        return " or ".join(describe_hint(a, plural) for a in args)
     if hint in (list, tuple) or origin in (list, tuple):
-        items = f" of {_describe(args[0], True)}" if args else ""
+        items = f" of {describe_hint(args[0], True)}" if args else ""
         return ("lists" if plural else "a list") + items
     if hint is dict or origin is dict:
-        items = f" of {_describe(args[0], True)} to {_describe(args[1], True)}" if args else ""
+        items = (
+            f" of {describe_hint(args[0], True)} to {describe_hint(args[1], True)}" if args else ""
+        )
         return ("mappings" if plural else "a mapping") + items
     return getattr(hint, "__name__", str(hint))
 

@@ -30,6 +30,7 @@ from thesis_lib.book.params import (
     validate_parameters,
 )
 from thesis_lib.paths import project_root
+from thesis_lib.sweep import EXECUTORS
 
 GENERATED = Path("book") / "generated"
 PROFILES = ("smoke", "full")
@@ -336,7 +337,6 @@ def sweep_environment(
     Raises:
         ValueError: an unknown executor, ``jobs < 1``, or an address with a non-Ray executor.
     """
-    from thesis_lib.sweep import EXECUTORS
 
     if address and executor is None:
         executor = "ray"

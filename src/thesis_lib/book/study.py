@@ -33,7 +33,13 @@ import pandas as pd
 
 from thesis_lib._io import atomic_write
 from thesis_lib.book.chapter import Chapter
+from thesis_lib.book.params import check_value, config_from_namespace, config_hints, describe_hint
 from thesis_lib.paths import project_root
+from thesis_lib.provenance import git_commit, package_versions
+from thesis_lib.stats import INTERVALS
+from thesis_lib.stats.claims import CLAIMS, check_comparison, claim_verdicts, evaluate_comparisons
+from thesis_lib.stats.gates import apply_retests, check_gate, load_review
+from thesis_lib.sweep import Task, TaskStore, config_hash, fn_path, run_tasks
 
 STUDY_KEYS = {
     "study",
@@ -86,7 +92,6 @@ class Study:
     def hash(self) -> str:
         """Hash of everything pre-registered (all fields but the file's path; ``gates`` and
         ``interval`` only where a file sets them, so v1 study files keep their hash)."""
-        from thesis_lib.sweep import config_hash
 
         d = dataclasses.asdict(self)
         d.pop("path")
@@ -116,7 +121,6 @@ def studies_dir(chapter: str | None = None) -> Path:
 
 def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     """Validate a study mapping (unknown or missing keys, unknown claims are errors)."""
-    from thesis_lib.stats.claims import check_comparison
 
     where = f" in {path}" if path else ""
     unknown = set(data) - STUDY_KEYS
@@ -164,8 +168,6 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     reuse = data.get("reuse") or []
     if isinstance(reuse, str):
         reuse = [reuse]
-    from thesis_lib.stats import INTERVALS
-    from thesis_lib.stats.gates import check_gate
 
     gates = data.get("gates") or []
     if not isinstance(gates, list):
@@ -263,7 +265,6 @@ def study_config(study: Study, chapter: Chapter, scale: str = "study") -> Any:
     them): fields added after the v1 studies were registered, at the value those studies ran
     with (``init: torch``), so an older file keeps its meaning and its task keys. A new study
     file names such fields itself."""
-    from thesis_lib.book.params import config_from_namespace
 
     _check_chapter(study, chapter)
     _check_study_values(study, chapter.Config)
@@ -282,7 +283,6 @@ def _check_study_values(study: Study, config_cls: type) -> None:
     of its ``Config`` field (:func:`~thesis_lib.book.params.check_value`, naming the file), and
     a list is written as one: ``seeds: 3`` is not the list ``[3]`` (as ``-p seeds 3`` would be),
     it is refused. Unknown fields are left to ``config_from_namespace``."""
-    from thesis_lib.book.params import _describe, check_value, config_hints
 
     hints = config_hints(config_cls)
     where = f" in {study.path}" if study.path else ""
@@ -294,7 +294,7 @@ def _check_study_values(study: Study, config_cls: type) -> None:
             checked = check_value(name, value, hints[name], f"{part}{where}")
             if isinstance(checked, list | tuple) and not isinstance(value, list | tuple):
                 raise ValueError(
-                    f"Expect `{name}` to be {_describe(hints[name])}, actually: {value!r} "
+                    f"Expect `{name}` to be {describe_hint(hints[name])}, actually: {value!r} "
                     f"({part}{where})"
                 )
 
@@ -323,7 +323,6 @@ def _check_study_columns(study: Study, columns: Any) -> None:
 def study_tasks(study: Study, chapter: Chapter) -> list[Any]:
     """The study's tasks, from its chapter's ``study_tasks(cfg)``: the scale check's first
     (their configs carry ``scale: check``), then the study's own."""
-    from thesis_lib.sweep import Task
 
     tasks = chapter.study_tasks(study_config(study, chapter))
     if study.scale_check and study.scale_check.get("config"):
@@ -338,7 +337,6 @@ def reuse_tasks(study: Study, keys: list[str]) -> int:
     study's store (each record notes where it came from); returns how many were copied.
 
     A record is reused only if it was written under its own study's current hash."""
-    from thesis_lib.sweep import TaskStore
 
     own = TaskStore(studies_dir(study.chapter) / "tasks")
     n = 0
@@ -436,8 +434,6 @@ def run_study(
     that another process holds is skipped (said on stderr), so a second run of a study never
     runs a task that the first one is running or will run. The rows returned are those of the
     tasks this run finished or found stored."""
-    from thesis_lib.provenance import git_commit
-    from thesis_lib.sweep import TaskStore, run_tasks
 
     study = load_study(chapter.name)
     tasks = study_tasks(study, chapter)
@@ -511,7 +507,6 @@ def cpu_hours_left(
     when nothing has finished. ``records``: the study's task records, when the caller has
     already read them (:func:`task_records`).
     """
-    from thesis_lib.sweep import _fn_path
 
     recs = records if records is not None else task_records(study, [t.key for t in tasks])
     if not recs:
@@ -530,7 +525,7 @@ def cpu_hours_left(
     for t in tasks:
         if t.key in done:
             continue
-        level = next(lv for lv in levels(_fn_path(t.fn), t.config) if lv in costs)
+        level = next(lv for lv in levels(fn_path(t.fn), t.config) if lv in costs)
         left += sum(costs[level]) / len(costs[level])
     return left / 3600
 
@@ -557,7 +552,6 @@ def write_study_summary(
 ) -> dict[str, Any]:
     """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks
     (``records``, when the caller has read them already)."""
-    from thesis_lib.provenance import package_versions
 
     out = studies_dir(study.chapter)
     out.mkdir(parents=True, exist_ok=True)
@@ -590,7 +584,6 @@ def gates_path(chapter: str) -> Path:
 
 def study_gates(study: Study) -> list[dict[str, Any]]:
     """The study file's gates, then those of its review file (:func:`gates_path`)."""
-    from thesis_lib.stats.gates import load_review
 
     p = gates_path(study.chapter)
     review = load_review(p)[0] if p.is_file() else []
@@ -600,7 +593,6 @@ def study_gates(study: Study) -> list[dict[str, Any]]:
 def study_comparisons(study: Study) -> list[dict[str, Any]]:
     """The study's comparisons, with its review file's ``retest`` entries applied
     (:func:`thesis_lib.stats.gates.apply_retests`: e.g. an equivalence claim retested by TOST)."""
-    from thesis_lib.stats.gates import apply_retests, load_review
 
     p = gates_path(study.chapter)
     retests = load_review(p)[1] if p.is_file() else []
@@ -616,7 +608,6 @@ def _parity_table() -> pd.DataFrame | None:
 def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
     """The pre-registered comparisons of a finished study (raises if it is incomplete, or if
     a row the comparisons read is wrong: the error names its task file and what is wrong)."""
-    from thesis_lib.stats.claims import evaluate_comparisons
 
     study = load_study(chapter)
     info_p = studies_dir(chapter) / "run.json"
@@ -675,7 +666,6 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
     """``studies/claims.csv``: one row per claim of CLAIMS.md, ``pending`` where no study
     (or no complete one) answers it yet. ``chapters``: the registry
     (``thesis_lib.chapters.CHAPTERS``), which counts a pending study's tasks."""
-    from thesis_lib.stats.claims import CLAIMS, claim_verdicts
 
     root = project_root() / "params"
     rows: dict[str, dict[str, Any]] = {}
