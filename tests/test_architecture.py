@@ -24,7 +24,8 @@ The rules, one test each:
 (d) in the packages cleaned for #38 (``CLEANED``) no module imports another ``thesis_lib``
     module inside a function, unless the import carries a reason as a trailing comment
     (``# lazy: torch``, ``# cycle: ...``): imports belong at the top, where they show the
-    module's dependencies.
+    module's dependencies. ``cli`` is the exception, for one reason said once
+    (``LAZY_PACKAGES``): a command loads only what it runs.
 
 An import is any ``import`` / ``from ... import`` statement anywhere in a file (module level,
 class bodies, functions), or ``importlib.import_module("thesis_lib....")`` with a literal name.
@@ -90,6 +91,14 @@ CLEANED = {
     "_io",
     "paths",
     "provenance",
+    "book",
+    "chapters",
+}
+#: Packages whose function-level imports all share one reason, said here once.
+LAZY_PACKAGES = {
+    # a command imports only what it runs: `thesis run` with a bad value fails in under a second
+    # (issue #37), before torch, MuJoCo or a chapter's package loads
+    "cli": "start-up",
 }
 REASON = re.compile(r"#\s*[A-Za-z][\w-]*:\s*\S")  # `# lazy: torch`, `# cycle: data.recipe`
 
@@ -449,7 +458,7 @@ def test_no_function_level_imports_of_our_own_modules_without_a_reason():
     bad = [
         f"  {e.where}: {e.source} imports {e.target} inside a function"
         for module, es in sorted(lazy.items())
-        if top(module) in CLEANED and module.rpartition(".")[2] != "cli"
+        if top(module) in CLEANED and top(module) not in LAZY_PACKAGES
         for e in es
         if e.reason is None
     ]
@@ -457,3 +466,28 @@ def test_no_function_level_imports_of_our_own_modules_without_a_reason():
         "move these imports to the top of the module, or give the reason as a trailing comment "
         "(`# lazy: torch`, `# cycle: ...`):\n" + "\n".join(bad)
     )
+
+
+#: (importer, imported) method packages that build on another method, with the reason; any
+#: other import between two packages of the methods' floor is refused: each method stands on
+#: the base alone, so it can be read, tested and replaced on its own.
+METHOD_EDGES = {
+    ("mdlt", "seq"),  # MDLT-T/MDLT-M are built from seq's blocks, trained by seq's one trainer
+}
+
+
+def test_methods_build_on_the_base_not_on_each_other():
+    methods = {p for p, f in FLOORS.items() if f == 2}
+    bad = sorted(
+        f"  {e.source} -> {e.target} at {e.where}"
+        for e in EDGES
+        if top(e.source) in methods
+        and top(e.target) in methods
+        and top(e.source) != top(e.target)
+        and (top(e.source), top(e.target)) not in METHOD_EDGES
+    )
+    assert not bad, "a method imports another method (add to METHOD_EDGES with a reason?):\n" + (
+        "\n".join(bad)
+    )
+    used = {(top(e.source), top(e.target)) for e in EDGES}
+    assert METHOD_EDGES <= used, f"listed but unused: {sorted(METHOD_EDGES - used)}"
