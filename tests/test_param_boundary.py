@@ -61,12 +61,12 @@ def _thesis_run(capsys, *argv: str) -> tuple[int, str]:
 
 def test_rl_timesteps_shorter_than_an_episode_is_a_clear_error():
     """``thesis run 01_background -p rl_timesteps 100``: Pendulum-v1's episodes are 200 steps,
-    so no episode ends, the curves are empty and ``summarise_rl`` raised ``KeyError: 'algo'``."""
+    so no episode ends, the curves are empty and ``summarize_rl`` (then ``summarise_rl``) raised ``KeyError: 'algo'``."""
     from thesis_lib.chapters import background as bg
 
     cfg = bg.Config(rl_algos=["DDPG"], rl_timesteps=100)
     with pytest.raises(ValueError, match="rl_timesteps"):
-        bg.summarise_rl(bg.run_rl_curves(cfg))
+        bg.summarize_rl(bg.run_rl_curves(cfg))
 
 
 @pytest.mark.parametrize(

@@ -160,8 +160,8 @@ def test_table_5_4_tiny():
     from thesis_lib.chapters.ur3 import (
         Config,
         run_reach,
-        run_success_curves,
-        summarize_table_5_4,
+        summarize_reach,
+        summarize_success_curves,
     )
 
     eps = reach.make_demonstrations(24, seed=0)
@@ -188,9 +188,9 @@ def test_table_5_4_tiny():
     assert rows.goals_reached.between(0, 5).all() and (rows.steps <= 12).all()
     dt = rows[rows.method == "DT"]
     assert (dt.target_return == max(e.episode_return for e in demos.train)).all()
-    t = summarize_table_5_4(rows)
+    t = summarize_reach(rows)
     assert list(t.columns[:4]) == ["method", "train_demos", "goals_mean", "goals_std"]
-    curves = run_success_curves(rows, horizon=12)
+    curves = summarize_success_curves(rows, horizon=12)
     last = curves[curves.step == 12].set_index("method")["goals_mean"]
     np.testing.assert_allclose(
         last.loc[["HDT", "DT"]].to_numpy(), t.set_index("method").loc[["HDT", "DT"], "goals_mean"]
@@ -311,6 +311,34 @@ def test_study_tasks_cover_the_grid_and_table_5_4_pools_the_runs():
             for s, m, a in [(0, 4.0, 0.2), (1, 5.0, 0.6)]
         ]
     )  # fmt: skip
-    t = ch.study_table_5_4(runs).iloc[0]
+    t = ch.summarize_study(runs).iloc[0]
     assert t.goals_mean == pytest.approx(4.5) and t.goals_std == pytest.approx(1.25**0.5)
     assert t.all_five == pytest.approx(0.4) and t.n_seeds == 2
+
+
+def test_table_5_4_is_pooled_from_the_runs_as_the_study_rows_are():
+    import pandas as pd
+
+    from thesis_lib.chapters import ur3 as ch
+    from thesis_lib.sweep import fn_path
+
+    rng = np.random.default_rng(0)
+    rows = pd.DataFrame(
+        [
+            {"method": m, "train_demos": n, "seed": s, "start": k,
+             "goals_reached": int(rng.integers(0, 6))}
+            for n in (10, 80) for m in ("HDT", "DT") for s in (0, 1, 2) for k in range(10)
+        ]
+    )  # fmt: skip
+    t = ch.summarize_reach(rows)
+    g = rows.groupby(["method", "train_demos"], sort=False)["goals_reached"]
+    np.testing.assert_allclose(t.goals_mean, g.mean(), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(t.goals_std, g.std(ddof=0), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(t.all_five, g.apply(lambda x: np.mean(x >= 5)), rtol=0, atol=1e-12)
+    assert t.n_episodes.tolist() == [30] * 4
+    assert list(t.columns) == [
+        "method", "train_demos", "goals_mean", "goals_std", "all_five", "n_episodes"
+    ]  # fmt: skip
+    # the study's tasks keep the name their committed keys were made with
+    assert fn_path(ch.study_run) == "thesis_lib.chapters.ur3:study_run"
+    assert fn_path(ch.reach_task) == "thesis_lib.chapters.ur3:reach_task"

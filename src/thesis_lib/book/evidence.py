@@ -180,9 +180,9 @@ def study_code_paths(modules: set[str], root: Path | None = None) -> list[str] |
     ``thesis_lib.book`` (paths, provenance, rendering) is left out, as in
     :data:`STUDY_CODE_PATHS`. ``None`` where a module is not a file under ``root/src``.
 
-    Example: the 07 study's tasks (``thesis_lib.chapters.ur3``) run ``ur3``, ``seq``, ``data``
-    and ``sweep`` code, but no ``mdlt`` or ``defender`` module: a commit that only changes MDLT
-    did not change what the 07 rows depend on.
+    Example: the 07 study's tasks (``thesis_lib.chapters.ur3``) run ``ur3``, ``seq``, ``data``,
+    ``sweep`` and ``mdlt`` (the dance checks) code, but no ``defender`` or ``clfd`` module: a
+    commit that only changes DEFENDER did not change what the 07 rows depend on.
     """
 
     root = Path(root) if root is not None else project_root()

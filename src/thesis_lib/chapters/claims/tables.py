@@ -1,0 +1,189 @@
+"""The Claims page's tables: the claims ledger (:func:`load_claims`, :func:`ledger_table`,
+:func:`gates_table`, :func:`verdict_counts`) and the peer-parity table (:func:`load_parity`,
+:func:`parity_view`, :func:`no_peer_table`).
+
+Used in: the Claims page of the book.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from thesis_lib.chapters.claims.config import Config
+from thesis_lib.paths import project_root
+from thesis_lib.stats.claims import CLAIMS, EVIDENCE, VERDICT_COLOURS
+
+__all__ = [
+    "gates_table",
+    "headline",
+    "ledger_table",
+    "link_chapters",
+    "load_claims",
+    "load_parity",
+    "no_peer_table",
+    "parity_view",
+    "verdict_counts",
+]
+
+
+def load_claims(cfg: Config) -> pd.DataFrame:
+    """The claims ledger: every claim of CLAIMS.md, its verdict and interval.
+
+    A missing ``claims.csv`` (no study committed yet) gives every claim ``pending``.
+    """
+    path = Path(cfg.claims_csv) if cfg.claims_csv else project_root() / "studies" / "claims.csv"
+    if path.exists():
+        df = pd.read_csv(path, dtype={"claim": str})
+    else:
+        df = pd.DataFrame({"claim": list(CLAIMS), "verdict": "pending"})
+    unknown = sorted(set(df["claim"]) - set(CLAIMS))
+    if unknown:
+        raise ValueError(f"{path}: unknown claim ids {unknown}")
+    return df
+
+
+def _fmt(x: Any, digits: int = 3) -> str:
+    return "" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{x:.{digits}g}"
+
+
+def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
+    """Per claim: the statement, the thesis's evidence, ours, the verdict and the chapter.
+
+    "ours" is the headline comparison's effect and interval, and, where another comparison
+    gave the verdict, that one too (``decided_by``).
+    """
+    by = claims.set_index("claim")
+    rows = []
+    for cid, (section, statement) in CLAIMS.items():
+        evidence, chapter = EVIDENCE[cid]
+        r = by.loc[cid] if cid in by.index else pd.Series(dtype=object)
+        verdict = r.get("verdict", "pending")
+        if verdict == "pending" or pd.isna(r.get("effect", np.nan)):
+            ours = str(r.get("comparisons", "") or "no study yet")
+        else:
+            ours = (
+                f"effect {_fmt(r['effect'])} [{_fmt(r['ci_low'])}, {_fmt(r['ci_high'])}], "
+                f"P(X>Y) {_fmt(r['prob_improvement'], 2)}, {int(r['seeds'])} seeds x "
+                f"{int(r['settings'])} settings"
+            )
+            decided = r.get("decided_by", "")
+            if isinstance(decided, str) and decided:
+                ours += f"; decided by {decided}"
+        rows.append(
+            {
+                "claim": cid,
+                "statement": statement,
+                "thesis (section, evidence)": f"{section}: {evidence}",
+                "ours": ours,
+                "verdict": verdict,
+                "chapter": chapter,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def link_chapters(ledger: pd.DataFrame, section: str = "evidence-at-study-scale") -> pd.DataFrame:
+    """The ledger with each chapter as an HTML link to its section "Evidence at study scale"
+    in the built book (pages are ``<chapter>.html``, sections anchored by their title).
+
+    >>> link_chapters(pd.DataFrame({"chapter": ["04_hdt"]})).chapter[0]
+    '<a href="04_hdt.html#evidence-at-study-scale">04_hdt</a>'
+    """
+    out = ledger.copy()
+    out["chapter"] = [f'<a href="{c}.html#{section}">{c}</a>' for c in out["chapter"]]
+    return out
+
+
+def verdict_counts(claims: pd.DataFrame) -> pd.Series:
+    """How many claims hold, fail, are inconclusive, untestable or pending."""
+    v = ledger_table(claims)["verdict"]
+    return v.value_counts().reindex(list(VERDICT_COLOURS), fill_value=0)
+
+
+def gates_table(claims: pd.DataFrame) -> pd.DataFrame:
+    """Per claim: its validity gates and their figures (``validity`` of ``claims.csv``): why a
+    verdict is trusted, or why it was withheld (``untestable``).
+
+    >>> t = gates_table(pd.DataFrame({"claim": ["C2", "C12"], "verdict": ["holds", "untestable"],
+    ...     "validity": ["no gate", "untestable: CLfD vs TCN: FAILED level: CLfD 0.025 < 0.1"]}))
+    >>> t["gates"].tolist()
+    ['no gate', 'untestable: CLfD vs TCN: FAILED level: CLfD 0.025 < 0.1']
+    """
+    cols = ["claim", "verdict", "validity"]
+    have = claims.reindex(columns=cols)
+    return pd.DataFrame(
+        {
+            "claim": have["claim"],
+            "verdict": have["verdict"].fillna("pending"),
+            "gates": have["validity"].fillna("no study yet").astype(str),
+        }
+    )
+
+
+def headline(comparisons: Any) -> str:
+    """The headline comparison (the one whose effect the ledger quotes) from ``comparisons``.
+
+    >>> headline("DT vs DT-noRTG (score_final): inconclusive [-6.45, 4.56]; x vs y (m): holds [1, 2]")
+    'DT vs DT-noRTG (score_final)'
+    """
+    if not isinstance(comparisons, str):
+        return ""
+    return comparisons.split("; ")[0].rsplit(":", 1)[0].strip()
+
+
+def load_parity(path: str | Path | None = None) -> pd.DataFrame:
+    """The peer-parity table ``studies/parity/parity.csv`` (``thesis parity`` writes it); empty
+    where no parity run is committed."""
+    p = Path(path) if path else project_root() / "studies" / "parity" / "parity.csv"
+    return pd.read_csv(p) if p.exists() else pd.DataFrame()
+
+
+def parity_view(table: pd.DataFrame) -> pd.DataFrame:
+    """The parity table for reading: per comparison, both sides' mean score (and each seed's),
+    the data set's own mean, the difference ours - peer with its 95% interval, and the verdict
+    (``at parity``: the interval holds 0 and the difference is at most 3 points; ``gap``: the
+    interval excludes 0; ``not shown``: neither)."""
+    if table.empty:
+        return pd.DataFrame({"comparison": [], "result": []})
+
+    def diff(r: pd.Series) -> str:
+        if pd.isna(r["difference"]):
+            return ""
+        return f"{r['difference']:+.1f} [{r['ci_low']:.1f}, {r['ci_high']:.1f}]"
+
+    def verdict(r: pd.Series) -> str:
+        if pd.isna(r.get("peer")) or r["seeds"] == 0:
+            return "no peer" if r["seeds"] else "not run"
+        if str(r["parity"]) == "True":
+            return "at parity"
+        # a gap only where the interval excludes 0; otherwise neither parity nor a gap is shown
+        return "gap" if r["ci_high"] < 0 or r["ci_low"] > 0 else "not shown"
+
+    def side(mean: Any, seeds: Any) -> str:
+        return "" if pd.isna(mean) else f"{mean:.1f} ({seeds})"
+
+    return pd.DataFrame({
+        "comparison": table["comparison"],
+        "method": table["method"],
+        "init": table["init"].fillna(""),
+        "model": table["arch"],
+        "updates": table["updates"],
+        "ours (seeds)": [side(m, s) for m, s in zip(table["ours"], table["ours_seeds"], strict=True)],
+        "d3rlpy (seeds)": [side(m, s) for m, s in zip(table["peer"], table["peer_seeds"], strict=True)],
+        "data mean": table["data_mean"].round(1),
+        "ours − peer [95% CI]": table.apply(diff, axis=1),
+        "result": table.apply(verdict, axis=1),
+    })  # fmt: skip
+
+
+def no_peer_table() -> pd.DataFrame:
+    """The learned methods with no peer package, and what stands in for one."""
+    from thesis_lib.parity import NO_PEER  # lazy: torch
+
+    return pd.DataFrame(
+        {"method": list(NO_PEER), "no peer package; instead": list(NO_PEER.values())}
+    )

@@ -1,0 +1,141 @@
+"""The UR3 deployment chapter's parameters: :class:`Config` (defaults are the smoke scale) and the
+constants of Table 5.4's data set and methods.
+
+Read without importing the chapter (``thesis run`` checks a parameter against the type hints
+here before a kernel starts), so nothing here imports torch at module level: the sequence
+models' registry is imported where a method's name is checked or a spec is built.
+
+Used in: UR3 deployment chapter.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Literal
+
+if TYPE_CHECKING:
+    from thesis_lib.seq.registry import ArchSpec
+    from thesis_lib.seq.runner import TrainSpec
+
+__all__ = ["CHAPTER", "METHODS", "N_DEMOS", "N_GOALS", "RTG_SCALE", "Config"]
+
+CHAPTER = "07_ur3_deployment"
+"""The chapter's notebook (``results/07_ur3_deployment/``)."""
+METHODS: tuple[str, ...] = ("HDT", "DT")
+"""The two methods of Table 5.4."""
+N_DEMOS = 100
+"""Demonstrations made: 80 train, 10 validation, 10 test starts (the thesis's split)."""
+N_GOALS = 5
+"""Goal positions of the reaching task (a test episode reaches 0 to 5)."""
+RTG_SCALE = 10.0
+"""Returns-to-go divisor (returns are about -30 to -60 here, not thousands)."""
+
+
+@dataclass
+class Config:
+    """The notebook's parameters (``params/07_ur3_deployment.*.yml``); defaults are the smoke scale.
+
+    Used in: UR3 deployment chapter.
+    """
+
+    seed: int = 0
+    """Seed of the demonstrations and of the stand-in dance."""
+    seeds: list[int] = field(default_factory=lambda: [0])
+    """Training seeds of Table 5.4."""
+    train_demos: list[int] = field(default_factory=lambda: [10, 80])
+    """Numbers of training demonstrations, the first n of the 80 (the thesis: 10, 20, ..., 80)."""
+    methods: list[str] = field(default_factory=lambda: list(METHODS))
+    """HDT and/or DT."""
+    iterations: int = 1000
+    """Training iterations per run (10k in the thesis)."""
+    batch_size: int = 32
+    """Windows per batch."""
+    K: int = 20
+    """Context length."""
+    d_model: int = 32
+    """Embedding size (128 in the thesis)."""
+    n_layers: int = 1
+    """GPT blocks (per HDT level; 3 in the thesis)."""
+    n_heads: int = 1
+    """Attention heads."""
+    dropout: float = 0.0
+    """Dropout (0.1 in the thesis; off at the smoke scale, where it slows the few hundred steps badly)."""
+    lr: float = 0.001
+    """Peak learning rate."""
+    warmup_steps: int = 50
+    """Warm-up steps."""
+    max_eval_steps: int = 200
+    """Steps per test episode (200 in the thesis)."""
+    paper_compat: bool = False
+    """The authors' behaviours in the sequence models (see the HDT chapter)."""
+    dance_source: Literal["mdlt", "demo"] = "mdlt"
+    """``"mdlt"``: the first sequence of MDLT's default AIST++-layout data set; ``"demo"``: a stand-in dance."""
+    dance_seconds: float = 6.0
+    """Seconds of dance to play."""
+    dance_fps: int = 60
+    """Frame rate of the dance angles (MDLT: 60)."""
+    dance_mode: Literal["clip", "reject"] = "clip"
+    """Limits: clip (clamp and rate-limit) or reject."""
+    viewer_frames: int = 180
+    """Frames stored in the 3-D viewer (subsampled)."""
+    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
+    ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
+    Hugging Face's DT) or ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
+    names no ``init`` ran with it)."""
+    device: str = "cpu"
+    """Training device."""
+    progress: bool = False
+    """Progress bars."""
+
+    def __post_init__(self) -> None:
+        from thesis_lib.seq.registry import check_methods  # lazy: torch
+
+        for name in ("seeds", "train_demos", "methods"):
+            value = getattr(self, name)
+            if isinstance(value, str):
+                raise ValueError(f"Expect `{name}` to be a list, got the string {value!r}.")
+            setattr(self, name, list(value))
+        check_methods(self.methods, METHODS)
+        if self.dance_source not in ("mdlt", "demo"):
+            raise ValueError(f"Unknown dance_source {self.dance_source!r}. Valid: mdlt, demo.")
+        if self.dance_mode not in ("clip", "reject"):
+            raise ValueError(f"Unknown dance_mode {self.dance_mode!r}. Valid: clip, reject.")
+        n_train = N_DEMOS - 20
+        bad = [n for n in self.train_demos if not 1 <= n <= n_train]
+        if bad:
+            raise ValueError(
+                f"train_demos must lie in 1..{n_train} ({N_DEMOS} demonstrations - 10 validation - 10 test), got {bad}."
+            )
+
+    def arch(self) -> ArchSpec:
+        """The :class:`~thesis_lib.seq.registry.ArchSpec` of both methods."""
+        from thesis_lib.seq.registry import ArchSpec  # lazy: torch
+
+        return ArchSpec(
+            d_model=self.d_model,
+            n_layers=self.n_layers,
+            n_heads=self.n_heads,
+            K=self.K,
+            dropout=self.dropout,
+            max_timestep=max(256, self.max_eval_steps + 1),
+            paper_compat=self.paper_compat,
+            init=self.init,
+        )
+
+    def train_spec(self, seed: int) -> TrainSpec:
+        """The :class:`~thesis_lib.seq.runner.TrainSpec` of the run with ``seed`` (no evaluation
+        during training)."""
+        from thesis_lib.seq.runner import TrainSpec  # lazy: torch
+
+        return TrainSpec(
+            seed=seed,
+            iterations=self.iterations,
+            batch_size=self.batch_size,
+            lr=self.lr,
+            warmup_steps=self.warmup_steps,
+            eval_every=0,
+            rtg_scale=RTG_SCALE,
+            device=self.device,
+            progress=self.progress,
+        )
