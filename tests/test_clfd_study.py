@@ -119,13 +119,13 @@ def test_study_tasks_give_one_row_per_run_with_finite_numbers(clfd_tiny, tmp_pat
     assert c11[c11.features == "untrained"].encoder_sha.isna().all()
     assert c12.loc["CLfD", "encoder_sha"] == sha["CLfD"]
     assert df.data_sha.dropna().nunique() == 1 and df[df.claim != "C12"].data_sha.notna().all()
-    inputs = ex.study_inputs_table(df)
+    inputs = ex.summarize_study_inputs(df)
     assert inputs.to_dict("records") == [{"seed": 3, "data_sets": 1, "encoder_matches": "5/5"}]
     moved = df.copy()  # an RL row whose encoder is not the one its alignment task trained
     moved.loc[(moved.claim == "C12") & moved.encoder_sha.notna(), "encoder_sha"] = "0" * 16
     moved.loc[moved.claim == "C11", "data_sha"] = "1" * 16
-    assert ex.study_inputs_table(moved).iloc[0].tolist() == [3, 2, "4/5"]
-    assert ex.study_inputs_table(df.drop(columns="encoder_sha")).empty
+    assert ex.summarize_study_inputs(moved).iloc[0].tolist() == [3, 2, "4/5"]
+    assert ex.summarize_study_inputs(df.drop(columns="encoder_sha")).empty
 
 
 def test_pinned_encoder_is_read_back_on_a_new_machine_not_trained_again(
@@ -232,12 +232,12 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     assert head.effect == pytest.approx(7.0, abs=0.5) and head.verdict == "holds"
     verdicts = claim_verdicts(res).set_index("claim").verdict
     assert verdicts.to_dict() == {"C10": "holds", "C11": "holds", "C12": "holds"}
-    t41, t42 = ex.study_tables_vs_thesis(rows, {"scale": "test"})
+    t41, t42 = ex.compare_study_tables(rows, {"scale": "test"})
     ran = t41[t41["what differs"] != "not run"]
     assert len(ran) == 6 and (ran.seeds == 5).all() and (ran.ci_low <= ran.ours).all()
     assert set(t41.loc[t41["what differs"] == "not run", "dataset"]) == {"Pouring"}
     assert t42.dropna(subset=["paper"]).ours.between(90, 100).all()
-    curves = ex.study_rl_curves(rows)
+    curves = ex.summarize_study_rl_curves(rows)
     assert set(curves.method) == {"CLfD", "TCN", "CMC", "untrained"}
     clfd = curves[curves.method == "CLfD"]
     assert list(clfd.episode) == list(range(80, 801, 80)) and (clfd.seeds == 5).all()
@@ -248,9 +248,9 @@ def test_study_section_renders_before_the_study_ran(unstarted_study):
     from thesis_lib.book import evidence as evi
 
     ev = unstarted_study("02_clfd")
-    assert ex.study_rl_curves(ev.rows).empty
-    ex.plot_study_rl_curves(ex.study_rl_curves(ev.rows))
-    t41, t42 = ex.study_tables_vs_thesis(ev.rows, {"scale": "test"})
+    assert ex.summarize_study_rl_curves(ev.rows).empty
+    ex.plot_study_rl_curves(ex.summarize_study_rl_curves(ev.rows))
+    t41, t42 = ex.compare_study_tables(ev.rows, {"scale": "test"})
     assert (t41["what differs"] == "not run").all() and len(t41) == 12
     assert (t42["what differs"] == "not run").all() and len(t42) == 3
     for metric in (None, "stage_accuracy", "success_final", "success_mean"):
@@ -280,5 +280,5 @@ def test_study_tables_render_mid_study_before_any_alignment_row(monkeypatch):
     stage = [t for t in tasks if t.fn is ex.study_stage_task][:1]
     rows = _fake_rows(stage, np.random.default_rng(0))
     assert "encoder" not in rows
-    t41, t42 = ex.study_tables_vs_thesis(rows, {"data": "d", "scale": "s"})
+    t41, t42 = ex.compare_study_tables(rows, {"data": "d", "scale": "s"})
     assert t41["seeds"].isna().all() and t42["seeds"].notna().any()
