@@ -459,7 +459,7 @@ def test_make_demonstrations_tops_up_a_missing_group(tmp_path, monkeypatch):
     run = runs["InvertedDoublePendulum-v5"]
     assert run.n_sac["safe"] == 0 and run.n_sac["unsafe"] > 3
     assert run.sources() == {"safe": (0, 3), "unsafe": (3, 0)}
-    table = ex.demo_table(runs, ex.Config(**kw))
+    table = ex.summarize_demonstrations(runs, ex.Config(**kw))
     assert table.recipe.tolist() == ["ARS expert + noise", "SAC roll-outs (thesis)"]
     assert (
         "came from the shipped ARS expert" in ex.describe_demonstrations(runs, ex.Config(**kw))[0]
@@ -554,14 +554,18 @@ def _fake_runs():
     return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
 
 
-def test_summarise_and_compare_with_thesis():
-    from thesis_lib.chapters.defender import compare_table_4_5, compare_tables, summarise
+def test_summarize_and_compare_with_thesis():
+    from thesis_lib.chapters.defender import (
+        compare_table_4_5,
+        compare_tables_4_3_4_4,
+        summarize_runs,
+    )
 
-    summary = summarise(_fake_runs())
+    summary = summarize_runs(_fake_runs())
     row = summary[(summary.algo == "SAC") & (summary.strategy != "none")].iloc[0]
     assert row.time_pct == pytest.approx(120.0) and row.crash_pct_mean == pytest.approx(10.5)
     assert row.crash_pct_std == pytest.approx(np.std([10, 11], ddof=1)) and row.n_seeds == 2
-    cmp = compare_tables(summary, differs={"scale": "test"})
+    cmp = compare_tables_4_3_4_4(summary, differs={"scale": "test"})
     sac = cmp[
         (cmp.table == "4.3")
         & (cmp.metric == "% Crash")
@@ -632,9 +636,9 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     def no_training(*args, **kwargs):
         raise AssertionError("a finished task ran again")
 
-    monkeypatch.setattr(ex, "train_run", no_training)
-    monkeypatch.setattr(ex, "strategy_ablation", no_training)
-    monkeypatch.setattr(ex, "collect_demonstrations", no_training)
+    monkeypatch.setattr(ex.tasks, "train_run", no_training)
+    monkeypatch.setattr(ex.tasks, "strategy_ablation", no_training)
+    monkeypatch.setattr(ex.demos, "collect_demonstrations", no_training)
     back = ex.make_demonstrations(cfg)["Hopper-v5"]
     run = runs["Hopper-v5"]
     assert back.n_sac == run.n_sac and back.sources() == run.sources()

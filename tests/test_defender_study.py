@@ -163,10 +163,10 @@ def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="without the expert top-up"):
         ex.study_run(tasks["SAC+MeanDemoW5/MeanDemoW10 no top-up"].config)
     rows = pd.DataFrame([plain, filt])
-    summary = ex.study_summary(rows)
+    summary = ex.summarize_study(rows)
     assert set(summary.strategy) == {"none", "MeanDemoW5/MeanDemoW10"}
     assert summary.loc[summary.strategy == "none", "time_pct"].iloc[0] == pytest.approx(100.0)
-    curves = ex.study_curves(rows, reps=50)
+    curves = ex.summarize_study_curves(rows, reps=50)
     assert set(curves.measure) == {"crash_rate", "filtered_rate", "return"}
     assert curves.groupby("method").span.nunique().tolist() == [ex.STUDY_CURVE_BINS] * 2
 
@@ -194,7 +194,7 @@ def test_pinned_demonstrations_are_kept_with_the_study_and_read_back(tmp_path, m
     def no_remake(*a, **k):
         raise AssertionError("made the demonstrations again")
 
-    monkeypatch.setattr(ex, "make_demonstrations", no_remake)
+    monkeypatch.setattr(ex.demos, "make_demonstrations", no_remake)
     again = ex.pinned_demonstrations(task, recipe)
     assert again.n_sac == first.n_sac and again.episodes == []
     for n in (2, 3):
@@ -239,8 +239,10 @@ def test_study_section_renders_before_the_study_ran(unstarted_study):
     from thesis_lib.book import evidence as evi
 
     ev = unstarted_study("03_defender")
-    assert ex.study_summary(ev.rows).empty and ex.study_curves(ev.rows).empty
-    assert ex.study_topup_table(ev.rows).empty and ex.study_demo_sources(ev.rows).empty
+    assert ex.summarize_study(ev.rows).empty and ex.summarize_study_curves(ev.rows).empty
+    assert (
+        ex.summarize_study_topup(ev.rows).empty and ex.summarize_study_demo_sources(ev.rows).empty
+    )
     ex.plot_study_curves(ev.rows)
     evi.plot_per_setting(ev)
     evi.plot_comparisons(ev)
@@ -330,13 +332,13 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     c7 = res[(res.claim == "C7") & (res.metric == "crash_free_rate")].iloc[0]
     assert c7.effect == pytest.approx(0.7, abs=0.03) and c7.verdict == "holds"
     assert set(claim_verdicts(res).claim) == {"C7", "C8", "C9"}
-    summary = ex.study_summary(rows)
+    summary = ex.summarize_study(rows)
     sac = summary[(summary.algo == "SAC") & (summary.strategy == "none")]
     assert len(sac) == 3 and (sac.time_pct == 100).all()
     filt = summary[(summary.strategy != "none") & (summary.algo == "SAC")]
     assert filt.time_pct.round(6).eq(round(100 * 200 / 180, 6)).all()
     assert filt.cpu_pct.round(6).eq(round(100 * 190 / 170, 6)).all()
-    t434 = ex.compare_tables(summary, differs={"scale": "test"})
+    t434 = ex.compare_tables_4_3_4_4(summary, differs={"scale": "test"})
     ran = t434[t434["what differs"] != "not run"]
     assert {"SAC", "TD3"} <= set(ran.algorithm) and set(ran.table) == {"4.3", "4.4"}
     t45 = ex.compare_table_4_5(
@@ -347,10 +349,10 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
         ]
     )
     assert sorted(t45.dropna(subset=["ours"]).n_demos_ours.astype(int).unique()) == [10, 20, 50]
-    topup = ex.study_topup_table(rows)
+    topup = ex.summarize_study_topup(rows)
     assert set(topup.setting) == {"Walker2d"} and len(topup) == 2
     assert topup.set_index("method").loc["SAC+MeanDemoW5/MeanDemoW10 no top-up", "demos_safe"] == 5
-    sources = ex.study_demo_sources(rows)
+    sources = ex.summarize_study_demo_sources(rows)
     assert set(sources.n_demos) == {10, 20, 50}
     # one draw per setting and count here: every filtered run of it is listed against it
     assert sources.groupby(["setting", "n_demos", "top_up"]).size().eq(1).all()
@@ -359,14 +361,14 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     moved = rows.copy()
     later = moved.demos_file.notna() & (moved.setting == "Hopper") & (moved.seed >= 3)
     moved.loc[later, "demos_file"] = "Hopper-0000000000000000.npz"
-    two = ex.study_demo_sources(moved)
+    two = ex.summarize_study_demo_sources(moved)
     hop = two[(two.setting == "Hopper") & (two.n_demos == 50) & two.top_up.astype(bool)]
     assert (
         hop.seeds.tolist() == ["0,1,2", "3,4"]
         and hop.runs.sum()
         == (rows.demos_file.notna() & (rows.setting == "Hopper") & (rows.n_demos == 50)).sum()
     )
-    curves = ex.study_curves(rows, reps=50)
+    curves = ex.summarize_study_curves(rows, reps=50)
     sac_crash = curves[(curves.method == "SAC") & (curves.measure == "crash_rate")]
     assert (sac_crash.seeds == 5).all() and (sac_crash.ci_low <= sac_crash["mean"]).all()
 

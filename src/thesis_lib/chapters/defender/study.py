@@ -1,0 +1,357 @@
+"""The DEFENDER chapter's pre-registered study of claims C7-C9 (``thesis study 03_defender``).
+
+:func:`study_tasks` is the grid (``params/03_defender.study.yml``): one :func:`study_run` per
+training run. Each trains through
+:func:`~thesis_lib.chapters.defender.tasks.train_run`, the training function of Tables
+4.3-4.5, and reduces its episode log to one row (:func:`training_run_numbers`), with a final
+evaluation without the filter. Its demonstrations are pinned beside the study's rows
+(:func:`~thesis_lib.chapters.defender.demos.pinned_demonstrations`).
+
+Used in: DEFENDER chapter study (``thesis study 03_defender``).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+
+from thesis_lib.chapters.defender.config import Config
+from thesis_lib.chapters.defender.demos import (
+    DEMO_FIELDS,
+    make_env,
+    study_demonstrations,
+    thesis_env_name,
+)
+from thesis_lib.chapters.defender.tasks import RUN_COLUMNS, TRAIN_FIELDS, train_run
+from thesis_lib.rl import evaluate
+from thesis_lib.sweep import Task, task_id
+
+#: The thesis's Table 4.3 plain-SAC Acc Reward per task: ``*_score`` columns are returns in
+#: percent of it (the tasks' returns differ by a factor 3, so raw returns would let
+#: InvertedDoublePendulum decide every aggregate).
+THESIS_SAC_RETURN: dict[str, float] = {
+    "Hopper-v5": 3474.0,
+    "InvertedDoublePendulum-v5": 9359.0,
+    "Walker2d-v5": 3326.0,
+}
+
+
+STUDY_CURVE_BINS = 10
+"""Training is cut into this many equal spans of environment steps; each study row carries the
+crash rate, filtered rate and mean return of the episodes that ended in each span."""
+
+
+EVAL_SEED = 100_000
+"""The final evaluation of a study run with training seed ``s`` resets its task with
+``EVAL_SEED + s``."""
+
+
+CRASH_DEFINITION = (
+    "A training episode **crashed** when the task terminated it before the horizon "
+    "(an unsafe state: Hopper or Walker2d fell, the pendulum tipped over) and the filter did "
+    "not end it first; an episode the filter ended is **filtered**, not crashed, and one that "
+    "reached the horizon is neither (thesis 4.3.3: an episode 'can end early if the agent "
+    "reaches an unsafe state, leading to a crash if the transition was not filtered'). The "
+    "crash rate is the share of a run's training episodes that crashed, the filtered rate the "
+    "share the filter ended."
+)
+"""The thesis's definition of a crash, as the chapter prints it."""
+
+
+def training_run_numbers(
+    episodes: pd.DataFrame, total_steps: int, bins: int = STUDY_CURVE_BINS
+) -> dict[str, Any]:
+    """Reduce one training run's episode log to the study's per-run measures.
+
+    A *crash* is the thesis's (4.3.3, :data:`CRASH_DEFINITION`): the task terminated the
+    episode before the horizon and the filter did not end it first (``crashed``, as
+    :class:`~thesis_lib.defender.DefenderWrapper` and :func:`train_run` label it); an episode the
+    filter ended is *filtered*.
+
+    Args:
+        episodes: one row per finished training episode with ``return``, ``crashed``,
+            ``filtered`` and ``timestep`` (the environment step at which it ended, 1-based).
+        total_steps: the run's environment steps (the curve's spans are ``total_steps / bins``).
+        bins: spans of the curve.
+
+    Returns:
+        ``episodes``, ``crashes``, ``filtered``; ``crash_rate`` and ``filtered_rate`` (shares of
+        the episodes, 0-1); ``crash_free_rate`` = 1 - ``crash_rate`` (higher is better, for the
+        comparisons); ``crashes_per_1k_steps``; ``return_best`` (the thesis's Acc Reward) and
+        ``return_last`` (mean return of the last span's episodes); and per span ``b``
+        ``crash_rate_b{b}``, ``filtered_rate_b{b}``, ``return_b{b}`` (NaN where no episode
+        ended in the span); and, where the log has the filter's counterfactual
+        (``would_crash``), ``saved_crashes``, ``false_alarms``, ``filter_precision``,
+        ``filter_recall`` and ``crash_rate_without_filter`` (:func:`_counterfactual_numbers`).
+
+    Raises:
+        ValueError: a column is missing, or ``total_steps`` / ``bins`` is not positive.
+
+    Used in: DEFENDER chapter study (``thesis study 03_defender``).
+    """
+    need = {"return", "crashed", "filtered", "timestep"}
+    if missing := sorted(need - set(episodes.columns)):
+        raise ValueError(f"the episode log lacks {missing}; it has {list(episodes.columns)}")
+    if total_steps < 1 or bins < 1:
+        raise ValueError(f"total_steps and bins must be positive, got {total_steps}, {bins}")
+    ep = episodes
+    n = len(ep)
+    crashed = ep["crashed"].astype(bool).to_numpy()
+    filtered = ep["filtered"].astype(bool).to_numpy()
+    if (crashed & filtered).any():
+        raise ValueError("an episode is both crashed and filtered; a filtered one never crashes")
+    ret = ep["return"].to_numpy(dtype=float)
+    span = np.minimum((ep["timestep"].to_numpy(dtype=float) - 1) * bins // total_steps, bins - 1)
+    out: dict[str, Any] = {
+        "episodes": n,
+        "crashes": int(crashed.sum()),
+        "filtered": int(filtered.sum()),
+        "crash_rate": float(crashed.mean()) if n else np.nan,
+        "filtered_rate": float(filtered.mean()) if n else np.nan,
+    }
+    out["crash_free_rate"] = 1.0 - out["crash_rate"]
+    out["crashes_per_1k_steps"] = 1000.0 * out["crashes"] / total_steps
+    out["return_best"] = float(ret.max()) if n else np.nan
+    last = ret[span == bins - 1]
+    out["return_last"] = float(last.mean()) if len(last) else np.nan
+    for b in range(bins):
+        m = span == b
+        k = int(m.sum())
+        out[f"crash_rate_b{b}"] = float(crashed[m].mean()) if k else np.nan
+        out[f"filtered_rate_b{b}"] = float(filtered[m].mean()) if k else np.nan
+        out[f"return_b{b}"] = float(ret[m].mean()) if k else np.nan
+    out.update(_counterfactual_numbers(ep, crashed, filtered))
+    return out
+
+
+def _counterfactual_numbers(
+    ep: pd.DataFrame, crashed: np.ndarray, filtered: np.ndarray
+) -> dict[str, float]:
+    """What the filter saved, from the episode log's ``would_crash`` (a filtered action stepped
+    on a copy of the state, :class:`~thesis_lib.defender.DefenderWrapper`'s counterfactual):
+    ``saved_crashes`` (it would have crashed), ``false_alarms`` (it would not),
+    ``filter_precision`` = saved / filtered, ``filter_recall`` = saved / (saved + real
+    crashes), and ``crash_rate_without_filter`` = (saved + real crashes) / episodes. NaN where
+    the log has no counterfactual (no filter, or a run made before it existed)."""
+    nan = float("nan")
+    names = (
+        "saved_crashes",
+        "false_alarms",
+        "filter_precision",
+        "filter_recall",
+        "crash_rate_without_filter",
+    )
+    if (
+        "would_crash" not in ep
+        or not filtered.any()
+        or ep.loc[filtered, "would_crash"].isna().any()
+    ):
+        return dict.fromkeys(names, nan)
+    saved = int(ep.loc[filtered, "would_crash"].astype(bool).sum())
+    alarms = int(filtered.sum()) - saved
+    real = int(crashed.sum())
+    return {
+        "saved_crashes": saved,
+        "false_alarms": alarms,
+        "filter_precision": saved / (saved + alarms),
+        "filter_recall": saved / (saved + real) if saved + real else nan,
+        "crash_rate_without_filter": (saved + real) / len(ep),
+    }
+
+
+#: The columns of a study run's row (:func:`study_run`; the ``demos_*`` and ``sac_rollouts_*``
+#: in filtered runs only); the study engine checks the study file's metrics against them.
+STUDY_COLUMNS = [
+    "method", "setting", "seed", "scale", "top_up",
+    *(c for c in RUN_COLUMNS if c != "seed"),
+    # training_run_numbers
+    "episodes", "crashes", "filtered", "crash_rate", "filtered_rate", "crash_free_rate",
+    "crashes_per_1k_steps", "return_best", "return_last",
+    "saved_crashes", "false_alarms", "filter_precision", "filter_recall",
+    "crash_rate_without_filter",
+    *(f"{k}_b{b}" for b in range(STUDY_CURVE_BINS) for k in ("crash_rate", "filtered_rate", "return")),
+    "eval_return", "eval_return_std", "eval_crash_rate", "eval_length", "eval_score",
+    "best_score", "steps", "train_wall_s", "train_cpu_s", "log_speed",
+    # study_demonstrations
+    "demos_file", "demos_safe", "demos_unsafe", "demos_safe_expert", "demos_unsafe_expert",
+    "sac_rollouts_safe", "sac_rollouts_unsafe",
+]  # fmt: skip
+
+
+@task_id("thesis_lib.chapters.defender:study_run")
+def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One study task: a training run (:func:`train_run`), reduced to one row.
+
+    ``config`` (:func:`study_task` builds it): ``label`` (the method's name in the study),
+    ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``, ``n_demos``,
+    ``top_up``, ``demos`` (the demonstration recipe, :data:`DEMO_FIELDS`; None without a
+    filter), ``train`` (:data:`TRAIN_FIELDS`), ``eval_episodes``, ``bins`` and, for a scale
+    check, ``scale``.
+
+    Returns:
+        One row: ``method`` (the label), ``setting`` (the thesis's task name), ``seed``,
+        ``scale``; the :data:`RUN_COLUMNS` of :func:`train_run` (``acc_reward``, ``crash_pct``,
+        ...: the chapter's tables read them); :func:`training_run_numbers`; the final policy's
+        evaluation **without the filter** over ``eval_episodes`` episodes (``eval_return``,
+        ``eval_return_std``, ``eval_crash_rate``, ``eval_length``); ``eval_score`` and
+        ``best_score`` (``eval_return`` and ``return_best`` in % of the thesis's plain-SAC
+        return on the task, :data:`THESIS_SAC_RETURN`); ``steps``, ``train_wall_s``,
+        ``train_cpu_s``, ``log_speed`` (ln of training steps per CPU-second: higher is
+        cheaper); and where the demonstrations came from (:func:`study_demonstrations`).
+
+    Used in: DEFENDER chapter study (``thesis study 03_defender``).
+    """
+    torch.set_num_threads(1)  # small nets: one core per run; the study runs one run per core
+    task, seed = config["task"], int(config["seed"])
+    cfg = Config(**config["train"], tasks=[task])
+    demos: Any = None
+    info: dict[str, Any] = {}
+    if config["strategy"]:
+        demos, info = study_demonstrations(
+            task, config["demos"], int(config["n_demos"]), bool(config["top_up"])
+        )
+    c0 = time.process_time()
+    row, ep, res = train_run(
+        task, config["algo"], seed, cfg, demos, config["strategy"], config["trajectory"], False
+    )
+    cpu = time.process_time() - c0
+    steps = int(res.model.num_timesteps)
+    ev = evaluate(
+        res.model,
+        make_env(task, cfg.max_episode_steps),
+        n_episodes=int(config["eval_episodes"]),
+        seed=EVAL_SEED + seed,
+    )
+    ref = THESIS_SAC_RETURN.get(task, np.nan)
+    numbers = training_run_numbers(ep, steps, int(config["bins"]))
+    out: dict[str, Any] = {
+        "method": config["label"],
+        "setting": thesis_env_name(task),
+        "seed": seed,
+        "scale": config.get("scale", "study"),
+        "top_up": bool(config["top_up"]) if config["strategy"] else None,
+        **row,
+        **numbers,
+        "eval_return": float(ev["return"].mean()),
+        "eval_return_std": float(ev["return"].std(ddof=0)),
+        "eval_crash_rate": float(ev["crashed"].mean()),
+        "eval_length": float(ev["length"].mean()),
+        "eval_score": 100.0 * float(ev["return"].mean()) / ref,
+        "best_score": 100.0 * numbers["return_best"] / ref,
+        "steps": steps,
+        "train_wall_s": float(res.wall_time_s),
+        "train_cpu_s": float(cpu),
+        "log_speed": float(np.log(steps / max(cpu, 1e-9))),
+        **info,
+    }
+    return [out]
+
+
+def study_label(
+    algo: str,
+    strategy: str | None = None,
+    trajectory: str = "state",
+    n_demos: int | None = None,
+    top_up: bool = True,
+) -> str:
+    """A study method's name: ``"SAC"``, ``"SAC+MeanDemoW5/MeanDemoW10"``, with
+    ``" state-action"``, ``" n=10"`` (a count other than the study's ``n_demos``) or
+    ``" no top-up"`` appended.
+
+    >>> study_label("SAC", "MeanBothW5/MeanBothW5", "state_action")
+    'SAC+MeanBothW5/MeanBothW5 state-action'
+    >>> study_label("SAC", "MeanDemoW5/MeanDemoW10", n_demos=10)
+    'SAC+MeanDemoW5/MeanDemoW10 n=10'
+    """
+    if not strategy:
+        return algo
+    label = f"{algo}+{strategy}"
+    if trajectory == "state_action":
+        label += " state-action"
+    if n_demos is not None:
+        label += f" n={n_demos}"
+    if not top_up:
+        label += " no top-up"
+    return label
+
+
+def study_task(
+    cfg: Config,
+    task: str,
+    algo: str,
+    seed: int,
+    strategy: str | None = None,
+    trajectory: str = "state",
+    n_demos: int | None = None,
+    top_up: bool = True,
+) -> Task:
+    """The :class:`~thesis_lib.sweep.Task` of one study run (:func:`study_run`) of ``cfg``.
+
+    Its config holds everything the run depends on: the training fields, and for a filtered
+    run the demonstration recipe (the same for every run of a task: one SAC run, seed
+    ``cfg.seed``, topped up to ``max(n_demos, n_demos_list)`` per group) and the count.
+
+    Used in: DEFENDER chapter study.
+    """
+    n = max(cfg.n_demos, *cfg.n_demos_list)
+    recipe = {f: getattr(cfg, f) for f in DEMO_FIELDS} | {"n_demos": n, "n_demos_list": [n]}
+    count = cfg.n_demos if n_demos is None else n_demos
+    config: dict[str, Any] = {
+        "label": study_label(
+            algo, strategy, trajectory, None if count == cfg.n_demos else count, top_up
+        ),
+        "task": task,
+        "algo": algo,
+        "seed": int(seed),
+        "strategy": strategy,
+        "trajectory": trajectory if strategy else "state",
+        "n_demos": count if strategy else 0,
+        "top_up": bool(top_up) if strategy else True,
+        "demos": recipe if strategy else None,
+        "train": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+        "eval_episodes": cfg.eval_episodes,
+        "bins": STUDY_CURVE_BINS,
+    }
+    return Task(study_run, config)
+
+
+def study_tasks(cfg: Config) -> list[Task]:
+    """The tasks of the chapter's pre-registered study (``params/03_defender.study.yml``).
+
+    For each seed and task: the first of ``algos`` (SAC) plain, with each of
+    ``state_strategies`` (state trajectories) and ``state_action_strategies`` (state-action),
+    all with ``n_demos`` demonstrations per group, and with the first state strategy and each
+    other count of ``n_demos_list`` (Table 4.5); on ``no_topup_tasks`` also with the first
+    state strategy on the SAC roll-outs alone. The other algorithms (TD3) run plain and with
+    the first state strategy, on their ``algo_tasks``. Seeds are the outer loop, so a study
+    stopped part-way has whole seeds.
+
+    Used in: ``thesis study 03_defender``.
+    """
+    main, first = cfg.algos[0], cfg.state_strategies[0] if cfg.state_strategies else None
+    tasks = []
+    for seed in cfg.seeds:
+        for task in cfg.tasks:
+            for algo in cfg.algos:
+                if task not in cfg.algo_tasks.get(algo, cfg.tasks):
+                    continue
+                tasks.append(study_task(cfg, task, algo, seed))
+                if algo != main:
+                    if first:
+                        tasks.append(study_task(cfg, task, algo, seed, first))
+                    continue
+                for s in cfg.state_strategies:
+                    tasks.append(study_task(cfg, task, algo, seed, s))
+                for s in cfg.state_action_strategies:
+                    tasks.append(study_task(cfg, task, algo, seed, s, "state_action"))
+                if first:
+                    for n in cfg.n_demos_list:
+                        if n != cfg.n_demos:
+                            tasks.append(study_task(cfg, task, algo, seed, first, n_demos=n))
+                    if task in cfg.no_topup_tasks:
+                        tasks.append(study_task(cfg, task, algo, seed, first, top_up=False))
+    return tasks

@@ -1,0 +1,389 @@
+"""The DEFENDER chapter's experiments (thesis 4.3.2-4.3.3): the ablation and the training runs.
+
+One task function per experiment, each run through :func:`thesis_lib.sweep.run_tasks` and
+stored under ``results/03_defender/tasks`` (an interrupted chapter resumes; a run that Tables
+4.3-4.4 and 4.5 share is trained once):
+
+- :func:`ablation_task` the 576-strategy ablation of one task's logged episodes, one trajectory
+  kind (:func:`run_ablation` builds the grid);
+- :func:`train_task` one training run (:func:`train_run`) as its episode log
+  (:func:`run_tables_4_3_4_4`, :func:`run_table_4_5` build the grids;
+  :func:`runs_from_episodes` reduces each run to one row, :data:`RUN_COLUMNS`).
+
+The study's runs (:mod:`thesis_lib.chapters.defender.study`) train through the same
+:func:`train_run`.
+
+Used in: DEFENDER chapter (thesis 4.3).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal, NamedTuple, cast
+
+import numpy as np
+import pandas as pd
+from stable_baselines3.common.callbacks import StopTrainingOnMaxEpisodes
+
+from thesis_lib.book import results_dir
+from thesis_lib.chapters.defender.config import CHAPTER, Config
+from thesis_lib.chapters.defender.demos import (
+    demos_file,
+    demos_subset,
+    episode_limit,
+    load_demos_file,
+    make_env,
+    rl_overrides,
+    thesis_env_name,
+)
+from thesis_lib.defender import DefenderWrapper, DemoRun, DemoSet
+from thesis_lib.defender.ablation import strategy_ablation
+from thesis_lib.rl import config_from_params, train
+from thesis_lib.sweep import Task, run_tasks, task_id
+
+RUN_COLUMNS: tuple[str, ...] = (
+    "task", "algo", "trajectory", "strategy", "safe_strategy", "unsafe_strategy", "n_demos", "paper_compat",
+    "seed", "acc_reward", "crash_pct", "filtered_pct", "mean_last_100", "n_episodes", "wall_time_s",
+)  # fmt: skip
+"""Columns of one training run's summary row (:func:`train_run`)."""
+
+
+@task_id("thesis_lib.chapters.defender:ablation_task")
+def ablation_task(config: dict[str, Any]) -> pd.DataFrame:
+    """Sweep task: the 576-strategy ablation of one task's logged episodes, one trajectory kind.
+
+    Config keys: ``task``, ``trajectory``, ``episodes`` and ``demos`` (:func:`demos_file` names:
+    the logged SAC episodes as a safe-only set, and the demonstrations), ``horizon``,
+    ``max_trajectory``, ``n_jobs``.
+
+    Used in: DEFENDER chapter (thesis 4.3.2), through :func:`run_ablation`.
+    """
+    scores = strategy_ablation(
+        load_demos_file(config["episodes"]).safe,
+        load_demos_file(config["demos"]),
+        trajectory=config["trajectory"],
+        horizon=config["horizon"],
+        max_trajectory=config["max_trajectory"],
+        n_jobs=config["n_jobs"],
+    )
+    scores.insert(0, "trajectory", config["trajectory"])
+    scores.insert(0, "task", config["task"])
+    return scores
+
+
+def run_ablation(cfg: Config, runs: dict[str, DemoRun], progress: bool = True) -> pd.DataFrame:
+    """The 576-strategy ablation on each task's logged SAC episodes, for both trajectory kinds.
+
+    Returns:
+        One row per (task, trajectory, strategy): ``task``, ``trajectory`` and
+        :data:`~thesis_lib.defender.ablation.ABLATION_COLUMNS`.
+
+    Used in: DEFENDER chapter (thesis 4.3.2).
+    """
+    tasks = []
+    for task, run in runs.items():
+        episodes = demos_file(DemoSet(list(run.episodes), [], task), f"{thesis_env_name(task)}-log")
+        demos = demos_file(demos_subset(run, cfg.n_demos))
+        horizon = cfg.max_episode_steps or episode_limit(make_env(task, None))
+        for trajectory in ("state", "state_action"):
+            config = {
+                "task": task,
+                "trajectory": trajectory,
+                "episodes": episodes,
+                "demos": demos,
+                "horizon": horizon,
+                "max_trajectory": cfg.max_trajectory,
+                "n_jobs": cfg.n_jobs,
+            }
+            tasks.append(Task(ablation_task, config))
+    rows = run_tasks(
+        tasks, store=results_dir(CHAPTER) / "tasks", desc="ablation", progress=progress
+    )
+    return rows.drop(columns="task_key")
+
+
+#: Config fields a training run depends on (each :func:`train_task` config holds them).
+TRAIN_FIELDS = (
+    "max_episode_steps", "train_timesteps", "train_episodes", "net_arch", "learning_rate",
+    "batch_size", "max_trajectory", "dynamics_train_every",
+)  # fmt: skip
+
+
+class TrainedRun(NamedTuple):
+    """One training run (:func:`train_run`): its summary row, its episode log and its result."""
+
+    row: dict[str, Any]
+    """The run's summary row, :data:`RUN_COLUMNS`."""
+    episodes: pd.DataFrame
+    """One row per finished training episode, with the run's keys and ``wall_time_s``."""
+    result: Any
+    """The :class:`~thesis_lib.rl.TrainResult` (its ``model`` is the trained agent)."""
+
+
+def train_run(
+    task: str,
+    algo: str,
+    seed: int,
+    cfg: Config,
+    demos: DemoSet | None = None,
+    strategy: str | None = None,
+    trajectory: str = "state",
+    paper_compat: bool = False,
+) -> TrainedRun:
+    """Train one agent, with DEFENDER when ``demos`` and ``strategy`` are given.
+
+    The one training function of the chapter: Tables 4.3-4.5 (:func:`train_task`) and the study
+    (:func:`~thesis_lib.chapters.defender.study.study_run`) both train through it.
+
+    Returns:
+        ``(row, episodes, result)``: a summary row (:data:`RUN_COLUMNS`; Acc Reward = best
+        training episode return, % Crash = share of training episodes that crashed, filtered
+        episodes not counted as crashes), the episode log with the run's keys and
+        ``wall_time_s``, and the :class:`~thesis_lib.rl.TrainResult` (its model).
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    env = make_env(task, cfg.max_episode_steps)
+    safe_s = unsafe_s = None
+    if demos is not None and strategy is not None:
+        safe_s, unsafe_s = strategy.split("/")
+        env = DefenderWrapper(
+            env,
+            demos.safe,
+            demos.unsafe,
+            safe_method=safe_s,
+            unsafe_method=unsafe_s,
+            trajectory=cast(Literal["state", "state_action"], trajectory),
+            max_trajectory=cfg.max_trajectory,
+            paper_compat=paper_compat,
+            seed=seed,
+            # what each filtered action would have done (a copy of the state is stepped and
+            # restored bit for bit: training is unchanged): saved crashes vs false alarms
+            counterfactual=True,
+            dynamics_train_every=cfg.dynamics_train_every,
+            # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
+            dynamics_kwargs={
+                "hidden": list(cfg.net_arch),
+                "learning_rate": cfg.learning_rate,
+                "batch_size": cfg.batch_size,
+            },
+        )
+    callbacks = []
+    steps = cfg.train_timesteps
+    if cfg.train_episodes:
+        horizon = cfg.max_episode_steps or episode_limit(env) or 1000
+        steps = (
+            cfg.train_episodes * horizon
+        )  # an upper bound; the callback stops at the episode count
+        callbacks.append(StopTrainingOnMaxEpisodes(cfg.train_episodes))
+    rl = config_from_params(
+        {
+            "algo": algo,
+            "env_id": None,
+            "total_timesteps": int(steps),
+            "seed": int(seed),
+            **rl_overrides(cfg),
+        }
+    )
+    res = train(
+        rl,
+        env=env,
+        callbacks=callbacks,
+        progress=False,
+        info_keys=["filtered", "filter_step", "would_crash"],
+    )
+    ep = res.episodes
+    ep["filtered"] = ep["filtered"].astype("boolean").fillna(False).astype(bool)
+    ep["crashed"] = ep["crashed"] & ~ep["filtered"]  # a filtered episode is not a crash (4.3.3)
+    keys = {
+        "task": task,
+        "algo": algo,
+        "trajectory": trajectory if strategy else "none",
+        "strategy": strategy or "none",
+        "safe_strategy": safe_s,
+        "unsafe_strategy": unsafe_s,
+        "n_demos": len(demos.safe) if demos is not None and strategy else 0,
+        "paper_compat": bool(paper_compat),
+        "seed": int(seed),
+    }
+    row = {**keys, **_run_numbers(ep), "wall_time_s": res.wall_time_s}
+    for k, v in reversed(keys.items()):
+        ep.insert(0, k, v)
+    ep["wall_time_s"] = res.wall_time_s
+    return TrainedRun(row, ep, res)
+
+
+def _run_numbers(ep: pd.DataFrame) -> dict[str, Any]:
+    return {
+        "acc_reward": float(ep["return"].max()) if len(ep) else np.nan,
+        "crash_pct": 100 * float(ep["crashed"].mean()) if len(ep) else np.nan,
+        "filtered_pct": 100 * float(ep["filtered"].mean()) if len(ep) else np.nan,
+        "mean_last_100": float(ep["return"].tail(100).mean()) if len(ep) else np.nan,
+        "n_episodes": len(ep),
+    }
+
+
+@task_id("thesis_lib.chapters.defender:train_task")
+def train_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """Sweep task: one training run (:func:`train_run`), its episodes as long-format rows.
+
+    Config keys: ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``,
+    ``paper_compat``, ``demos`` (a :func:`demos_file` name, or None) and ``train`` (the
+    :data:`TRAIN_FIELDS` of the chapter's :class:`Config`).
+
+    Returns:
+        One row per training episode, with the run's keys and ``wall_time_s``; a run that
+        finished no episode gives one row with ``episode`` None.
+
+    Used in: DEFENDER chapter (thesis 4.3.3), through :func:`run_tables_4_3_4_4` and
+    :func:`run_table_4_5`.
+    """
+    cfg = Config(**config["train"])
+    demos = load_demos_file(config["demos"]) if config["demos"] else None
+    row, ep, _ = train_run(
+        config["task"],
+        config["algo"],
+        config["seed"],
+        cfg,
+        demos=demos,
+        strategy=config["strategy"],
+        trajectory=config["trajectory"],
+        paper_compat=config["paper_compat"],
+    )
+    if not len(ep):
+        keys = {k: row[k] for k in RUN_COLUMNS[:9]}
+        return [{**keys, "episode": None, "wall_time_s": row["wall_time_s"]}]
+    return ep.to_dict(orient="records")
+
+
+_RUN_KEYS = list(RUN_COLUMNS[:9])
+
+
+def runs_from_episodes(episodes: pd.DataFrame) -> pd.DataFrame:
+    """One summary row per run (:data:`RUN_COLUMNS`) from :func:`train_task`'s episode rows."""
+    rows = []
+    for _, ep in episodes.groupby("task_key", sort=False):
+        first = ep.iloc[0]
+        ep = ep[ep["episode"].notna()]
+        keys = {k: first[k] for k in _RUN_KEYS}
+        keys["paper_compat"] = bool(keys["paper_compat"])
+        rows.append({**keys, **_run_numbers(ep), "wall_time_s": float(first["wall_time_s"])})
+    return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
+
+
+class TableRuns(NamedTuple):
+    """Training runs: one summary row each, and every episode of every run."""
+
+    runs: pd.DataFrame
+    """One row per run, :data:`RUN_COLUMNS`."""
+    episodes: pd.DataFrame
+    """Every training episode, with the run's keys."""
+
+
+def _train_spec(cfg: Config, spec: dict[str, Any], demos: DemoSet | None) -> Task:
+    strategy = spec.get("strategy")
+    config = {
+        "task": spec["task"],
+        "algo": spec["algo"],
+        "seed": int(spec["seed"]),
+        "strategy": strategy,
+        "trajectory": spec.get("trajectory", "state") if strategy else "state",
+        "paper_compat": bool(spec.get("paper_compat", False)),
+        "demos": demos_file(demos) if strategy and demos is not None else None,
+        "train": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+    }
+    return Task(train_task, config)
+
+
+def _run_all(tasks: list[Task], desc: str, progress: bool) -> TableRuns:
+    unique = list({t.key: t for t in tasks}.values())
+    episodes = run_tasks(unique, store=results_dir(CHAPTER) / "tasks", desc=desc, progress=progress)
+    runs = runs_from_episodes(episodes)
+    eps = episodes[episodes["episode"].notna()].drop(columns="task_key").reset_index(drop=True)
+    return TableRuns(runs, eps)
+
+
+def run_tables_4_3_4_4(
+    cfg: Config, demo_runs: dict[str, DemoRun], progress: bool = True
+) -> TableRuns:
+    """SAC and TD3 with and without DEFENDER on every task and seed (Tables 4.3 and 4.4).
+
+    Runs each algorithm (on its ``algo_tasks``, default every task) plain, with each of
+    ``state_strategies`` on state trajectories, with
+    each of ``state_action_strategies`` on state-action trajectories, and (``paper_compat_check``)
+    SAC with the first state strategy in the authors' setting.
+
+    Used in: DEFENDER chapter (thesis 4.3.3).
+    """
+    specs: list[dict[str, Any]] = []
+    for task in cfg.tasks:
+        for seed in cfg.seeds:
+            for algo in cfg.algos:
+                if task not in cfg.algo_tasks.get(algo, cfg.tasks):
+                    continue
+                specs.append({"task": task, "algo": algo, "seed": seed})
+                specs += [
+                    {"task": task, "algo": algo, "seed": seed, "strategy": s, "trajectory": "state"}
+                    for s in cfg.state_strategies
+                ]
+                specs += [
+                    {
+                        "task": task,
+                        "algo": algo,
+                        "seed": seed,
+                        "strategy": s,
+                        "trajectory": "state_action",
+                    }
+                    for s in cfg.state_action_strategies
+                ]
+            if (
+                cfg.paper_compat_check
+                and cfg.state_strategies
+                and "SAC" in cfg.algos
+                and task
+                in (cfg.tasks[:1] if cfg.paper_compat_tasks is None else cfg.paper_compat_tasks)
+            ):
+                specs.append(
+                    {
+                        "task": task,
+                        "algo": "SAC",
+                        "seed": seed,
+                        "strategy": cfg.state_strategies[0],
+                        "trajectory": "state",
+                        "paper_compat": True,
+                    }
+                )
+    subsets = {task: demos_subset(run, cfg.n_demos) for task, run in demo_runs.items()}
+    tasks = [_train_spec(cfg, spec, subsets[spec["task"]]) for spec in specs]
+    return _run_all(tasks, "Tables 4.3-4.4", progress)
+
+
+def run_table_4_5(
+    cfg: Config,
+    demo_runs: dict[str, DemoRun],
+    strategy: str = "MeanDemoW5/MeanDemoW10",
+    progress: bool = True,
+) -> TableRuns:
+    """SAC with DEFENDER (state trajectories, ``strategy``) and each of ``n_demos_list`` demonstrations.
+
+    A run Tables 4.3-4.4 already made (same task, seed, strategy and demonstrations) is read
+    back from the sweep store, not repeated; so is a count larger than the pool (it gives the
+    same demonstrations as the whole pool).
+
+    Used in: DEFENDER chapter (thesis 4.3.3, Table 4.5).
+    """
+    tasks = []
+    for task in cfg.tasks:
+        for n in cfg.n_demos_list:
+            demos = demos_subset(demo_runs[task], n)
+            for seed in cfg.seeds:
+                spec = {
+                    "task": task,
+                    "algo": "SAC",
+                    "seed": seed,
+                    "strategy": strategy,
+                    "trajectory": "state",
+                }
+                tasks.append(_train_spec(cfg, spec, demos))
+    out = _run_all(tasks, "Table 4.5", progress)
+    runs = out.runs.sort_values(["task", "n_demos", "seed"], kind="stable")
+    return TableRuns(runs.reset_index(drop=True), out.episodes)
