@@ -14,7 +14,7 @@ from thesis_lib.chapters.mdlt import (
     aist_folds,
     phantomdance_folds,
     run_fold,
-    summarize,
+    summarize_folds,
     table_6_1,
     train_model,
 )
@@ -400,7 +400,7 @@ def test_run_fold_scores_models_and_baselines():
         "genre mean pose (oracle)",
     }
     assert len(res.rows) == 6 * len(va) and res.rows[["aje", "fid", "mae_deg"]].notna().all().all()
-    table = summarize(res.rows)
+    table = summarize_folds(res.rows)
     assert len(table) == 6 and (table["n_folds"] == 1).all()
     row = table[table.variant == "mean pose"].iloc[0]
     mean = np.concatenate([s.angles for s in tr]).mean(0)
@@ -415,9 +415,10 @@ def test_table_6_2_folds_run_as_resumable_tasks(tmp_path, monkeypatch):
     import tempfile
 
     from thesis_lib.chapters import mdlt as ch
+    from thesis_lib.chapters.mdlt import data, tasks
 
     seqs = _sequences(2, 3, T=40)
-    monkeypatch.setattr(ch, "_cached_sequences", lambda *a: tuple(seqs))
+    monkeypatch.setattr(data, "cached_sequences", lambda *a: tuple(seqs))
     monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path / "results"))
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
     (tmp_path / "tmp").mkdir()
@@ -432,7 +433,7 @@ def test_table_6_2_folds_run_as_resumable_tasks(tmp_path, monkeypatch):
     assert len(list((out / "checkpoints").glob("All_Genres_fold0_*.pt"))) == 2
     assert ch.example_checkpoint(cfg, "mamba").is_file()
     assert np.array_equal(run.examples["predictions"]["mamba"][0].shape, va[0].angles.shape)
-    monkeypatch.setattr(ch, "train_model", lambda *a, **k: pytest.fail("trained again"))
+    monkeypatch.setattr(tasks, "train_model", lambda *a, **k: pytest.fail("trained again"))
     again = ch.run_table_6_2(cfg)
     pd.testing.assert_frame_equal(again.rows, run.rows)
     assert list((tmp_path / "tmp").iterdir()) == []

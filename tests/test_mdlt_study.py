@@ -138,7 +138,7 @@ def test_phantomdance_fps_follows_the_text_unless_paper_compat():
 
 
 def test_thesis_table_6_2_beside_an_empty_and_a_filled_study():
-    empty = ex.study_table_6_2(pd.DataFrame())
+    empty = ex.compare_study_table_6_2(pd.DataFrame())
     assert (empty["what differs"] == "not run").all() and len(empty) == 22
     rows = pd.DataFrame(
         [
@@ -152,7 +152,7 @@ def test_thesis_table_6_2_beside_an_empty_and_a_filled_study():
             )
         ]
     )
-    t = ex.study_table_6_2(rows)
+    t = ex.compare_study_table_6_2(rows)
     ours = t.dropna(subset=["ours"]).set_index(["genre", "variant"])["ours"]
     assert ours[("mHO", "MDLT-T")] == pytest.approx(0.3)
     assert ours[(ex.ALL_GENRES, "MDLT-T")] == pytest.approx(0.5)
@@ -346,8 +346,8 @@ def test_data_sha_names_the_numbers_of_the_data_set(monkeypatch):
 
     shas = []
     for bump in (0.0, 0.0, 1e-6):
-        monkeypatch.setattr(ex, "_cached_sequences", lambda *a, b=bump: pieces(b))
-        ex._data_sha.cache_clear()
-        shas.append(ex._data_sha("aist", None, "smoke", 0))
-    ex._data_sha.cache_clear()
+        monkeypatch.setattr(ex.data, "cached_sequences", lambda *a, b=bump: pieces(b))
+        ex.data_sha.cache_clear()
+        shas.append(ex.data_sha("aist", None, "smoke", 0))
+    ex.data_sha.cache_clear()
     assert shas[0] == shas[1] != shas[2]  # one feature changed by 1e-6: another data set
