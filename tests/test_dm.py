@@ -223,7 +223,7 @@ def test_summary_and_win_counts_on_synthetic_curves():
     from thesis_lib.chapters.decision_mamba import (
         compare_table_5_5,
         compare_win_counts_5_5,
-        summarize_dm,
+        summarize_curves,
     )
 
     rows = []
@@ -249,7 +249,7 @@ def test_summary_and_win_counts_on_synthetic_curves():
                 rows.append(
                     dict(base, method="DT", target=tgt, eval_mode="window", return_mean=dt * scale)
                 )
-    s = summarize_dm(pd.DataFrame(rows))
+    s = summarize_curves(pd.DataFrame(rows))
     dm = s[s.method == "DM-noRTG"].iloc[0]
     assert (
         dm.best_mean == pytest.approx(15.0)
@@ -306,7 +306,7 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale(tmp_path, monkeypatch):
     assert curves.groupby("method").size().to_dict() == n
     assert set(curves[curves.method == "DM-noRTG"].eval_mode) == {"recurrent", "window"}
     assert len(list((tmp_path / "results" / ch.CHAPTER / "tasks").glob("*.json"))) == 5
-    summary = ch.summarize_dm(curves)
+    summary = ch.summarize_curves(curves)
     t55 = ch.compare_table_5_5(summary, "recurrent")
     assert set(t55.dropna(subset=["ours"]).method) == {
         "DT",
@@ -328,7 +328,7 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale(tmp_path, monkeypatch):
     assert (timing.time_ms_mean > 0).all()
     t56 = ch.compare_table_5_6(timing)
     assert "DM_without_R (recurrent step)" in set(t56.dropna(subset=["ours"]).method)
-    ratios = ch.run_timing_ratios(timing).set_index("method")
+    ratios = ch.summarize_timing_ratios(timing).set_index("method")
     assert ratios.loc["DT", "train / DT"] == pytest.approx(1.0)
     assert ratios.loc["HDM", "window / recurrent"] == pytest.approx(
         ratios.loc["HDM", "inference (window)"] / ratios.loc["HDM", "inference (recurrent)"]
@@ -340,7 +340,7 @@ def test_chapter_functions_run_end_to_end_at_tiny_scale(tmp_path, monkeypatch):
     names = [ch.THESIS_METHOD[m].replace("_", " ") for m in ch.DM_METHODS]
     assert labels == [n for n in names if n in labels] and len(labels) == 5
     assert len(ax.patches) == len(labels) * len(ax.get_xticks())  # a bar per method and set
-    ax = ch.plot_sweep(ch.summarize_dm(sweep), "DM-noRTG", data)
+    ax = ch.plot_sweep(ch.summarize_curves(sweep), "DM-noRTG", data)
     archs = [t.get_text() for t in ax.get_legend().get_texts()]
     assert "L1 D8 K2" in archs and len(ax.patches) == len(archs) * len(ax.get_xticks())
 

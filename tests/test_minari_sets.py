@@ -71,7 +71,7 @@ def test_task_keys_of_task_tier_sets_are_unchanged():
     assert keys == {"BC": "654399e8f19a64b3", "DT": "44c79d1a5285a803", "HDT": "748967226e6598ff"}
     compat = hdt.study_task(cfg, "DT", "hopper/medium", 0, cfg.arch(True), label="DT-compat")
     assert compat.key == "cf07719fda4531c6"
-    assert [t.key for t in hdt._tasks(cfg, cfg.datasets, cfg.methods, False)] == [
+    assert [t.key for t in hdt.sweep_tasks(cfg, cfg.datasets, cfg.methods, False)] == [
         "a863f1ebaf01d132",
         "003bc2aca2d3ef9b",
         "6dee81c5e068bf78",
@@ -92,7 +92,7 @@ def test_task_keys_of_task_tier_sets_are_unchanged():
         "f323e13b08b3e54b",
     ]
     ev = EvalSpec(episodes=1, max_steps=10)
-    assert dm._task(c5, "DM-noRTG", "hopper/medium", 0, c5.arch, ev).key == "db9c4ff3cf239c72"
+    assert dm.sweep_task(c5, "DM-noRTG", "hopper/medium", 0, c5.arch, ev).key == "db9c4ff3cf239c72"
 
 
 # ------------------------------------------------------------------ names, references, caps
@@ -201,7 +201,7 @@ def test_hdt_table_5_3_rows_from_minari_ids(minari_root):
     for _, r in curves.iterrows():  # D4RL-normalised with D4RL's references of the id
         lo, hi = ms.reference_returns(DOOR if r.task == "door" else KITCHEN)
         assert r.score_mean == pytest.approx(100 * (r.return_mean - lo) / (hi - lo))
-    summary = hdt.summarize(curves)
+    summary = hdt.summarize_curves(curves)
     data_avg = {k: float(np.mean(ds.returns)) for k, ds in data.items()}
     t53 = hdt.compare_table_5_3(summary, data_avg)
     ran = t53[t53.metric == "best during training (thesis)"].dropna(subset=["ours"])
@@ -236,7 +236,7 @@ def test_decision_mamba_table_5_5_rows_from_minari_ids(minari_root):
     assert (curves.length_mean > 5).all()  # AntMaze: whole episodes (to the goal or 700 steps)
     assert curves.score_mean.notna().all()
     assert (curves.score_mean == 100 * curves.return_mean).all()  # references 0 and 1
-    t55 = dm.compare_table_5_5(dm.summarize_dm(curves), cfg.eval_mode)
+    t55 = dm.compare_table_5_5(dm.summarize_curves(curves), cfg.eval_mode)
     ran = t55[t55.metric == t55.metric.iloc[0]].dropna(subset=["ours"])
     got = {(r.task, r.dataset, r.method, r.desired_return): r.paper for _, r in ran.iterrows()}
     assert got[("Antmaze", "umaze", "DT", "max")] == 0.92

@@ -514,7 +514,7 @@ def test_trained_models_beat_a_random_policy(kind):
 
 
 def test_offline_runner_rows_and_both_metrics():
-    from thesis_lib.chapters.hdt import Config, summarize
+    from thesis_lib.chapters.hdt import Config, summarize_curves
     from thesis_lib.seq.runner import run_offline
 
     rng = np.random.default_rng(0)
@@ -564,7 +564,7 @@ def test_offline_runner_rows_and_both_metrics():
         max(e.rewards.sum() for e in data)
     )
     assert curves[curves.method == "HDT"].target.unique().tolist() == ["none"]
-    s = summarize(curves)
+    s = summarize_curves(curves)
     assert len(s) == 4 and (s.n_seeds == 2).all()
     row = s[(s.method == "HDT")].iloc[0]
     hdt = curves[curves.method == "HDT"]
@@ -604,7 +604,7 @@ def test_experiment_config_errors_and_seeds():
 
 
 def test_paper_compat_is_measured_beside_the_default():
-    from thesis_lib.chapters.hdt import compare_paper_compat
+    from thesis_lib.chapters.hdt import summarize_paper_compat
 
     def rows(compat, offset):
         return pd.DataFrame([
@@ -614,7 +614,7 @@ def test_paper_compat_is_measured_beside_the_default():
         ] + [{"method": "BC", "task": "hopper", "tier": "medium", "seed": 0, "target": "none", "iteration": 2,
               "return_mean": 5.0, "score_mean": np.nan, "paper_compat": compat}])  # fmt: skip
 
-    c = compare_paper_compat(rows(False, 0.0), rows(True, 100.0)[lambda d: d.method == "HDT"])
+    c = summarize_paper_compat(rows(False, 0.0), rows(True, 100.0)[lambda d: d.method == "HDT"])
     assert c.method.unique().tolist() == ["HDT"]  # only what was measured both ways
     final = c[c.metric == "final checkpoint"].iloc[0]
     assert final.correct == pytest.approx(7.0) and final.paper_compat == pytest.approx(107.0)
@@ -622,7 +622,7 @@ def test_paper_compat_is_measured_beside_the_default():
 
 
 def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
-    from thesis_lib.chapters.hdt import Config, compare_paper_compat, run_curves, run_paper_compat
+    from thesis_lib.chapters.hdt import Config, run_curves, run_paper_compat, summarize_paper_compat
 
     monkeypatch.setenv(
         "THESIS_DATA_DIR", str(tmp_path / "data")
@@ -667,7 +667,7 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     monkeypatch.delenv("THESIS_SWEEP_FORCE")
     compat = run_paper_compat(cfg)
     assert compat.paper_compat.all() and set(compat.method) == {"HDT"}
-    table = compare_paper_compat(curves, compat)
+    table = summarize_paper_compat(curves, compat)
     assert (
         set(table.method) == {"HDT"} and (table.n_seeds == 2).all() and len(table) == 2
     )  # two metrics
