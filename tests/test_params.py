@@ -303,3 +303,21 @@ def test_existing_config_generates_a_valid_cell():
     exec(src, ns)
     assert config_from_namespace(bg.Config, ns) == bg.Config()
     _assert_ruff_clean(src)
+
+
+def test_spec_from_takes_same_named_fields_then_overrides():
+    """The one way a chapter's flat Config becomes a method's spec (``spec_from``)."""
+    from thesis_lib.book.params import spec_from
+    from thesis_lib.chapters.ur3 import Config as Ur3Config
+    from thesis_lib.seq.registry import ArchSpec
+    from thesis_lib.seq.runner import TrainSpec
+
+    cfg = Ur3Config(d_model=48, lr=2e-3, batch_size=7)
+    arch = spec_from(cfg, ArchSpec, max_timestep=300)
+    assert (arch.d_model, arch.max_timestep, arch.n_heads) == (48, 300, cfg.n_heads)
+    assert arch.bc_hidden_dim == ArchSpec().bc_hidden_dim  # not a Config field: the default
+    train = spec_from(cfg, TrainSpec, seed=9)
+    assert (train.lr, train.batch_size, train.seed) == (2e-3, 7, 9)
+    assert cfg.arch() == spec_from(cfg, ArchSpec, max_timestep=max(256, cfg.max_eval_steps + 1))
+    with pytest.raises(TypeError, match="TrainSpec has no field 'lrr'"):
+        spec_from(cfg, TrainSpec, lrr=1.0)

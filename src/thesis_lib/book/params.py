@@ -87,6 +87,42 @@ def config_from_namespace(
     return cls(**check_parameters(hints, {n: namespace[n] for n in names}, f"in {chapter}"))
 
 
+S = TypeVar("S")
+
+
+def spec_from(config: Any, spec: type[S], /, **overrides: Any) -> S:
+    """A method's spec (``ArchSpec``, ``TrainSpec``, ...) from a chapter's flat ``Config`` (a
+    dataclass): each field of ``spec`` that ``config`` has as a field by the same name, then
+    ``overrides``.
+
+    A chapter's parameters are flat (one notebook cell, one line of a study file each); this is
+    the one place where they become the specs the methods take, so a parameter keeps its name
+    on its way from the notebook to the model.
+
+    Example:
+        >>> @dataclasses.dataclass
+        ... class Train:
+        ...     lr: float = 1e-3
+        ...     seed: int = 0
+        >>> @dataclasses.dataclass
+        ... class Cfg:
+        ...     lr: float = 3e-4
+        ...     seeds: tuple = (0, 1)
+        >>> spec_from(Cfg(), Train, seed=1)
+        Train(lr=0.0003, seed=1)
+
+    Raises:
+        TypeError: an override that is no field of ``spec``.
+    """
+    fields = {f.name for f in dataclasses.fields(spec) if f.init}  # type: ignore[arg-type]
+    unknown = sorted(set(overrides) - fields)
+    if unknown:
+        raise TypeError(f"{spec.__name__} has no field {', '.join(map(repr, unknown))}")
+    own = {f.name for f in dataclasses.fields(config)}  # fields, not methods of the same name
+    taken = {n: getattr(config, n) for n in fields & own if n not in overrides}
+    return spec(**taken, **overrides)
+
+
 def _is_parameter_like(name: str, value: Any) -> bool:
     if name.startswith("_") or name in _KERNEL_NAMES:
         return False

@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
+from thesis_lib.book.params import spec_from
+
 if TYPE_CHECKING:
     from thesis_lib.seq.registry import ArchSpec
     from thesis_lib.seq.runner import TrainSpec
@@ -206,29 +208,10 @@ class Config:
         from thesis_lib.seq.registry import ArchSpec  # lazy: torch
 
         a = parse_arch(arch or self.arch)
-        return ArchSpec(
-            d_model=a.d_model,
-            n_layers=a.n_layers,
-            n_heads=self.n_heads,
-            K=a.K,
-            dropout=self.dropout,
-            gated_mlp=self.gated_mlp,
-            eval_mode=self.eval_mode,
-            paper_compat=self.paper_compat,
-            init=self.init,
-        )
+        return spec_from(self, ArchSpec, d_model=a.d_model, n_layers=a.n_layers, K=a.K)
 
     def train_spec(self, seed: int) -> TrainSpec:
         """The :class:`~thesis_lib.seq.runner.TrainSpec` of the run with ``seed``."""
         from thesis_lib.seq.runner import TrainSpec  # lazy: torch
 
-        return TrainSpec(
-            seed=seed,
-            iterations=self.iterations,
-            batch_size=self.batch_size,
-            lr=self.lr,
-            warmup_steps=self.warmup_steps,
-            eval_every=self.eval_every,
-            device=self.device,
-            progress=self.progress,
-        )
+        return spec_from(self, TrainSpec, seed=seed)

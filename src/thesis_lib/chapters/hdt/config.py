@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
+from thesis_lib.book.params import spec_from
+
 if TYPE_CHECKING:
     from thesis_lib.seq.registry import ArchSpec
     from thesis_lib.seq.runner import EvalSpec, TrainSpec
@@ -190,31 +192,15 @@ class Config:
         """The :class:`~thesis_lib.seq.registry.ArchSpec` of every method."""
         from thesis_lib.seq.registry import ArchSpec  # lazy: torch
 
-        return ArchSpec(
-            d_model=self.d_model,
-            n_layers=self.n_layers,
-            n_heads=self.n_heads,
-            K=self.K,
-            dropout=self.dropout,
-            bc_hidden_dim=self.bc_hidden_dim,
-            paper_compat=self.paper_compat if paper_compat is None else bool(paper_compat),
-            init=self.init,
-        )
+        if paper_compat is None:
+            return spec_from(self, ArchSpec)
+        return spec_from(self, ArchSpec, paper_compat=bool(paper_compat))
 
     def train_spec(self, seed: int) -> TrainSpec:
         """The :class:`~thesis_lib.seq.runner.TrainSpec` of the run with ``seed``."""
         from thesis_lib.seq.runner import TrainSpec  # lazy: torch
 
-        return TrainSpec(
-            seed=seed,
-            iterations=self.iterations,
-            batch_size=self.batch_size,
-            lr=self.lr,
-            warmup_steps=self.warmup_steps,
-            eval_every=self.eval_every,
-            device=self.device,
-            progress=self.progress,
-        )
+        return spec_from(self, TrainSpec, seed=seed)
 
     def eval_spec(self) -> EvalSpec:
         """The :class:`~thesis_lib.seq.runner.EvalSpec` of every run."""

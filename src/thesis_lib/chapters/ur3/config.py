@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
+from thesis_lib.book.params import spec_from
+
 if TYPE_CHECKING:
     from thesis_lib.seq.registry import ArchSpec
     from thesis_lib.seq.runner import TrainSpec
@@ -112,30 +114,11 @@ class Config:
         """The :class:`~thesis_lib.seq.registry.ArchSpec` of both methods."""
         from thesis_lib.seq.registry import ArchSpec  # lazy: torch
 
-        return ArchSpec(
-            d_model=self.d_model,
-            n_layers=self.n_layers,
-            n_heads=self.n_heads,
-            K=self.K,
-            dropout=self.dropout,
-            max_timestep=max(256, self.max_eval_steps + 1),
-            paper_compat=self.paper_compat,
-            init=self.init,
-        )
+        return spec_from(self, ArchSpec, max_timestep=max(256, self.max_eval_steps + 1))
 
     def train_spec(self, seed: int) -> TrainSpec:
         """The :class:`~thesis_lib.seq.runner.TrainSpec` of the run with ``seed`` (no evaluation
         during training)."""
         from thesis_lib.seq.runner import TrainSpec  # lazy: torch
 
-        return TrainSpec(
-            seed=seed,
-            iterations=self.iterations,
-            batch_size=self.batch_size,
-            lr=self.lr,
-            warmup_steps=self.warmup_steps,
-            eval_every=0,
-            rtg_scale=RTG_SCALE,
-            device=self.device,
-            progress=self.progress,
-        )
+        return spec_from(self, TrainSpec, seed=seed, eval_every=0, rtg_scale=RTG_SCALE)
