@@ -92,14 +92,13 @@ def load_evidence(chapter: Chapter, reps: int = 10_000) -> Evidence:
     Raises:
         FileNotFoundError: the chapter has no study file.
     """
-
-    spec, chapter = chapter, chapter.name
-    study = st.load_study(chapter)
+    name = chapter.name
+    study = st.load_study(name)
     rows = st.study_rows(study)
     if len(rows):  # the grid's order (settings, seeds, methods as registered), not the files'
-        order = {t.key: i for i, t in enumerate(st.study_tasks(study, spec))}
+        order = {t.key: i for i, t in enumerate(st.study_tasks(study, chapter))}
         rows = rows.sort_values("task_key", key=lambda k: k.map(order), kind="stable")
-    info_p = st.studies_dir(chapter) / "run.json"
+    info_p = st.studies_dir(name) / "run.json"
     info = json.loads(info_p.read_text()) if info_p.exists() else {}
     scale = rows["scale"].fillna("study") if "scale" in rows else pd.Series("study", rows.index)
     main, check = rows[scale == "study"], rows[scale == "check"]
@@ -108,7 +107,7 @@ def load_evidence(chapter: Chapter, reps: int = 10_000) -> Evidence:
         check = pd.concat([same, check], ignore_index=True)
     ev = Evidence(study, main.reset_index(drop=True), check.reset_index(drop=True), info)
     if ev.complete:
-        ev.comparisons = st.evaluate_study(chapter, reps=reps)
+        ev.comparisons = st.evaluate_study(name, reps=reps)
     return ev
 
 
