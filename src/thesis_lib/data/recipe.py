@@ -66,7 +66,11 @@ DatasetSize = Literal["smoke", "full"]
 #: 3: the medium tier samples its policy's own exploration (D4RL's medium sets were sampled
 #: from SAC's Gaussian: the returns spread); Maze2D scores D4RL's fixed target and its
 #: expert visits random goals; the size is part of the id (:func:`size_namespace`).
-GENERATOR_VERSION = 3
+#: 4: hopper's medium and medium-replay tiers (and the medium half of medium-expert) come from
+#: its SAC medium run at D4RL's level (``policies/hopper-medium``, issue #34), not from ARS.
+#: A shipped policy that changes what a tier is made from moves this version too: it is the
+#: data recipe that a run's key carries (:mod:`thesis_lib.parity`).
+GENERATOR_VERSION = 4
 
 #: order of the tiers in the per-tier seed (never reorder: it would change every set).
 _TIER_INDEX = {"expert": 0, "medium": 1, "medium-replay": 2, "medium-expert": 3, "random": 4}
