@@ -205,10 +205,14 @@ def test_v1_study_files_keep_their_init_and_task_keys():
 def test_dt_learns_to_bc_level_on_hopper_medium():
     """Our DT within 5 normalised points of BC on the hopper/medium smoke set, at the study's
     size (d32, 1 layer) with batch 16 for 10k updates (about 90 CPU-seconds a run; the three
-    runs share the two cores through the parity harness's own task function). With the v1
-    initialisation (``init="torch"``) the same run stops more than 5 points short of the fixed
-    DT. Measured on recipe-3 data (seed 0): DT 23.9, v1 16.8, BC 21.0 (data 21.7); on the
-    recipe-2 data of the parity table, v1 12.0 and 15.0 against 35.2 and 32.0."""
+    runs share the two cores through the parity harness's own task function).
+
+    The v1 initialisation (``init="torch"``) runs beside it, reported, not asserted: it fell
+    more than 5 points short of the fixed DT on the recipe-2 data of the parity table (v1 12.0
+    and 15.0 against 35.2 and 32.0) and on recipe 3 (16.8 against 23.9), but not on recipe 4's
+    hopper medium at D4RL's level (seed 0: DT 32.0, v1 33.6, BC 34.8; data 41.9). How much the
+    v1 initialisation costs depends on the data; the parity table's `-r4` rows measure it over
+    seeds."""
     from thesis_lib.data.recipe import GENERATOR_VERSION
     from thesis_lib.parity import ours_run
     from thesis_lib.sweep import Task, run_tasks
@@ -236,8 +240,8 @@ def test_dt_learns_to_bc_level_on_hopper_medium():
         progress=False,
     )
     dt, v1, bc = rows["score"].tolist()
-    assert dt >= bc - 5.0, (dt, bc)
-    assert v1 < dt - 5.0, (v1, dt)  # the test can fail: the v1 code does
+    assert dt >= bc - 5.0, {"DT": dt, "DT v1 init": v1, "BC": bc}
+    assert np.isfinite(v1)
 
 
 def test_a_run_of_another_data_recipe_is_refused():
@@ -355,3 +359,20 @@ def test_parity_table_says_parity_only_inside_the_band():
     assert bool(t.loc["same", "parity"]) and t.loc["same", "difference"] == pytest.approx(0.0)
     assert not bool(t.loc["gap", "parity"]) and t.loc["gap", "ci_high"] < 0
     assert pd.isna(t.loc["half", "difference"]) and t.loc["half", "parity"] is None
+
+
+def test_thesis_parity_skips_runs_it_cannot_redo(tmp_path, capsys):
+    """`make parity` runs what is missing; a missing run of another data recipe cannot be made
+    (its data is gone), so it is skipped and named, and the table is still written."""
+    from thesis_lib.cli import main
+
+    f = tmp_path / "parity.yml"
+    f.write_text(
+        "common: {dataset: hopper/medium, dataset_size: smoke, seeds: [0, 1], episodes: 2}\n"
+        "comparisons:\n- {name: old, method: DT, data_recipe: 2}\n"
+    )
+    store = tmp_path / "runs" / "tasks"
+    assert main(["parity", "-f", str(f), "--store", str(store)]) == 0
+    out = capsys.readouterr()
+    assert "skipping 4 run(s) of old" in out.err and "cannot be redone" in out.err
+    assert (store.parent / "parity.csv").is_file() and not list(store.glob("*.json"))

@@ -9,12 +9,15 @@ thesis parity --table                  # print the table from the stored runs on
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 
 def _cmd_parity(args: argparse.Namespace) -> int:
+    from thesis_lib.data.recipe import GENERATOR_VERSION
     from thesis_lib.parity import (
+        can_redo,
         load_parity_file,
         parity_table,
         parity_tasks,
@@ -35,12 +38,26 @@ def _cmd_parity(args: argparse.Namespace) -> int:
         if unknown:
             raise ValueError(f"Unknown comparison(s) {unknown}. Valid: {', '.join(tasks)}.")
     store = args.store or root / "studies" / "parity" / "tasks"
+    st = TaskStore(store)
     if not args.table:
         chosen = {k: v for k, v in tasks.items() if not args.only or k in args.only}
+        todo = [t for t in unique_tasks(chosen) if not st.has(t.key)]
+        stale = [t for t in todo if not can_redo(t.config)]
+        if stale:  # made on data this checkout no longer makes: their rows stay a record
+            names = sorted({n for n, sides in chosen.items() for ts in sides.values()
+                            for t in ts if t in stale})  # fmt: skip
+            print(
+                f"skipping {len(stale)} run(s) of {', '.join(names)}: their data recipe is not "
+                f"this checkout's ({GENERATOR_VERSION}), so they cannot be redone",
+                file=sys.stderr,
+            )
         run_tasks(
-            unique_tasks(chosen), store=store, n_jobs=args.jobs, desc="parity", keep_going=True
+            [t for t in todo if t not in stale],
+            store=store,
+            n_jobs=args.jobs,
+            desc="parity",
+            keep_going=True,
         )
-    st = TaskStore(store)
     rows = {
         name: {side: [r for t in ts if st.has(t.key) for r in st.read(t.key)["rows"]]
                for side, ts in sides.items()}

@@ -29,6 +29,7 @@ import os
 import subprocess
 import sys
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +49,7 @@ from thesis_lib.seq.trainer import TrainConfig
 from thesis_lib.sweep import Task
 
 __all__ = [
+    "can_redo",
     "KNOWN_DIFFERENCES",
     "NO_PEER",
     "PEER_METHODS",
@@ -184,6 +186,14 @@ def data_recipe(comparison: Comparison) -> int | None:
     if is_minari_id(comparison.dataset):
         return None
     return comparison.data_recipe or GENERATOR_VERSION
+
+
+def can_redo(config: Mapping[str, Any]) -> bool:
+    """Whether this checkout can make a run's data again: a Minari id, or a ``task/tier`` set
+    of this checkout's data recipe (a run without ``data_recipe`` is of recipe 2)."""
+    if is_minari_id(config["dataset"]):
+        return True
+    return config.get("data_recipe", LEGACY_DATA_RECIPE) == GENERATOR_VERSION
 
 
 def _load(dataset: str, size: str, recipe: int | None = LEGACY_DATA_RECIPE) -> Any:
