@@ -183,7 +183,6 @@ def study_code_paths(modules: set[str], root: Path | None = None) -> list[str] |
     ``sweep`` and ``mdlt`` (the dance checks) code, but no ``defender`` or ``clfd`` module: a
     commit that only changes DEFENDER did not change what the 07 rows depend on.
     """
-
     root = Path(root) if root is not None else project_root()
     src = root / "src"
     todo, seen, files = list(modules), set(), set()
@@ -214,7 +213,6 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     CLAIMS.md asks each page to say at which commit a study was computed and what changed
     since: a change listed here did not take part in the verdicts.
     """
-
     cols = ["commit", "date", "subject"]
     commits = [c.removesuffix("-dirty") for c in ev.info.get("commits", [])]
     stamps = {}
@@ -360,7 +358,6 @@ def _complete_methods(ev: Evidence, metric: str, settings: list[str] | None) -> 
     """Per method, its ``(seeds, settings)`` matrix over ``settings`` (default: every setting
     the method ran), once the study is complete (``{}`` before: like the verdicts, the
     aggregates wait for the full grid)."""
-
     c = ev.study.columns
     if not ev.complete or metric not in ev.rows or c["method"] not in ev.rows:
         return {}
@@ -386,7 +383,6 @@ def aggregate_table(
     """Per method, over ``settings`` (default: all the method ran): the IQM and the mean of
     every (seed, setting) score, each with its 95% interval from a bootstrap stratified over
     settings (rliable's aggregate estimates). Empty until the study is complete."""
-
     metric = metric or ev.study.metric
     cols = ["method", "settings", "runs", "iqm", "iqm_low", "iqm_high"]
     cols += ["mean", "mean_low", "mean_high"]
@@ -555,7 +551,6 @@ def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
     """The comparisons registered on the primary metric, recomputed on the secondary one (the
     thesis's best evaluation during training): does the verdict depend on the metric?
     Empty until the study is complete or when the study names no secondary metric."""
-
     sec = ev.study.secondary
     if not ev.complete or not sec or sec not in ev.rows:
         return pd.DataFrame()
@@ -604,7 +599,6 @@ def claim_readings(
     Raises:
         ValueError: ``claim_notes`` names a claim the study does not answer.
     """
-
     claims = list(dict.fromkeys(s["claim"] for s in ev.study.comparisons))
     claim_notes = dict(claim_notes or {})
     unknown = sorted(set(claim_notes) - set(claims))

@@ -337,7 +337,6 @@ def sweep_environment(
     Raises:
         ValueError: an unknown executor, ``jobs < 1``, or an address with a non-Ray executor.
     """
-
     if address and executor is None:
         executor = "ray"
     env: dict[str, str] = {}
@@ -399,7 +398,7 @@ def run_chapters(
     ``jobs`` counts chapters; how each chapter's own task grids run (executor, parallel
     tasks) is set by ``env`` (see :func:`sweep_environment`), given to every chapter's kernel.
     ``registry`` (``thesis_lib.chapters.CHAPTERS``): each chapter found there has its values
-    checked against its ``Config`` before any chapter starts.
+    checked against its ``Config``'s type hints before papermill starts it.
 
     Raises:
         ChapterFailed: after all chapters ran, if any failed (every failure in the message).

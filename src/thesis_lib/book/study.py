@@ -92,7 +92,6 @@ class Study:
     def hash(self) -> str:
         """Hash of everything pre-registered (all fields but the file's path; ``gates`` and
         ``interval`` only where a file sets them, so v1 study files keep their hash)."""
-
         d = dataclasses.asdict(self)
         d.pop("path")
         if not d["gates"]:
@@ -121,7 +120,6 @@ def studies_dir(chapter: str | None = None) -> Path:
 
 def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     """Validate a study mapping (unknown or missing keys, unknown claims are errors)."""
-
     where = f" in {path}" if path else ""
     unknown = set(data) - STUDY_KEYS
     if unknown:
@@ -265,7 +263,6 @@ def study_config(study: Study, chapter: Chapter, scale: str = "study") -> Any:
     them): fields added after the v1 studies were registered, at the value those studies ran
     with (``init: torch``), so an older file keeps its meaning and its task keys. A new study
     file names such fields itself."""
-
     _check_chapter(study, chapter)
     _check_study_values(study, chapter.Config)
     _check_study_columns(study, chapter.study_columns)
@@ -283,7 +280,6 @@ def _check_study_values(study: Study, config_cls: type) -> None:
     of its ``Config`` field (:func:`~thesis_lib.book.params.check_value`, naming the file), and
     a list is written as one: ``seeds: 3`` is not the list ``[3]`` (as ``-p seeds 3`` would be),
     it is refused. Unknown fields are left to ``config_from_namespace``."""
-
     hints = config_hints(config_cls)
     where = f" in {study.path}" if study.path else ""
     check = (study.scale_check or {}).get("config") or {}
@@ -323,7 +319,6 @@ def _check_study_columns(study: Study, columns: Any) -> None:
 def study_tasks(study: Study, chapter: Chapter) -> list[Any]:
     """The study's tasks, from its chapter's ``study_tasks(cfg)``: the scale check's first
     (their configs carry ``scale: check``), then the study's own."""
-
     tasks = chapter.study_tasks(study_config(study, chapter))
     if study.scale_check and study.scale_check.get("config"):
         check = chapter.study_tasks(study_config(study, chapter, "check"))
@@ -337,7 +332,6 @@ def reuse_tasks(study: Study, keys: list[str]) -> int:
     study's store (each record notes where it came from); returns how many were copied.
 
     A record is reused only if it was written under its own study's current hash."""
-
     own = TaskStore(studies_dir(study.chapter) / "tasks")
     n = 0
     for chapter in study.reuse:
@@ -434,7 +428,6 @@ def run_study(
     that another process holds is skipped (said on stderr), so a second run of a study never
     runs a task that the first one is running or will run. The rows returned are those of the
     tasks this run finished or found stored."""
-
     study = load_study(chapter.name)
     tasks = study_tasks(study, chapter)
     out = studies_dir(chapter.name)
@@ -507,7 +500,6 @@ def cpu_hours_left(
     when nothing has finished. ``records``: the study's task records, when the caller has
     already read them (:func:`task_records`).
     """
-
     recs = records if records is not None else task_records(study, [t.key for t in tasks])
     if not recs:
         return 0.0
@@ -552,7 +544,6 @@ def write_study_summary(
 ) -> dict[str, Any]:
     """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks
     (``records``, when the caller has read them already)."""
-
     out = studies_dir(study.chapter)
     out.mkdir(parents=True, exist_ok=True)
     recs = records if records is not None else task_records(study, keys)
@@ -584,7 +575,6 @@ def gates_path(chapter: str) -> Path:
 
 def study_gates(study: Study) -> list[dict[str, Any]]:
     """The study file's gates, then those of its review file (:func:`gates_path`)."""
-
     p = gates_path(study.chapter)
     review = load_review(p)[0] if p.is_file() else []
     return [*study.gates, *review]
@@ -593,7 +583,6 @@ def study_gates(study: Study) -> list[dict[str, Any]]:
 def study_comparisons(study: Study) -> list[dict[str, Any]]:
     """The study's comparisons, with its review file's ``retest`` entries applied
     (:func:`thesis_lib.stats.gates.apply_retests`: e.g. an equivalence claim retested by TOST)."""
-
     p = gates_path(study.chapter)
     retests = load_review(p)[1] if p.is_file() else []
     return apply_retests(study.comparisons, retests)
@@ -608,7 +597,6 @@ def _parity_table() -> pd.DataFrame | None:
 def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
     """The pre-registered comparisons of a finished study (raises if it is incomplete, or if
     a row the comparisons read is wrong: the error names its task file and what is wrong)."""
-
     study = load_study(chapter)
     info_p = studies_dir(chapter) / "run.json"
     info = json.loads(info_p.read_text()) if info_p.exists() else {}
@@ -666,7 +654,6 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
     """``studies/claims.csv``: one row per claim of CLAIMS.md, ``pending`` where no study
     (or no complete one) answers it yet. ``chapters``: the registry
     (``thesis_lib.chapters.CHAPTERS``), which counts a pending study's tasks."""
-
     root = project_root() / "params"
     rows: dict[str, dict[str, Any]] = {}
     for p in sorted(root.glob("*.study.yml")):

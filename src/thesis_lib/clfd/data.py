@@ -179,7 +179,6 @@ def split_sizes(n_demos: int) -> dict[str, int]:
 
 def default_cache_dir() -> Path:
     """Where rendered data sets are cached: ``<thesis data dir>/thesis/clfd``."""
-
     return data_dir() / "thesis" / "clfd"
 
 

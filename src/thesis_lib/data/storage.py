@@ -269,7 +269,6 @@ def load(dataset_id: str, validate: bool = True) -> OfflineDataset:
         DamagedDatasetError: the files cannot be read (truncated, half-written); the message
             names the id and the command that rebuilds it.
     """
-
     path = find_dataset(dataset_id)
     if path is None:
         raise FileNotFoundError(missing_message(dataset_id))

@@ -259,7 +259,6 @@ def cost_curves(
 
     Used in: DEFENDER strategy ablation (thesis 4.3.2).
     """
-
     x = as_sequence(trajectory, "trajectory")
     packed = (
         references

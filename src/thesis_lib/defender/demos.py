@@ -514,7 +514,6 @@ def expert_demonstrations(
 
     Used in: DEFENDER (thesis 4.3).
     """
-
     return policy_demonstrations(
         env_id,
         load_policy(_expert_task(env_id), "expert"),
@@ -626,7 +625,6 @@ def save_demonstrations_minari(
 
     Used in: DEFENDER (thesis 4.3).
     """
-
     ids = _minari_ids(demoset.env_id, name)
     for group, dataset_id in ids.items():
         demos = getattr(demoset, group)
@@ -668,7 +666,6 @@ def load_demonstrations_minari(
 
     Used in: DEFENDER (thesis 4.3).
     """
-
     groups = {}
     with _DataDir(root):
         for group, dataset_id in _minari_ids(env_id, name).items():
@@ -689,7 +686,6 @@ def _features_list(demos: Sequence[Any], trajectory: Trajectory, group: str) -> 
 
 def _expert_task(env_id: str) -> str:
     """The :mod:`thesis_lib.data` task whose shipped expert plays ``env_id``."""
-
     names = [name for name, spec in TASKS.items() if spec.env_id == env_id and has_policies(name)]
     if not names:
         have = sorted(spec.env_id for name, spec in TASKS.items() if has_policies(name))
@@ -706,5 +702,4 @@ def shipped_expert_label(env_id: str) -> str:
     Raises:
         ValueError: no shipped expert for ``env_id``.
     """
-
     return f"{load_policy_record(_expert_task(env_id)).algorithm_name} expert"

@@ -666,7 +666,6 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
     poses at exactly 30 fps, in the official format (:func:`readers.smpl_to_phantom`): world
     rotations as (x, y, z, w) quaternions and root positions in Unity's left-handed frame.
     """
-
     root = Path(root)
     (root / "motion").mkdir(parents=True, exist_ok=True)
     (root / "music").mkdir(parents=True, exist_ok=True)
@@ -702,7 +701,6 @@ def write_phantomdance_layout(root: str | Path, n: int = 20, seconds: float = 8.
 
 def default_root(layout: str = "aist", size: str = "smoke", seed: int = 0) -> Path:
     """Where :func:`default_dataset` keeps a set: ``<data dir>/thesis-mdlt/<layout>-<size>-seed<seed>``."""
-
     return data_dir() / "thesis-mdlt" / f"{layout}-{size}-seed{seed}"
 
 

@@ -182,7 +182,6 @@ LEGACY_DATA_RECIPE = 2
 def data_recipe(comparison: Comparison) -> int | None:
     """The recipe a comparison's runs use: its own, else this checkout's for a ``task/tier``
     set; ``None`` for a Minari id (not made here)."""
-
     if is_minari_id(comparison.dataset):
         return None
     return comparison.data_recipe or GENERATOR_VERSION
@@ -198,7 +197,6 @@ def can_redo(config: Mapping[str, Any]) -> bool:
 
 def _load(dataset: str, size: str, recipe: int | None = LEGACY_DATA_RECIPE) -> Any:
     """The run's data set; refused where it needs another data recipe than this checkout's."""
-
     if not is_minari_id(dataset) and recipe is not None and recipe != GENERATOR_VERSION:
         raise ValueError(
             f"This run needs {dataset} made by data recipe {recipe}, and this checkout makes "
@@ -219,7 +217,6 @@ def _data_sha(ds: Any) -> str:
 
 def _row(config: dict[str, Any], side: str, returns: Any, lengths: Any, ds: Any, **extra: Any):
     """One parity row: the run's D4RL-normalised score (of the mean return), the data set's."""
-
     task = config["dataset"].split("/")[0]
     r = float(np.mean(returns))
     return {
@@ -269,7 +266,6 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
 
 def peer_python() -> Path:
     """The peer venv's python (``$THESIS_CACHE_DIR/peer-venv``)."""
-
     return cache_dir() / "peer-venv" / "bin" / "python"
 
 
@@ -313,7 +309,6 @@ def export_npz(ds: Any, path: str | Path) -> Path:
 
 def peer_config(config: dict[str, Any], ds: Any) -> dict[str, Any]:
     """The JSON the peer script reads: the run's settings in plain numbers."""
-
     arch = ArchSpec(**config["arch"])
     tr = config["train"]
     defaults = TrainConfig()
@@ -405,7 +400,6 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
     A peer run's config holds no ``init`` (it is ours to vary), so comparisons that differ only
     there share their peer runs (the same task keys: run and stored once).
     """
-
     out: dict[str, dict[str, list[Any]]] = {}
     for c in comparisons:
         sides: dict[str, list[Any]] = {"ours": [], "peer": []}

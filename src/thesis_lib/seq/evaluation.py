@@ -105,7 +105,6 @@ def eval_step_cap(task: str, cap: int | None) -> int | None:
         >>> eval_step_cap("D4RL/door/human-v2", 100), eval_step_cap("D4RL/antmaze/umaze-v1", 100)
         (100, None)
     """
-
     if is_minari_id(task):  # a real Minari set: AntMaze and Kitchen are sparse too
         return minari_step_cap(task, cap)
     return None if get_task(task).kind == "maze" else cap

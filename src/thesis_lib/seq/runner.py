@@ -178,7 +178,6 @@ def run_offline(
         target_return, iteration, return_mean, return_std, score_mean, length_mean, loss``
         (``episode`` and the ``episode_info`` keys with ``episode_info``).
     """
-
     check_methods([method])
     if envs is None and task is None:
         raise ValueError("run_offline needs the task's name (task=...) or an envs factory.")

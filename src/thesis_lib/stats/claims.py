@@ -158,7 +158,6 @@ def evaluate_comparisons(
     keeps what its interval alone says, ``validity`` is ``valid``, ``untestable`` or empty (no
     gate), and ``gates`` lists each gate's figure.
     """
-
     for g in gates:
         check_gate(g)
     cols = {"method": method_col, "setting": setting_col, "seed": seed_col}
@@ -234,7 +233,6 @@ def _holm_adjust(res: pd.DataFrame) -> pd.DataFrame:
     comparison that holds by its own interval but not after the adjustment (at
     :data:`HOLM_ALPHA`, or :data:`HOLM_ALPHA_EQUIVALENT`) becomes inconclusive
     (``stat_verdict`` keeps the unadjusted verdict)."""
-
     res = res.copy()
     counted = res["counts"].astype(bool).to_numpy()
     p = res["p_value"].astype(float).to_numpy() if "p_value" in res else np.full(len(res), np.nan)

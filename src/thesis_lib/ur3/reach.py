@@ -279,7 +279,6 @@ def make_demonstrations(
 
     Used in: UR3 deployment chapter (Table 5.4).
     """
-
     if n < 1:
         raise ValueError(f"Expect n >= 1 demonstrations, got {n}.")
     env = UR3ReachEnv(**{"terminate_on_success": False, **(env_kwargs or {})})
@@ -324,7 +323,6 @@ def get_reach_dataset(n_demos: int = 100, seed: int = 0, overwrite: bool = False
 
     Used in: UR3 deployment chapter (Table 5.4).
     """
-
     ctrl = TeleopController(seed=seed)
     info = {
         "algorithm": "thesis_lib.ur3.reach.TeleopController",

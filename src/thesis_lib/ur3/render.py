@@ -30,7 +30,6 @@ def plot_arm(
     kin=None,
 ) -> None:
     """Draw the arm at ``q (6,)`` as its DH skeleton (base → joint origins → flange) on a 3-D axis."""
-
     kin = kin or UR3Kinematics()
     p = kin.points(q)
     ax.plot(p[:, 0], p[:, 1], p[:, 2], "-o", color=color, alpha=alpha, lw=3, ms=3, label=label)

@@ -181,7 +181,6 @@ def check_trajectory(
 
     Used in: UR3 deployment chapter.
     """
-
     q, dt, lim = _as_traj(q), _check_dt(dt), limits or SafetyLimits()
     pos_bad = np.flatnonzero(((q < lim.position[:, 0]) | (q > lim.position[:, 1])).any(axis=1))
     prev = np.vstack(
