@@ -125,6 +125,109 @@ def test_a_changed_study_file_does_not_reuse_old_rows(project):
     assert st.study_rows(new).empty  # old task files carry the old study hash
 
 
+V2 = {
+    **STUDY,
+    "study": "fake-v2",
+    "supersedes": "fake-v1",
+    "config": {"seeds": [0, 1, 2], "offset": 3.0},
+    # the claim turned round (DT better than HDT), so that its verdict differs from v1's
+    "comparisons": [{"claim": "C3", "x": "DT", "y": "HDT", "kind": "superior", "margin": 2.0}],
+}
+
+
+def test_a_later_study_runs_beside_the_first_and_takes_over_its_claims_once_complete(project):
+    """params/<chapter>.<tag>.study.yml: its own folder, hash and rows; the first study keeps
+    its rows and verdicts, and claims.csv shows both (history) and the last complete one's."""
+    (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump(V2))
+    v1, v2 = st.chapter_studies("04_hdt")
+    assert (v1.ref, v2.ref, v2.tag) == ("04_hdt", "04_hdt:v2", "v2")
+    assert v2.folder == project / "studies" / "04_hdt" / "v2"
+    assert v2.file == "params/04_hdt.v2.study.yml" and v1.hash != v2.hash
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    claims = st.write_claims(CHAPTERS, reps=200).set_index("claim")
+    # v2 pending: the first study still answers C3, and the history says v2 is on its way
+    assert claims.loc["C3", "study"] == "fake-v1" and claims.loc["C3", "verdict"] == "holds"
+    assert claims.loc["C3", "history"] == "fake-v1: holds; fake-v2: pending, 0/12 tasks"
+    assert claims.loc["C2", "history"] == "fake-v1: fails"
+    CALLS.clear()
+    st.run_study(CHAPTERS["04_hdt"], study="v2", progress=False)
+    assert len(CALLS) == 12  # its own tasks (another offset: other keys), none of v1's
+    info = json.loads((v2.folder / "run.json").read_text())
+    assert info["complete"] and info["supersedes"] == "fake-v1"
+    assert info["study_file"] == "params/04_hdt.v2.study.yml"
+    assert len(st.study_rows(v1)) == 20 and len(st.study_rows(v2)) == 12
+    claims = st.write_claims(CHAPTERS, reps=200).set_index("claim")
+    # HDT - DT = 10 < the v2 margin of 20: v2 decides C3 now, v1's verdict stays in the history
+    assert claims.loc["C3", "study"] == "fake-v2" and claims.loc["C3", "verdict"] != "holds"
+    assert claims.loc["C3", "history"].startswith("fake-v1: holds; fake-v2: ")
+    assert claims.loc["C2", "study"] == "fake-v1"  # v2 does not register C2
+    from thesis_lib.chapters.claims import ledger_table
+
+    ours = ledger_table(claims.reset_index()).set_index("claim").ours
+    assert ours["C3"].endswith("(studies: fake-v1: holds; fake-v2: fails)")
+    assert "studies:" not in ours["C2"]
+    # evidence of either study, by tag
+    from thesis_lib.book import evidence as evi
+
+    assert evi.load_evidence(CHAPTERS["04_hdt"], reps=200, study="v2").study.study == "fake-v2"
+    assert evi.load_evidence(CHAPTERS["04_hdt"], reps=200).study.study == "fake-v1"
+
+
+def test_thesis_study_names_a_later_study_by_tag_or_file(project, capsys):
+    from thesis_lib.cli import main
+
+    (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump(V2))
+    assert main(["study", "04_hdt:v2", "--status"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["study"], out["tasks_total"]) == ("fake-v2", 12)
+    assert main(["study", str(project / "params" / "04_hdt.v2.study.yml")]) == 0
+    assert len(CALLS) == 12 and (project / "studies" / "04_hdt" / "v2" / "rows.csv").is_file()
+    assert not (project / "studies" / "04_hdt" / "rows.csv").exists()  # v1 untouched
+    assert main(["study", "04_hdt:V2"]) == 1
+    assert "A study tag is lower-case" in capsys.readouterr().err
+    assert main(["study", "04_hdt:v3"]) == 1
+    assert "No study file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("patch", "match"),
+    [
+        ({"supersedes": "hdt-v0"}, "names no earlier study of 04_hdt"),
+        ({"supersedes": 2}, "Expect `supersedes` to be the id of an earlier study"),
+        ({"chapter": "05_decision_mamba"}, "named unlike its `chapter: 05_decision_mamba`"),
+    ],
+)
+def test_a_later_study_file_names_an_earlier_study_and_its_own_chapter(project, patch, match):
+    (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump({**V2, **patch}))
+    with pytest.raises(ValueError, match=match):
+        st.load_study("04_hdt:v2")
+
+
+def test_committing_a_first_study_leaves_its_later_studies_rows_alone(project):
+    import subprocess
+
+    from thesis_lib.cli import study as study_cli
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=project, check=True, capture_output=True, text=True
+        ).stdout
+
+    git("init", "-q")
+    git("config", "user.name", "t")
+    git("config", "user.email", "t@t")
+    git("commit", "-q", "--allow-empty", "-m", "0")
+    (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump(V2))
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    st.run_study(CHAPTERS["04_hdt"], study="v2", progress=False)
+    assert study_cli.commit_studies(["04_hdt"]).startswith("studies: 20 finished task(s)")
+    files = git("show", "--name-only", "--format=", "HEAD").split()
+    assert files and not any(f.startswith("studies/04_hdt/v2/") for f in files)
+    assert study_cli.commit_studies(["04_hdt:v2"]).startswith("studies: 12 finished task(s)")
+    files = git("show", "--name-only", "--format=", "HEAD").split()
+    assert all(f.startswith("studies/04_hdt/v2/") or f == "studies/claims.csv" for f in files)
+
+
 @pytest.mark.parametrize(
     ("patch", "match"),
     [
@@ -200,7 +303,9 @@ def test_bad_scale_check_is_an_error():
 
 
 REPO = Path(__file__).resolve().parents[1]
-COMMITTED = sorted((REPO / "studies").glob("*/run.json"))
+COMMITTED = sorted(
+    [*(REPO / "studies").glob("*/run.json"), *(REPO / "studies").glob("*/*/run.json")]
+)
 
 
 @pytest.mark.skipif(not COMMITTED, reason="no study committed yet")
@@ -208,13 +313,19 @@ COMMITTED = sorted((REPO / "studies").glob("*/run.json"))
 def test_committed_studies_match_their_parameter_files(run_json, monkeypatch):
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     info = json.loads(run_json.read_text())
-    assert info["study_hash"] == st.load_study(run_json.parent.name).hash, (
+    study = st.load_study(REPO / info["study_file"])
+    assert run_json.parent == REPO / "studies" / study.chapter / study.tag
+    assert info["study_hash"] == study.hash, (
         f"{run_json} was computed from another {info['study_file']}: the study file changed "
         "after the study started (start a new study id instead)"
     )
 
 
-COMPLETE = [p.parent.name for p in COMMITTED if json.loads(p.read_text()).get("complete")]
+COMPLETE = [
+    json.loads(p.read_text())["study_file"]
+    for p in COMMITTED
+    if json.loads(p.read_text()).get("complete")
+]
 
 
 @pytest.mark.skipif(not COMPLETE, reason="no complete study committed yet")
@@ -224,10 +335,18 @@ def test_committed_claims_follow_from_the_committed_rows(monkeypatch):
 
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
     committed = pd.read_csv(REPO / "studies" / "claims.csv").set_index("claim")
-    for chapter in COMPLETE:
-        for r in claim_verdicts(st.evaluate_study(chapter)).itertuples():
+    deciding = {}  # each claim's verdict comes from the last complete study that registers it
+    for file in COMPLETE:
+        for c in st.load_study(REPO / file).comparisons:
+            deciding[c["claim"]] = file
+    for file in dict.fromkeys(deciding.values()):
+        study = st.load_study(REPO / file)
+        for r in claim_verdicts(st.evaluate_study(study)).itertuples():
+            if deciding[r.claim] != file:
+                continue
             c = committed.loc[r.claim]
-            assert c.chapter == chapter and c.verdict == r.verdict, (r.claim, "run thesis claims")
+            assert (c.chapter, c.study) == (study.chapter, study.study), (r.claim, "thesis claims")
+            assert c.verdict == r.verdict, (r.claim, "run thesis claims")
             assert c.effect == pytest.approx(r.effect) and c.ci_low == pytest.approx(r.ci_low)
             assert c.ci_high == pytest.approx(r.ci_high)
             assert (c.kind, c.margin) == (r.kind, pytest.approx(r.margin))
@@ -738,7 +857,7 @@ def test_thesis_study_takes_its_study_files_path_and_refuses_a_misnamed_one(
     (project / "elsewhere").mkdir()
     (project / "elsewhere" / "04_hdt.study.yml").write_text(yaml.safe_dump(STUDY))
     assert main(["study", "elsewhere/04_hdt.study.yml"]) == 1
-    assert "is not the registered study of 04_hdt" in capsys.readouterr().err
+    assert "is not a registered study of 04_hdt" in capsys.readouterr().err
     # a file named unlike its chapter would write its tasks where no one reads them
     (project / "params" / "04_hdx.study.yml").write_text(yaml.safe_dump(STUDY))
     CALLS.clear()

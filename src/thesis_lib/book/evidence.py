@@ -26,7 +26,6 @@ every chapter that gets a study.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -85,29 +84,31 @@ class Evidence:
         return bool(self.info.get("complete")) and self.info.get("study_hash") == self.study.hash
 
 
-def load_evidence(chapter: Chapter, reps: int = 10_000) -> Evidence:
-    """Read ``studies/<chapter>/`` (the rows of this study file's tasks), for the chapter's
-    registered :class:`~thesis_lib.book.chapter.Chapter`.
+def load_evidence(chapter: Chapter, reps: int = 10_000, study: str = "") -> Evidence:
+    """Read a study's committed rows (``studies/<chapter>/``: the rows of this study file's
+    tasks), for the chapter's registered :class:`~thesis_lib.book.chapter.Chapter`.
+
+    ``study``: the tag of a later study of the chapter (``"v2"``: ``params/<chapter>.v2.study.yml``,
+    ``studies/<chapter>/v2/``); default its first.
 
     Raises:
-        FileNotFoundError: the chapter has no study file.
+        FileNotFoundError: the chapter has no such study file.
     """
-    name = chapter.name
-    study = st.load_study(name)
-    rows = st.study_rows(study)
+    registered = st.load_study(st.study_ref(chapter.name, study))
+    rows = st.study_rows(registered)
     if len(rows):  # the grid's order (settings, seeds, methods as registered), not the files'
-        order = {t.key: i for i, t in enumerate(st.study_tasks(study, chapter))}
+        order = {t.key: i for i, t in enumerate(st.study_tasks(registered, chapter))}
         rows = rows.sort_values("task_key", key=lambda k: k.map(order), kind="stable")
-    info_p = st.studies_dir(name) / "run.json"
-    info = json.loads(info_p.read_text()) if info_p.exists() else {}
+    info = st.read_run_info(registered)
     scale = rows["scale"].fillna("study") if "scale" in rows else pd.Series("study", rows.index)
     main, check = rows[scale == "study"], rows[scale == "check"]
     if len(check):
-        same = main[main[study.columns["setting"]].isin(set(check[study.columns["setting"]]))]
+        setting = registered.columns["setting"]
+        same = main[main[setting].isin(set(check[setting]))]
         check = pd.concat([same, check], ignore_index=True)
-    ev = Evidence(study, main.reset_index(drop=True), check.reset_index(drop=True), info)
+    ev = Evidence(registered, main.reset_index(drop=True), check.reset_index(drop=True), info)
     if ev.complete:
-        ev.comparisons = st.evaluate_study(name, reps=reps)
+        ev.comparisons = st.evaluate_study(registered, reps=reps)
     return ev
 
 
@@ -116,7 +117,7 @@ def status_line(ev: Evidence) -> str:
     complete whether the library changed since (:func:`code_changes_since`)."""
     i = ev.info
     if not i or i.get("study_hash") != ev.study.hash:
-        return f"Study {ev.study.study}: not run yet (`thesis study {ev.study.chapter}`)."
+        return f"Study {ev.study.study}: not run yet (`thesis study {ev.study.ref}`)."
     commits = ", ".join(c[:7] for c in i.get("commits", [])) or "none"
     state = "complete" if ev.complete else "in progress: verdicts wait for the full grid"
     line = (
@@ -225,7 +226,7 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     last = max(stamps, key=lambda c: stamps[c])
     fns = st.study_task_functions(ev.study)
     traced = study_code_paths({f.partition(":")[0] for f in fns}) if fns else None
-    paths = [*(traced or STUDY_CODE_PATHS), f"params/{ev.study.chapter}.study.yml"]
+    paths = [*(traced or STUDY_CODE_PATHS), ev.study.file]
     log = git_output(["log", "--format=%h%x09%cs%x09%s", f"{last}..HEAD", "--", *paths])
     if log is None:
         return None

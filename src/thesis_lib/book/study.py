@@ -1,5 +1,12 @@
 """Pre-registered studies: ``params/<chapter>.study.yml`` run into ``studies/<chapter>/``.
 
+A chapter may register later studies beside its first, each in a file of its own:
+``params/<chapter>.<tag>.study.yml`` (e.g. ``04_hdt.v2.study.yml``), run into
+``studies/<chapter>/<tag>/`` and named ``<chapter>:<tag>`` on the command line
+(``thesis study 04_hdt:v2``). A later study names the one it replaces (``supersedes:``); the
+earlier one keeps its file, its rows and its verdicts, and ``studies/claims.csv`` shows them
+beside the later one (column ``history``), so a change of verdict stays visible.
+
 A study file fixes, before anything runs, the chapter config (settings, seeds, sizes), the
 metric, and the comparisons that test the thesis's claims (``CLAIMS.md``). ``thesis study
 <chapter>`` builds the chapter's :class:`Config` from it, asks the chapter module for its
@@ -22,6 +29,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import re
 import socket
 import sys
 from collections.abc import Iterator, Mapping
@@ -56,6 +64,7 @@ STUDY_KEYS = {
     "notes",
     "gates",
     "interval",
+    "supersedes",
 }
 SCALE_CHECK_KEYS = {"config", "note"}
 REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
@@ -79,7 +88,8 @@ class Study:
     """``config``: overrides of ``config`` for a second scale on one setting, run beside the
     study and tagged ``scale: check`` (not used by the comparisons); ``note``: why."""
     reuse: list[str] = field(default_factory=list)
-    """Chapters whose finished study tasks are copied in when a task is the same (same key)."""
+    """Studies (``05_decision_mamba``, ``04_hdt:v2``) whose finished tasks are copied in when a
+    task is the same (same key)."""
     notes: str = ""
     path: Path | None = None
     gates: list[dict[str, Any]] = field(default_factory=list)
@@ -87,18 +97,40 @@ class Study:
     interval: str | None = None
     """The comparisons' interval (:data:`thesis_lib.stats.INTERVALS`); ``None``: the engine's
     default, :data:`DEFAULT_INTERVAL`."""
+    supersedes: str | None = None
+    """The id of the earlier study of the same chapter that this one replaces (its verdicts
+    move to the claims' ``history`` once this one is complete)."""
+    tag: str = ""
+    """Which of the chapter's studies: ``""`` for ``params/<chapter>.study.yml``, ``"v2"`` for
+    ``params/<chapter>.v2.study.yml`` (from the file's name; not pre-registered)."""
 
     @property
     def hash(self) -> str:
-        """Hash of everything pre-registered (all fields but the file's path; ``gates`` and
-        ``interval`` only where a file sets them, so v1 study files keep their hash)."""
+        """Hash of everything pre-registered (all fields but the file's path and tag;
+        ``gates``, ``interval`` and ``supersedes`` only where a file sets them, so v1 study
+        files keep their hash)."""
         d = dataclasses.asdict(self)
         d.pop("path")
-        if not d["gates"]:
-            d.pop("gates")
-        if d["interval"] is None:
-            d.pop("interval")
+        d.pop("tag")
+        for key, unset in (("gates", []), ("interval", None), ("supersedes", None)):
+            if d[key] == unset:
+                d.pop(key)
         return config_hash(d)
+
+    @property
+    def ref(self) -> str:
+        """How the command line names it: ``04_hdt`` or ``04_hdt:v2``."""
+        return study_ref(self.chapter, self.tag)
+
+    @property
+    def folder(self) -> Path:
+        """Where its tasks and rows go: ``studies/<chapter>/`` or ``studies/<chapter>/<tag>/``."""
+        return studies_dir(self.chapter, self.tag)
+
+    @property
+    def file(self) -> str:
+        """Its parameter file, relative to the project: ``params/<chapter>[.<tag>].study.yml``."""
+        return f"params/{study_path(self.chapter, self.tag).name}"
 
 
 #: The interval of every study's comparisons unless its file says otherwise: Welch's t
@@ -107,15 +139,64 @@ class Study:
 DEFAULT_INTERVAL = "welch"
 
 
-def study_path(chapter: str) -> Path:
-    """``params/<chapter>.study.yml`` of the checkout."""
-    return project_root() / "params" / f"{chapter}.study.yml"
+_TAG = re.compile(r"[a-z0-9][a-z0-9_-]*")
 
 
-def studies_dir(chapter: str | None = None) -> Path:
-    """``<project>/studies`` or ``<project>/studies/<chapter>`` (committed evidence)."""
+def study_ref(chapter: str, tag: str = "") -> str:
+    """``04_hdt`` (a chapter's first study) or ``04_hdt:v2`` (its study tagged ``v2``)."""
+    return f"{chapter}:{tag}" if tag else chapter
+
+
+def split_ref(ref: str) -> tuple[str, str]:
+    """``"04_hdt:v2"`` -> ``("04_hdt", "v2")``; ``"04_hdt"`` -> ``("04_hdt", "")``.
+
+    Raises:
+        ValueError: a tag that is not lower-case letters, digits, ``-`` and ``_``.
+    """
+    chapter, _, tag = str(ref).partition(":")
+    if tag and not _TAG.fullmatch(tag):
+        raise ValueError(
+            f"A study tag is lower-case letters, digits, '-' and '_' (e.g. 04_hdt:v2), got {ref!r}."
+        )
+    return chapter, tag
+
+
+def study_path(chapter: str, tag: str = "") -> Path:
+    """``params/<chapter>.study.yml`` (``tag``: ``params/<chapter>.<tag>.study.yml``)."""
+    return project_root() / "params" / f"{chapter}{'.' + tag if tag else ''}.study.yml"
+
+
+def studies_dir(chapter: str | None = None, tag: str = "") -> Path:
+    """``<project>/studies``, ``studies/<chapter>`` or ``studies/<chapter>/<tag>`` (committed
+    evidence)."""
     base = project_root() / "studies"
-    return base / chapter if chapter else base
+    if not chapter:
+        return base
+    return base / chapter / tag if tag else base / chapter
+
+
+def study_files() -> list[Path]:
+    """Every study file of the checkout, each chapter's first study before its tagged ones."""
+    root = project_root() / "params"
+
+    def order(p: Path) -> tuple[str, int, str]:
+        chapter, tag = _name_parts(p)
+        return chapter, bool(tag), tag
+
+    return sorted(root.glob("*.study.yml"), key=order)
+
+
+def _name_parts(p: Path) -> tuple[str, str]:
+    """``(chapter, tag)`` that a study file's name says (``04_hdt.v2.study.yml``)."""
+    stem = p.name.removesuffix(".study.yml")
+    chapter, _, tag = stem.partition(".")
+    return chapter, tag
+
+
+def chapter_studies(chapter: str) -> list[Study]:
+    """The studies of ``chapter``, first to last (its first study, then the tagged ones by
+    tag)."""
+    return [load_study(p) for p in study_files() if _name_parts(p)[0] == chapter]
 
 
 def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
@@ -175,6 +256,11 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
             check_gate(g)
         except ValueError as e:
             raise ValueError(f"{e}{where}") from None
+    supersedes = data.get("supersedes")
+    if supersedes is not None and not (isinstance(supersedes, str) and supersedes):
+        raise ValueError(
+            f"Expect `supersedes` to be the id of an earlier study, actually: {supersedes!r}{where}"
+        )
     interval = data.get("interval")
     if interval is not None and interval not in INTERVALS:
         raise ValueError(
@@ -196,56 +282,85 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
         path=path,
         gates=[dict(g) for g in gates],
         interval=interval,
+        supersedes=supersedes,
     )
 
 
-def load_study(chapter_or_path: str | Path) -> Study:
-    """Read ``params/<chapter>.study.yml`` (or a path) and validate it.
+def load_study(ref_or_path: str | Path) -> Study:
+    """Read a study file and validate it: ``"04_hdt"`` (``params/04_hdt.study.yml``),
+    ``"04_hdt:v2"`` (``params/04_hdt.v2.study.yml``) or a path.
 
     Raises:
         FileNotFoundError: no such study file.
-        ValueError: the file is invalid (:func:`parse_study`), or a ``*.study.yml`` is named
-            unlike its ``chapter:`` (its tasks and rows would go to another chapter's study).
+        ValueError: the file is invalid (:func:`parse_study`); a ``*.study.yml`` is named
+            unlike its ``chapter:`` (its tasks and rows would go to another chapter's study);
+            a tagged study's ``supersedes`` names no earlier study of its chapter.
     """
     import yaml
 
-    p = Path(chapter_or_path)
+    p = Path(ref_or_path)
     if p.suffix not in (".yml", ".yaml"):
-        p = study_path(str(chapter_or_path))
+        p = study_path(*split_ref(str(ref_or_path)))
     if not p.is_file():
-        have = sorted(x.name for x in (project_root() / "params").glob("*.study.yml"))
+        have = [x.name for x in study_files()]
         raise FileNotFoundError(f"No study file {p}. Study files here: {have or 'none'}.")
     study = parse_study(yaml.safe_load(p.read_text()) or {}, p)
-    stem = p.name.removesuffix(p.suffix)
-    if stem.endswith(".study") and stem.removesuffix(".study") != study.chapter:
-        raise ValueError(
-            f"Study file {p} is named unlike its `chapter: {study.chapter}`: its results go to "
-            f"studies/{study.chapter}/, so name it {study.chapter}.study.yml (or fix `chapter:`)."
-        )
+    if p.name.endswith(".study.yml"):
+        chapter, tag = _name_parts(p)
+        if chapter != study.chapter:
+            raise ValueError(
+                f"Study file {p} is named unlike its `chapter: {study.chapter}`: its results go "
+                f"to studies/{study.chapter}/, so name it {study.chapter}.study.yml or "
+                f"{study.chapter}.<tag>.study.yml (or fix `chapter:`)."
+            )
+        split_ref(study_ref(chapter, tag))  # a well-formed tag
+        study.tag = tag
+    if study.supersedes is not None:
+        earlier = [s.study for s in _earlier_studies(study)]
+        if study.supersedes not in earlier:
+            raise ValueError(
+                f"{p}: `supersedes: {study.supersedes}` names no earlier study of "
+                f"{study.chapter} (earlier: {', '.join(earlier) or 'none'})."
+            )
     return study
 
 
-def study_chapter(chapter_or_path: str | Path) -> str:
-    """The chapter of a study named by its chapter (``04_hdt``) or by its study file's path.
+def _earlier_studies(study: Study) -> list[Study]:
+    """The studies of ``study``'s chapter registered before it (by :func:`study_files`' order)."""
+    out = []
+    for p in study_files():
+        chapter, tag = _name_parts(p)
+        if chapter != study.chapter:
+            continue
+        if tag == study.tag:
+            break
+        out.append(load_study(p))
+    return out
 
-    A path must be the chapter's ``params/<chapter>.study.yml``: that file is the study that
-    ``thesis study``, ``thesis claims`` and the book read.
+
+def study_chapter(ref_or_path: str | Path) -> str:
+    """The reference (``04_hdt``, ``04_hdt:v2``) of a study named by it or by its study file's
+    path.
+
+    A path must be a registered study file, ``params/<chapter>[.<tag>].study.yml``: those are the
+    studies that ``thesis study``, ``thesis claims`` and the book read.
 
     Raises:
         FileNotFoundError: no such study file.
         ValueError: the file is invalid (:func:`load_study`), or a path outside ``params/``.
     """
-    p = Path(chapter_or_path)
+    p = Path(ref_or_path)
     if p.suffix not in (".yml", ".yaml"):
-        return str(chapter_or_path)
+        split_ref(str(ref_or_path))
+        return str(ref_or_path)
     study = load_study(p)
-    registered = study_path(study.chapter)
+    registered = study_path(study.chapter, study.tag)
     if not registered.is_file() or p.resolve() != registered.resolve():
         raise ValueError(
-            f"{p} is not the registered study of {study.chapter} ({registered}): copy it "
-            f"there (or run 'thesis study {study.chapter}')."
+            f"{p} is not a registered study of {study.chapter} ({registered}): copy it "
+            f"there (or run 'thesis study {study.ref}')."
         )
-    return study.chapter
+    return study.ref
 
 
 def _check_chapter(study: Study, chapter: Chapter) -> None:
@@ -332,11 +447,11 @@ def reuse_tasks(study: Study, keys: list[str]) -> int:
     study's store (each record notes where it came from); returns how many were copied.
 
     A record is reused only if it was written under its own study's current hash."""
-    own = TaskStore(studies_dir(study.chapter) / "tasks")
+    own = TaskStore(study.folder / "tasks")
     n = 0
-    for chapter in study.reuse:
-        other = load_study(chapter)
-        store = TaskStore(studies_dir(chapter) / "tasks")
+    for ref in study.reuse:
+        other = load_study(ref)
+        store = TaskStore(other.folder / "tasks")
         for k in keys:
             if own.has(k) or not store.has(k):
                 continue
@@ -348,7 +463,7 @@ def reuse_tasks(study: Study, keys: list[str]) -> int:
                 {
                     "study": study.study,
                     "study_hash": study.hash,
-                    "reused_from": {"study": other.study, "chapter": chapter},
+                    "reused_from": {"study": other.study, "chapter": other.chapter},
                 },
             )
             n += 1
@@ -408,6 +523,7 @@ def task_locks(store: str | Path, keys: list[str]) -> Iterator[list[str]]:
 def run_study(
     chapter: Chapter,
     *,
+    study: Study | str | None = None,
     executor: str | None = None,
     n_jobs: int | None = None,
     address: str | None = None,
@@ -415,10 +531,13 @@ def run_study(
     progress: bool | None = None,
     keep_going: bool = False,
 ) -> pd.DataFrame:
-    """Run (or resume) the study of ``chapter`` (its registered
+    """Run (or resume) a study of ``chapter`` (its registered
     :class:`~thesis_lib.book.chapter.Chapter`: ``thesis_lib.chapters.CHAPTERS["04_hdt"]``);
     returns its rows and rewrites its files
     (``rows.csv``, ``run.json``: also when a task fails, for the tasks that finished).
+
+    ``study``: which of the chapter's studies, a :class:`Study` or its tag (``"v2"``); default
+    the chapter's first, ``params/<chapter>.study.yml``.
 
     ``keep_going``: a failed task does not stop the study; the others run, and
     :class:`~thesis_lib.sweep.GridFailed` lists the failures at the end (their tracebacks are in
@@ -428,9 +547,10 @@ def run_study(
     that another process holds is skipped (said on stderr), so a second run of a study never
     runs a task that the first one is running or will run. The rows returned are those of the
     tasks this run finished or found stored."""
-    study = load_study(chapter.name)
+    if not isinstance(study, Study):
+        study = load_study(study_ref(chapter.name, study or ""))
     tasks = study_tasks(study, chapter)
-    out = studies_dir(chapter.name)
+    out = study.folder
     if study.reuse and not force:
         reuse_tasks(study, [t.key for t in tasks])
     store = TaskStore(out / "tasks")
@@ -479,7 +599,7 @@ def task_records(study: Study, keys: list[str] | None = None) -> list[dict[str, 
     """The stored records of a study's finished tasks (those written under this study's hash),
     restricted to ``keys`` when given; read once, pass them to the functions that take
     ``records=``."""
-    root = studies_dir(study.chapter) / "tasks"
+    root = study.folder / "tasks"
     recs = []
     for p in sorted(root.glob("*.json")) if root.is_dir() else []:
         rec = json.loads(p.read_text())
@@ -542,9 +662,9 @@ def study_rows(
 def write_study_summary(
     study: Study, keys: list[str], records: list[dict[str, Any]] | None = None
 ) -> dict[str, Any]:
-    """Rewrite ``studies/<chapter>/rows.csv`` and ``run.json`` from the stored tasks
-    (``records``, when the caller has read them already)."""
-    out = studies_dir(study.chapter)
+    """Rewrite the study's ``rows.csv`` and ``run.json`` (in :attr:`Study.folder`) from the
+    stored tasks (``records``, when the caller has read them already)."""
+    out = study.folder
     out.mkdir(parents=True, exist_ok=True)
     recs = records if records is not None else task_records(study, keys)
     rows = study_rows(study, keys, records=recs)
@@ -552,7 +672,7 @@ def write_study_summary(
     info = {
         "study": study.study,
         "chapter": study.chapter,
-        "study_file": f"params/{study.chapter}.study.yml",
+        "study_file": study.file,
         "study_hash": study.hash,
         "tasks_total": len(keys),
         "tasks_done": len(recs),
@@ -563,19 +683,21 @@ def write_study_summary(
         "versions": package_versions(),
         "budget_cpu_hours": study.budget_cpu_hours,
     }
+    if study.supersedes:
+        info["supersedes"] = study.supersedes
     atomic_write(out / "run.json", lambda tmp: tmp.write_text(json.dumps(info, indent=1) + "\n"))
     return info
 
 
-def gates_path(chapter: str) -> Path:
-    """``params/<chapter>.gates.yml``: the post-hoc validity review of a study whose file
-    predates gates (the v1 studies); its gates are applied beside the file's own."""
-    return project_root() / "params" / f"{chapter}.gates.yml"
+def gates_path(chapter: str, tag: str = "") -> Path:
+    """``params/<chapter>[.<tag>].gates.yml``: the post-hoc validity review of a study whose
+    file predates gates (the v1 studies); its gates are applied beside the file's own."""
+    return project_root() / "params" / f"{chapter}{'.' + tag if tag else ''}.gates.yml"
 
 
 def study_gates(study: Study) -> list[dict[str, Any]]:
     """The study file's gates, then those of its review file (:func:`gates_path`)."""
-    p = gates_path(study.chapter)
+    p = gates_path(study.chapter, study.tag)
     review = load_review(p)[0] if p.is_file() else []
     return [*study.gates, *review]
 
@@ -583,7 +705,7 @@ def study_gates(study: Study) -> list[dict[str, Any]]:
 def study_comparisons(study: Study) -> list[dict[str, Any]]:
     """The study's comparisons, with its review file's ``retest`` entries applied
     (:func:`thesis_lib.stats.gates.apply_retests`: e.g. an equivalence claim retested by TOST)."""
-    p = gates_path(study.chapter)
+    p = gates_path(study.chapter, study.tag)
     retests = load_review(p)[1] if p.is_file() else []
     return apply_retests(study.comparisons, retests)
 
@@ -594,23 +716,37 @@ def _parity_table() -> pd.DataFrame | None:
     return pd.read_csv(p) if p.is_file() else None
 
 
-def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
-    """The pre-registered comparisons of a finished study (raises if it is incomplete, or if
-    a row the comparisons read is wrong: the error names its task file and what is wrong)."""
-    study = load_study(chapter)
-    info_p = studies_dir(chapter) / "run.json"
-    info = json.loads(info_p.read_text()) if info_p.exists() else {}
-    if not info.get("complete") or info.get("study_hash") != study.hash:
+def read_run_info(study: Study) -> dict[str, Any]:
+    """The study's ``run.json`` (``{}`` before it ran)."""
+    p = study.folder / "run.json"
+    return json.loads(p.read_text()) if p.exists() else {}
+
+
+def is_complete(study: Study, info: Mapping[str, Any] | None = None) -> bool:
+    """Every task of ``study`` has run under its current file (``info``: its ``run.json``)."""
+    info = read_run_info(study) if info is None else info
+    return bool(info.get("complete")) and info.get("study_hash") == study.hash
+
+
+def evaluate_study(study: Study | str, reps: int = 10_000) -> pd.DataFrame:
+    """The pre-registered comparisons of a finished study (a :class:`Study`, or its reference:
+    ``04_hdt``, ``04_hdt:v2``); raises if it is incomplete, or if a row the comparisons read is
+    wrong (the error names its task file and what is wrong)."""
+    if not isinstance(study, Study):
+        study = load_study(study)
+    info = read_run_info(study)
+    if not is_complete(study, info):
         raise RuntimeError(
-            f"study {study.study} of {chapter} is not complete "
+            f"study {study.study} of {study.chapter} is not complete "
             f"({info.get('tasks_done', 0)}/{info.get('tasks_total', '?')} tasks); "
-            f"run 'thesis study {chapter}' first"
+            f"run 'thesis study {study.ref}' first"
         )
     rows = study_rows(study)
     if "scale" in rows:
         rows = rows[rows["scale"].fillna("study") == "study"]
     if "task_key" in rows:  # a bad row is named by its task file (thesis_lib.stats.score_matrix)
-        rows = rows.assign(task_file=f"studies/{chapter}/tasks/" + rows["task_key"] + ".json")
+        where = study.folder.relative_to(project_root()).as_posix()
+        rows = rows.assign(task_file=f"{where}/tasks/" + rows["task_key"] + ".json")
     c = study.columns
     res = evaluate_comparisons(
         rows,
@@ -625,7 +761,7 @@ def evaluate_study(chapter: str, reps: int = 10_000) -> pd.DataFrame:
         parity=_parity_table(),
     )
     res.insert(0, "study", study.study)
-    res.insert(1, "chapter", chapter)
+    res.insert(1, "chapter", study.chapter)
     return res
 
 
@@ -647,44 +783,53 @@ CLAIMS_COLUMNS = [
     "study",
     "study_commit",
     "comparisons",
+    "history",
 ]
 
 
 def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.DataFrame:
     """``studies/claims.csv``: one row per claim of CLAIMS.md, ``pending`` where no study
     (or no complete one) answers it yet. ``chapters``: the registry
-    (``thesis_lib.chapters.CHAPTERS``), which counts a pending study's tasks."""
-    root = project_root() / "params"
+    (``thesis_lib.chapters.CHAPTERS``), which counts a pending study's tasks.
+
+    Where several studies of a chapter pre-register a claim (a later study that supersedes an
+    earlier one), the verdict is the last complete one's, and ``history`` lists every study of
+    the claim, first to last, with its verdict or its progress (``hdt-c1c3-v1: untestable;
+    hdt-c1c3-v2: pending, 12/450 tasks``)."""
     rows: dict[str, dict[str, Any]] = {}
-    for p in sorted(root.glob("*.study.yml")):
-        chapter = p.name.removesuffix(".study.yml")
+    history: dict[str, list[str]] = {}
+    for p in study_files():
         study = load_study(p)
-        info_p = studies_dir(chapter) / "run.json"
-        info = json.loads(info_p.read_text()) if info_p.exists() else {}
+        info = read_run_info(study)
         claims = dict.fromkeys(c["claim"] for c in study.comparisons)
-        if not info.get("complete") or info.get("study_hash") != study.hash:
+        if not is_complete(study, info):
+            done = info.get("tasks_done", 0) if info.get("study_hash") == study.hash else 0
+            total = len(study_tasks(study, chapters[study.chapter]))
             for cl in claims:
-                done = info.get("tasks_done", 0) if info.get("study_hash") == study.hash else 0
+                history.setdefault(cl, []).append(f"{study.study}: pending, {done}/{total} tasks")
+                if rows.get(cl, {}).get("verdict", "pending") != "pending":
+                    continue  # an earlier complete study answers it until this one completes
                 rows[cl] = {
                     "claim": cl,
                     "verdict": "pending",
-                    "chapter": chapter,
+                    "chapter": study.chapter,
                     "study": study.study,
-                    "comparisons": f"{done}/{len(study_tasks(study, chapters[chapter]))} "
-                    "tasks done",
+                    "comparisons": f"{done}/{total} tasks done",
                 }
             continue
-        verdicts = claim_verdicts(evaluate_study(chapter, reps=reps))
+        verdicts = claim_verdicts(evaluate_study(study, reps=reps))
         for r in verdicts.to_dict("records"):
+            history.setdefault(r["claim"], []).append(f"{study.study}: {r['verdict']}")
             rows[r["claim"]] = {
                 **r,
-                "chapter": chapter,
+                "chapter": study.chapter,
                 "study": study.study,
                 "study_commit": ",".join(info.get("commits", [])),
             }
     table = []
     for cid, (_sec, statement) in CLAIMS.items():
         r = rows.get(cid, {"claim": cid, "verdict": "pending", "comparisons": "no study yet"})
+        r = {**r, "history": "; ".join(history.get(cid, []))}
         table.append({**{k: None for k in CLAIMS_COLUMNS}, **r, "statement": statement})
     df = pd.DataFrame(table, columns=CLAIMS_COLUMNS)
     out = studies_dir()
@@ -696,7 +841,13 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
 
 __all__ = [
     "Study",
+    "chapter_studies",
     "evaluate_study",
+    "is_complete",
+    "read_run_info",
+    "split_ref",
+    "study_files",
+    "study_ref",
     "load_study",
     "parse_study",
     "run_study",

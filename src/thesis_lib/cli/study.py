@@ -4,6 +4,7 @@ thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
 thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate)
 thesis study params/04_hdt.study.yml  # the same, named by its study file
+thesis study 04_hdt:v2                # a later study of the chapter: params/04_hdt.v2.study.yml
 thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
 thesis study 03_defender 02_clfd -j 2 --keep-going   # unattended: a failed task stops nothing
 thesis study 03_defender -j 2 --commit-every 600      # and commit finished tasks every 10 min
@@ -21,18 +22,17 @@ import threading
 from pathlib import Path
 
 
-def _status(chapter: str) -> dict:
-    """Progress of one study; refreshes its ``rows.csv`` / ``run.json`` once a task has run
-    (an unstarted study gets no files)."""
+def _status(ref: str) -> dict:
+    """Progress of one study (``04_hdt``, ``04_hdt:v2``); refreshes its ``rows.csv`` /
+    ``run.json`` once a task has run (an unstarted study gets no files)."""
     from thesis_lib.book import study as st
     from thesis_lib.chapters import get_chapter
     from thesis_lib.sweep import TaskStore
 
-    chapter = st.study_chapter(chapter)
-    s = st.load_study(chapter)
-    tasks = st.study_tasks(s, get_chapter(chapter))
+    s = st.load_study(st.study_chapter(ref))
+    tasks = st.study_tasks(s, get_chapter(s.chapter))
     keys = [t.key for t in tasks]
-    failed = [k for k in TaskStore(st.studies_dir(chapter) / "tasks").failures() if k in keys]
+    failed = [k for k in TaskStore(s.folder / "tasks").failures() if k in keys]
     recs = st.task_records(s, keys)  # read once: a large study has thousands of files
     if st.study_rows(s, keys, records=recs).empty:
         out = {"study": s.study, "tasks_done": 0, "tasks_total": len(keys), "cpu_hours": 0.0}
@@ -49,11 +49,23 @@ def _status(chapter: str) -> dict:
 
 #: what :func:`commit_studies` leaves out (git pathspec globs): failed tasks' tracebacks,
 #: temporary files and the locks of running tasks (:func:`~thesis_lib.book.study.task_locks`).
-NOT_COMMITTED = ("studies/*/tasks/failed/**", "**/.*.tmp", "**/.*.tmp.*", "studies/*/tasks/*.lock")
+NOT_COMMITTED = (
+    "studies/**/tasks/failed/**",
+    "**/.*.tmp",
+    "**/.*.tmp.*",
+    "studies/**/tasks/*.lock",
+)
 
 
 def _git(root: Path, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+
+
+def _rel(folder: Path) -> str:
+    """``folder`` (under the project's ``studies/``) as a path relative to the project."""
+    from thesis_lib.paths import project_root
+
+    return folder.relative_to(project_root()).as_posix()
 
 
 def _checkout(root: Path | None) -> Path:
@@ -66,12 +78,14 @@ def _checkout(root: Path | None) -> Path:
 
 
 def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
-    """Commit what the studies of ``chapters`` stored, and nothing else.
+    """Commit what the studies ``chapters`` (``04_hdt``, ``04_hdt:v2``) stored, and nothing
+    else.
 
     Refreshes each study's ``rows.csv`` / ``run.json`` (:func:`_status`) and
     ``studies/claims.csv`` (:func:`~thesis_lib.book.study.write_claims`: the verdicts of a
     study that just completed, the progress of the others), then commits
-    ``studies/<chapter>/`` and ``studies/claims.csv`` as one commit of those paths only: other
+    each study's folder (``studies/<chapter>/``, ``studies/<chapter>/<tag>/``) and
+    ``studies/claims.csv`` as one commit of those paths only: other
     changes in the checkout, staged or not, stay as they are. Returns the commit message, or
     None when nothing changed.
 
@@ -89,20 +103,37 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
         from thesis_lib.chapters import CHAPTERS
 
         write_claims(CHAPTERS)
-    paths = [*(f"studies/{c}" for c in chapters), "studies/claims.csv"]
+    from thesis_lib.book.study import chapter_studies, load_study
+
+    studies = [load_study(c) for c in chapters]
+    paths = [*(_rel(s.folder) for s in studies), "studies/claims.csv"]
+    # a chapter's first study's folder holds its later studies' folders: not theirs unless named
+    named = {s.ref for s in studies}
+    others = {
+        _rel(t.folder)
+        for s in studies
+        if not s.tag
+        for t in chapter_studies(s.chapter)
+        if t.tag and t.ref not in named
+    }
     paths = [p for p in paths if (root / p).exists()]
     if not paths:
         return None
     # never a failed task's traceback or a temporary file, whatever .gitignore says
-    r = _git(root, "add", "--", *paths, *(f":(exclude,glob){g}" for g in NOT_COMMITTED))
+    excluded = [
+        *(f":(exclude,glob){g}" for g in NOT_COMMITTED),
+        *(f":(exclude){o}" for o in others),
+    ]
+    r = _git(root, "add", "--", *paths, *excluded)
     if r.returncode != 0:
         raise RuntimeError(f"git add failed: {r.stderr.strip()}")
-    if _git(root, "diff", "--cached", "--quiet", "--", *paths).returncode == 0:
+    only = [*paths, *(f":(exclude){o}" for o in others)]
+    if _git(root, "diff", "--cached", "--quiet", "--", *only).returncode == 0:
         return None
-    added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", *paths).stdout
+    added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", *only).stdout
     n = sum("/tasks/" in line and line.endswith(".json") for line in added.splitlines())
     msg = f"studies: {n} finished task(s) landed ({'; '.join(summary)})"
-    r = _git(root, "commit", "-q", "-m", msg, "--", *paths)
+    r = _git(root, "commit", "-q", "-m", msg, "--", *only)
     if r.returncode != 0:
         raise RuntimeError(f"git commit failed: {r.stderr.strip() or r.stdout.strip()}")
     return msg
@@ -153,8 +184,9 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
     # every study file first (names, values, metrics): a typo fails before hours of work
     args.chapter = [st.study_chapter(c) for c in args.chapter]
-    for chapter in args.chapter:
-        st.study_config(st.load_study(chapter), get_chapter(chapter))
+    for ref in args.chapter:
+        s = st.load_study(ref)
+        st.study_config(s, get_chapter(s.chapter))
     if args.status:
         for chapter in args.chapter:
             print(json.dumps(_status(chapter), indent=1))
@@ -186,9 +218,11 @@ def _run_studies(args: argparse.Namespace) -> list[str]:
 
     failed = []
     for chapter in args.chapter:  # in order; a complete study finds every task stored
+        study = st.load_study(chapter)
         try:
             rows = st.run_study(
-                get_chapter(chapter),
+                get_chapter(study.chapter),
+                study=study,
                 executor=args.executor,
                 n_jobs=args.jobs,
                 address=args.address,
@@ -199,7 +233,7 @@ def _run_studies(args: argparse.Namespace) -> list[str]:
             print(f"{chapter}: {e}", file=sys.stderr)
             failed.append(f"{chapter} ({len(e.failures)} task(s))")
             continue
-        print(f"{chapter}: {len(rows)} rows in {st.studies_dir(chapter)}")
+        print(f"{chapter}: {len(rows)} rows in {study.folder}")
     return failed
 
 
@@ -219,8 +253,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "chapter",
         nargs="+",
-        help="e.g. 04_hdt or params/04_hdt.study.yml (reads params/<chapter>.study.yml); "
-        "several run one after another",
+        help="e.g. 04_hdt or params/04_hdt.study.yml (reads params/<chapter>.study.yml), "
+        "04_hdt:v2 (a later study, params/04_hdt.v2.study.yml); several run one after another",
     )
     p.add_argument(
         "--executor",

@@ -54,7 +54,8 @@ def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
     """Per claim: the statement, the thesis's evidence, ours, the verdict and the chapter.
 
     "ours" is the headline comparison's effect and interval, and, where another comparison
-    gave the verdict, that one too (``decided_by``).
+    gave the verdict, that one too (``decided_by``); where several studies registered the claim
+    (a later one beside the first), each with its verdict or progress (``history``).
     """
     by = claims.set_index("claim")
     rows = []
@@ -73,6 +74,9 @@ def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
             decided = r.get("decided_by", "")
             if isinstance(decided, str) and decided:
                 ours += f"; decided by {decided}"
+        history = r.get("history", "")
+        if isinstance(history, str) and ";" in history:  # a later study beside the first
+            ours += f" (studies: {history})"
         rows.append(
             {
                 "claim": cid,
