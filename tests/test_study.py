@@ -918,16 +918,19 @@ def test_the_hdt_study_checks_its_values_and_metrics_against_the_chapter():
             st.study_config(st.parse_study({**data, **patch}), CHAPTERS["04_hdt"])
 
 
-@pytest.mark.parametrize(
-    "chapter", ["02_clfd", "03_defender", "05_decision_mamba", "06_mdlt", "07_ur3_deployment"]
-)
-def test_every_registered_study_declares_its_columns_and_passes_the_check(chapter):
-    """Only the HDT chapter declared STUDY_COLUMNS, so no other study's metrics were checked."""
-    columns = CHAPTERS[chapter].study_columns
+@pytest.mark.parametrize("file", st.study_files(), ids=lambda p: p.name)
+def test_every_registered_study_declares_its_columns_and_passes_the_check(file):
+    """Only the HDT chapter declared STUDY_COLUMNS, so no other study's metrics were checked;
+    every study file, a later one too, builds its chapter's Config and its tasks."""
+    study = st.load_study(file)
+    columns = CHAPTERS[study.chapter].study_columns
     assert len(columns) == len(set(columns)) and {"method", "setting", "seed"} <= set(columns)
-    st.study_config(
-        st.load_study(chapter), CHAPTERS[chapter]
-    )  # the committed study file names real columns
+    st.study_config(study, CHAPTERS[study.chapter])  # the study file names real columns
+    if study.tag:  # a later study: what it supersedes exists, and its tasks are not v1's
+        assert study.supersedes in {s.study for s in st.chapter_studies(study.chapter)}
+        first = st.load_study(study.chapter)
+        keys = {t.key for t in st.study_tasks(study, CHAPTERS[study.chapter])}
+        assert not keys & {t.key for t in st.study_tasks(first, CHAPTERS[study.chapter])}
 
 
 def test_a_misspelt_ur3_metric_is_refused_at_load_naming_it(tmp_path):

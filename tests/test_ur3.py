@@ -111,6 +111,39 @@ def test_dataset_roundtrip_minari_format(tmp_path, monkeypatch):
         reach.split_demonstrations(ds.episodes)
 
 
+def _goal_order(e) -> tuple[int, ...]:
+    """The order in which a demonstration reached its goals (from its one-hot entries)."""
+    first = [int(np.argmax(e.observations[:, 6 + g] > 0)) for g in range(5)]
+    return tuple(int(g) for g in np.argsort(first, kind="stable"))
+
+
+def test_the_any_order_set_visits_the_goals_in_orders_of_its_own(tmp_path, monkeypatch):
+    """``any-order``: each demonstration reaches all five goals, in an order drawn for it (the
+    next goal is not a function of the goals reached); ``teleop`` goes in one sequence."""
+    monkeypatch.setenv("THESIS_DATA_DIR", str(tmp_path))
+    seq = reach.get_reach_dataset(n_demos=12, seed=1)
+    anyo = reach.get_reach_dataset(n_demos=12, seed=1, reach_set="any-order")
+    assert anyo.id == "thesis/ur3-reach/any-order-v0" and seq.id == reach.DATASET_ID
+    assert {_goal_order(e) for e in seq.episodes} == {(0, 1, 2, 3, 4)}
+    orders = [_goal_order(e) for e in anyo.episodes]
+    assert len(set(orders)) >= 8  # 12 draws of 120 orders
+    assert all(e.observations[-1, 6:].tolist() == [1.0] * 5 for e in anyo.episodes)
+    assert anyo.metadata["thesis_info"]["controller"]["order"] == "random"
+    with pytest.raises(ValueError, match="Unknown reach_set 'hard'. Valid: teleop, any-order"):
+        reach.get_reach_dataset(n_demos=12, seed=1, reach_set="hard")
+
+
+def test_the_reach_set_enters_a_task_only_where_it_is_not_teleop():
+    """The v1 study's tasks (teleop) keep their keys; an any-order task has its own."""
+    from thesis_lib.chapters.ur3 import Config, reach_config
+
+    teleop = reach_config(Config(), "DT", 10, 0)
+    anyo = reach_config(Config(reach_set="any-order"), "DT", 10, 0)
+    assert "reach_set" not in teleop and anyo == {**teleop, "reach_set": "any-order"}
+    with pytest.raises(ValueError, match="Unknown reach_set"):
+        Config(reach_set="hard")
+
+
 # -- dance ------------------------------------------------------------------------------------
 def test_dance_mapping_and_clip():
     a = np.zeros((3, 4))

@@ -151,7 +151,7 @@ def _check(args: argparse.Namespace) -> int:
 def _demos(args: argparse.Namespace) -> int:
     from thesis_lib.ur3.reach import get_reach_dataset
 
-    ds = get_reach_dataset(args.n, args.seed, overwrite=True)
+    ds = get_reach_dataset(args.n, args.seed, overwrite=True, reach_set=args.set)
     print(f"{ds.id}: {len(ds)} demonstrations, {ds.n_transitions} steps, at {ds.path}")
     return 0
 
@@ -224,6 +224,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     demos.add_argument("-n", type=int, default=100)
     demos.add_argument("--seed", type=int, default=0)
+    demos.add_argument(
+        "--set",
+        choices=["teleop", "any-order"],
+        default="teleop",
+        help="teleop: the goals in one sequence (Table 5.4's); any-order: each demonstration "
+        "in an order of its own (thesis/ur3-reach/any-order-v0, harder)",
+    )
     demos.set_defaults(func=_demos)
 
     mdl = sub.add_parser("model", help="path of the UR3 MJCF model (--print: its text)")

@@ -44,6 +44,10 @@ class Config:
     """Seed of the demonstrations and of the stand-in dance."""
     seeds: list[int] = field(default_factory=lambda: [0])
     """Training seeds of Table 5.4."""
+    reach_set: Literal["teleop", "any-order"] = "teleop"
+    """The reaching demonstrations (:data:`thesis_lib.ur3.reach.REACH_SETS`): ``teleop``, the
+    goals in one sequence (Table 5.4's), or ``any-order``, each demonstration in an order of its
+    own (harder: no ceiling at 20 demonstrations; the C14 study v2)."""
     train_demos: list[int] = field(default_factory=lambda: [10, 80])
     """Numbers of training demonstrations, the first n of the 80 (the thesis: 10, 20, ..., 80)."""
     methods: list[str] = field(default_factory=lambda: list(METHODS))
@@ -101,6 +105,8 @@ class Config:
         check_methods(self.methods, METHODS)
         if self.dance_source not in ("mdlt", "demo"):
             raise ValueError(f"Unknown dance_source {self.dance_source!r}. Valid: mdlt, demo.")
+        if self.reach_set not in ("teleop", "any-order"):
+            raise ValueError(f"Unknown reach_set {self.reach_set!r}. Valid: teleop, any-order.")
         if self.dance_mode not in ("clip", "reject"):
             raise ValueError(f"Unknown dance_mode {self.dance_mode!r}. Valid: clip, reject.")
         n_train = N_DEMOS - 20

@@ -78,10 +78,10 @@ before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_c
 # ------------------------------------------------------------------------------ the data set
 
 
-def reach_demos(seed: int) -> Any:
-    """The reaching demonstrations of ``seed`` split as the thesis's: 80 train, 10 validation,
-    10 test starts (:func:`thesis_lib.ur3.reach.split_demonstrations`)."""
-    return split_demonstrations(get_reach_dataset(N_DEMOS, seed).episodes)
+def reach_demos(seed: int, reach_set: str = "teleop") -> Any:
+    """The reaching demonstrations of ``seed`` (the set ``reach_set``) split as the thesis's: 80
+    train, 10 validation, 10 test starts (:func:`thesis_lib.ur3.reach.split_demonstrations`)."""
+    return split_demonstrations(get_reach_dataset(N_DEMOS, seed, reach_set=reach_set).episodes)
 
 
 def run_demonstrations(cfg: Config) -> pd.DataFrame:
@@ -89,7 +89,7 @@ def run_demonstrations(cfg: Config) -> pd.DataFrame:
 
     Used in: UR3 deployment chapter.
     """
-    ds = get_reach_dataset(N_DEMOS, cfg.seed)
+    ds = get_reach_dataset(N_DEMOS, cfg.seed, reach_set=cfg.reach_set)
     lengths = np.array([len(e) for e in ds.episodes])
     return pd.DataFrame(
         [
@@ -184,13 +184,14 @@ def reach_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One sweep task: train ``config["method"]`` on the first ``train_demos`` demonstrations
     and run it from every test start (:func:`run_reach`).
 
-    ``config`` (:func:`reach_config`) holds ``method, train_demos, data_seed, max_eval_steps``
-    and the ``arch`` and ``train`` specs as dicts. Returns :data:`RUN_COLUMNS` rows, one per
+    ``config`` (:func:`reach_config`) holds ``method, train_demos, data_seed, max_eval_steps``,
+    the ``arch`` and ``train`` specs as dicts and, for a set other than ``teleop``,
+    ``reach_set``. Returns :data:`RUN_COLUMNS` rows, one per
     test start.
 
     Used in: UR3 deployment chapter (Table 5.4) and, through :func:`study_run`, its study.
     """
-    demos = reach_demos(config["data_seed"])
+    demos = reach_demos(config["data_seed"], config.get("reach_set", "teleop"))
     rows = run_reach(
         config["method"],
         demos.train[: config["train_demos"]],
@@ -205,8 +206,9 @@ def reach_task(config: dict[str, Any]) -> list[dict[str, Any]]:
 
 def reach_config(cfg: Config, method: str, train_demos: int, seed: int) -> dict[str, Any]:
     """The config of :func:`reach_task` (and :func:`study_run`) for one run of ``cfg``'s grid:
-    ``method`` trained with the first ``train_demos`` demonstrations, training seed ``seed``."""
-    return {
+    ``method`` trained with the first ``train_demos`` demonstrations, training seed ``seed``
+    (``reach_set`` only where it is not ``teleop``: the v1 study's tasks keep their keys)."""
+    config = {
         "method": method,
         "train_demos": train_demos,
         "data_seed": cfg.seed,
@@ -214,6 +216,9 @@ def reach_config(cfg: Config, method: str, train_demos: int, seed: int) -> dict[
         "arch": cfg.arch().task_dict(),
         "train": asdict(cfg.train_spec(seed)),
     }
+    if cfg.reach_set != "teleop":
+        config["reach_set"] = cfg.reach_set
+    return config
 
 
 def run_table_5_4(cfg: Config) -> pd.DataFrame:
