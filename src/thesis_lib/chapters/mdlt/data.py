@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import os
 from collections.abc import Sequence
 from typing import Any, Literal
 
@@ -43,6 +44,27 @@ def genre_label(genre: str) -> str:
     return g
 
 
+def expand_root(root: str) -> str:
+    """A data set's folder with its environment variables expanded (``"$AIST_PLUSPLUS"``: a
+    study file names the folder the same way on every machine; the study's rows record which
+    numbers it held, ``data_sha``).
+
+    Raises:
+        ValueError: a variable it names is not set.
+
+    >>> import os; os.environ["DEMO_ROOT"] = "/data/aist"
+    >>> expand_root("$DEMO_ROOT/v1")
+    '/data/aist/v1'
+    """
+    where = os.path.expandvars(os.path.expanduser(str(root)))
+    if "$" in where:
+        raise ValueError(
+            f"The data folder {root!r} names an environment variable that is not set: set it to "
+            "your download (e.g. AIST_PLUSPLUS=/data/aist_plusplus thesis study 06_mdlt:aist)."
+        )
+    return where
+
+
 def load_sequences(
     layout: Literal["aist", "phantomdance"],
     root: str | None = None,
@@ -60,7 +82,9 @@ def load_sequences(
     """
     if layout == "phantomdance" and size == "study":
         size = "smoke"
-    where = default_dataset(layout=layout, size=size, seed=seed) if root is None else root
+    where = (
+        default_dataset(layout=layout, size=size, seed=seed) if root is None else expand_root(root)
+    )
     if layout == "aist":
         return readers.load_aist(where)
     return readers.load_phantomdance(where, fps=fps)
