@@ -282,3 +282,19 @@ def test_study_tables_render_mid_study_before_any_alignment_row(monkeypatch):
     assert "encoder" not in rows
     t41, t42 = ex.compare_study_tables(rows, {"data": "d", "scale": "s"})
     assert t41["seeds"].isna().all() and t42["seeds"].notna().any()
+
+
+def test_a_study_of_one_claim_runs_only_its_tasks_with_the_same_keys(monkeypatch):
+    """``study_claims: [C12]`` (clfd-c12-v2): only the RL tasks, each with the key it has in
+    the full grid at the same config (the encoders come from the chapter's store)."""
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    cfg = st.study_config(st.load_study("02_clfd"), CHAPTERS["02_clfd"])
+    full = ex.study_tasks(cfg)
+    rl = ex.study_tasks(ex.Config(**{**cfg.__dict__, "study_claims": ["C12"]}))
+    assert rl and all(t.fn is ex.study_rl_task for t in rl)
+    assert [t.key for t in rl] == [t.key for t in full if t.fn is ex.study_rl_task]
+    for bad in (["C13"], [], "C12"):
+        with pytest.raises(ValueError, match="study_claims"):
+            ex.Config(study_claims=bad)

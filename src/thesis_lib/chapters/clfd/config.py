@@ -83,11 +83,20 @@ class Config:
     """Study: the RL success curve cuts the training episodes into this many equal windows."""
     study_controls: bool = True
     """Study: also run an untrained encoder (same backbone) through stage classification and RL."""
+    study_claims: list[str] = field(default_factory=lambda: ["C10", "C11", "C12"])
+    """Study: the claims whose tasks run (C10 alignment, C11 stage classification, C12 RL); a
+    later study of one claim names it alone (the encoders come from the chapter's store)."""
 
     def __post_init__(self) -> None:
         from thesis_lib.clfd.env import CAMERAS  # lazy: mujoco
         from thesis_lib.clfd.models import ENCODERS  # lazy: torch
         from thesis_lib.clfd.train import METHODS  # lazy: torch
+
+        bad = sorted(set(self.study_claims) - {"C10", "C11", "C12"})
+        if bad or isinstance(self.study_claims, str) or not self.study_claims:
+            raise ValueError(
+                f"Expect `study_claims` to be a non-empty list of C10, C11, C12, got {self.study_claims!r}."
+            )
 
         for e in [*self.encoders, *self.compat_encoders, self.rl_encoder]:
             if e not in ENCODERS:

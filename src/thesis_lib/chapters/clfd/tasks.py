@@ -351,7 +351,9 @@ def study_tasks(cfg: Config) -> list[Task]:
     * C11 (:func:`study_stage_task`): stage classification from the CLfD encoder on
       ``cfg.rl_encoder``'s backbone (and from an untrained one, with ``study_controls``);
     * C12 (:func:`study_rl_task`): DDPG+HER on the pick stage with each of ``cfg.rl_methods``'
-      encoders (and the untrained one).
+      encoders (and the untrained one);
+
+    each only where ``cfg.study_claims`` names its claim.
 
     Encoders are trained once, through the chapter's encoder store
     (:func:`~thesis_lib.chapters.clfd.encoders.trained_encoder`), and shared by the three
@@ -363,21 +365,29 @@ def study_tasks(cfg: Config) -> list[Task]:
     seeded = [replace(cfg, seed=s) for s in cfg.seeds]
     backbones = sorted(cfg.encoders, key=lambda e: e != cfg.rl_encoder)
     methods = sorted(cfg.methods, key=lambda m: m != "clfd")  # the stage tasks' encoder first
+    claims = set(cfg.study_claims)
     tasks = [
         _study_task(study_alignment_task, c, TRAIN_FIELDS, encoder=enc, method=m)
         for enc in backbones
         for c in seeded
         for m in methods
+        if "C10" in claims
     ]
     kinds = ["clfd"] + ([UNTRAINED] if cfg.study_controls else [])
     tasks += [
         _study_task(study_stage_task, c, TRAIN_FIELDS + STAGE_FIELDS, features=k)
         for c in seeded
         for k in kinds
+        if "C11" in claims
     ]
     rl = list(cfg.rl_methods) + ([UNTRAINED] if cfg.study_controls and cfg.rl_methods else [])
     fields = TRAIN_FIELDS + RL_FIELDS
-    tasks += [_study_task(study_rl_task, c, fields, method=m) for c in seeded for m in rl]
+    tasks += [
+        _study_task(study_rl_task, c, fields, method=m)
+        for c in seeded
+        for m in rl
+        if "C12" in claims
+    ]
     return tasks
 
 
