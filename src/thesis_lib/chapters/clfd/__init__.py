@@ -60,18 +60,20 @@ from thesis_lib.chapters.clfd.figures import (
     plot_training_curves,
 )
 from thesis_lib.chapters.clfd.tables import (
+    RL_FINAL_COLUMNS,
+    RL_FINAL_SHARE,
     compare_study_tables,
     compare_table_4_1,
     compare_table_4_2,
     describe_numbers,
     mean_ci,
+    rl_final_numbers,
     summarize_rl_episodes,
     summarize_study_inputs,
     summarize_study_rl_curves,
 )
 from thesis_lib.chapters.clfd.tasks import (
     RL_FIELDS,
-    RL_FINAL_SHARE,
     STAGE_FIELDS,
     STAGE_PROTOCOLS,
     STUDY_COLUMNS,
@@ -131,6 +133,7 @@ __all__ = [
     "trained_encoder_rows",
     # experiments and the study
     "RL_FIELDS",
+    "RL_FINAL_COLUMNS",
     "RL_FINAL_SHARE",
     "STAGE_FIELDS",
     "STAGE_PROTOCOLS",
@@ -161,6 +164,7 @@ __all__ = [
     "compare_table_4_2",
     "describe_numbers",
     "mean_ci",
+    "rl_final_numbers",
     "summarize_rl_episodes",
     "summarize_study_inputs",
     "summarize_study_rl_curves",

@@ -37,19 +37,45 @@ def compare_table_4_2(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFr
     )
 
 
+#: C12's final success rate (and Fig 4.4's numbers) are measured over this last share of the
+#: training episodes.
+RL_FINAL_SHARE = 0.2
+
+
+def rl_final_numbers(episodes: pd.DataFrame, success_m: float) -> dict[str, float]:
+    """One RL run's end of training, over its last :data:`RL_FINAL_SHARE` of episodes:
+    ``success_final`` (share that ended with the grasp point within ``success_m`` of the box
+    centre), ``final_distance_m`` (mean final gripper-box distance), ``lifted_final`` (share
+    that lifted the box) and ``return_final`` (mean Eq 4.2 return). The one reduction of a run
+    that Fig 4.4's table and the C12 study's rows share.
+
+    >>> ep = pd.DataFrame({"final_grip_box_distance": [0.2, 0.1, 0.02, 0.01, 0.5],
+    ...                    "box_lifted": [0, 0, 1, 1, 0], "return": [-5, -4, -1, 0, -9]})
+    >>> rl_final_numbers(ep, 0.03)
+    {'success_final': 0.0, 'final_distance_m': 0.5, 'lifted_final': 0.0, 'return_final': -9.0}
+    """
+    last = episodes.iloc[-max(1, int(np.ceil(RL_FINAL_SHARE * len(episodes)))) :]
+    dist = last["final_grip_box_distance"].to_numpy(dtype=float)
+    return {
+        "success_final": float((dist < success_m).mean()),
+        "final_distance_m": float(dist.mean()),
+        "lifted_final": float(last["box_lifted"].astype(float).mean()),
+        "return_final": float(last["return"].mean()),
+    }
+
+
 def summarize_rl_episodes(cfg: Config, episodes: pd.DataFrame) -> pd.DataFrame:
-    """Fig 4.4 in numbers: per encoder, the mean over the last quarter of the episodes of the
-    return, the final gripper-box distance and the share of episodes that lifted the box."""
-    last = episodes.groupby("encoder").tail(max(1, cfg.rl_episodes // 4))
-    return (
-        last.groupby("encoder", sort=False)
-        .agg(
-            mean_return=("return", "mean"),
-            final_grip_box_distance_m=("final_grip_box_distance", "mean"),
-            box_lifted_share=("box_lifted", "mean"),
-        )
-        .reset_index()
-    )
+    """Fig 4.4 in numbers: per encoder, :func:`rl_final_numbers` of its run (the last
+    :data:`RL_FINAL_SHARE` of the episodes, as the C12 study measures it)."""
+    rows = [
+        {"encoder": enc, **rl_final_numbers(g, cfg.rl_success_m)}
+        for enc, g in episodes.groupby("encoder", sort=False)
+    ]
+    return pd.DataFrame(rows, columns=["encoder", *RL_FINAL_COLUMNS])
+
+
+#: The columns of :func:`rl_final_numbers`.
+RL_FINAL_COLUMNS = ("success_final", "final_distance_m", "lifted_final", "return_final")
 
 
 def describe_numbers(t41: pd.DataFrame, compat: pd.DataFrame, t42: pd.DataFrame) -> list[str]:

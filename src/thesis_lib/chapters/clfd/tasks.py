@@ -49,6 +49,7 @@ from thesis_lib.chapters.clfd.encoders import (
     trained_encoder,
     trained_encoder_rows,
 )
+from thesis_lib.chapters.clfd.tables import rl_final_numbers
 from thesis_lib.clfd.data import MultiViewVideos
 from thesis_lib.clfd.losses import nt_xent
 from thesis_lib.clfd.metrics import (
@@ -313,8 +314,6 @@ RL_FIELDS = (
 )  # fmt: skip
 #: How the study labels the untrained encoder (the controls of C11 and C12).
 UNTRAINED = "untrained"
-#: C12's final success rate is measured over this last share of the training episodes.
-RL_FINAL_SHARE = 0.2
 
 
 #: The columns of the study's rows (:func:`study_alignment_task`, :func:`study_stage_task`,
@@ -543,7 +542,7 @@ def study_rl_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     model, sha = _study_encoder(cfg, m)
     ep = rl_episodes(cfg, model)
     curve = rl_success_curve(ep, cfg.rl_checkpoints, cfg.rl_success_m)
-    last = ep.iloc[-max(1, int(np.ceil(RL_FINAL_SHARE * len(ep)))) :]
+    final = rl_final_numbers(ep, cfg.rl_success_m)
     return [
         _study_row(
             config,
@@ -553,15 +552,13 @@ def study_rl_task(config: dict[str, Any]) -> list[dict[str, Any]]:
             setting=f"RL pick ({ENCODER_LABELS[cfg.rl_encoder]} encoder)",
             encoder=ENCODER_LABELS[cfg.rl_encoder],
             episodes=len(ep),
-            success_final=float(
-                (last["final_grip_box_distance"].to_numpy(dtype=float) < cfg.rl_success_m).mean()
-            ),
+            success_final=final["success_final"],
             success_mean=float((ep["final_grip_box_distance"] < cfg.rl_success_m).mean()),
             success_best=max(curve.values()),
             **curve,
-            final_distance_m=float(last["final_grip_box_distance"].mean()),
-            lifted_final=float(last["box_lifted"].astype(float).mean()),
-            return_final=float(last["return"].mean()),
+            final_distance_m=final["final_distance_m"],
+            lifted_final=final["lifted_final"],
+            return_final=final["return_final"],
             expert_return=float(ep["expert_return"].iloc[0]),
             encoder_sha=sha,
         )
