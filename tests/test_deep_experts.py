@@ -171,6 +171,47 @@ def test_train_expert_cli_switches_algorithm_with_its_learning_rate(monkeypatch,
     assert "critic_arch must be whole numbers" in capsys.readouterr().err
 
 
+def test_train_expert_medium_trains_then_ships_only_a_finished_run(monkeypatch, capsys, tmp_path):
+    """``--medium``: the task's medium recipe trains in ``<runs>/<task>-medium``; an unfinished
+    run ships nothing (unless ``--ship``), ``--ship-only`` ships without training."""
+    import json
+    from types import SimpleNamespace
+
+    from thesis_lib.cli import main
+
+    calls = []
+
+    def fake_train(task, cfg, run_dir=None, **kw):
+        calls.append(("train", task, cfg.total_steps, run_dir.name))
+        return deep_experts.RunState(task=task, config={}, backend="sb3")  # not done
+
+    def fake_ship(task, run_dir, **kw):
+        calls.append(("ship", task, run_dir.name))
+        return SimpleNamespace(
+            expert_step=9, medium_normalized=40.0, medium_sampled_normalized=41.0
+        )
+
+    monkeypatch.setattr(deep_experts, "train_deep_expert", fake_train)
+    monkeypatch.setattr(deep_experts, "ship_medium_run", fake_ship)
+    monkeypatch.setattr(deep_experts, "runs_dir", lambda: tmp_path)
+    argv = ["data", "train-expert", "--task", "hopper", "--medium"]
+    assert main([*argv, "--steps", "1000"]) == 0
+    assert calls == [("train", "hopper", 1000, "hopper-medium")]
+    assert main([*argv, "--ship"]) == 0 and calls[-1] == ("ship", "hopper", "hopper-medium")
+    calls.clear()
+    capsys.readouterr()
+    assert main([*argv, "--ship-only"]) == 0 and calls == [("ship", "hopper", "hopper-medium")]
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out == {
+        "task": "hopper",
+        "medium_step": 9,
+        "medium_normalized": 40.0,
+        "medium_sampled_normalized": 41.0,
+    }
+    assert main(["data", "train-expert", "--task", "ant", "--medium"]) == 2
+    assert "No medium-run recipe for 'ant'" in capsys.readouterr().err
+
+
 def test_train_freq_batches_updates_and_old_runs_resume_under_the_default(tmp_path):
     """``train_freq`` N collects N steps, then takes N gradient steps (ratio 1); a run whose
     state predates the field resumes as a run of its default, 1."""

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
+from typing import Any
 
 
 def _generate(args: argparse.Namespace) -> int:
@@ -130,7 +132,6 @@ def _train_expert(args: argparse.Namespace) -> int:
         DEEP_EXPERT_CONFIGS,
         DeepExpertConfig,
         ship_deep_expert,
-        train_deep_expert,
     )
 
     if args.medium:
@@ -168,34 +169,49 @@ def _train_expert(args: argparse.Namespace) -> int:
             print(f"--train-freq must be ≥ 1, got {args.train_freq}.", file=sys.stderr)
             return 2
         cfg = replace(cfg, train_freq=args.train_freq)
+
+    def ship() -> dict[str, Any]:
+        rec = ship_deep_expert(
+            args.task,
+            run_dir=args.run_dir,
+            out_dir=args.out,
+            n_eval_episodes=args.eval_episodes,
+            log=_log,
+        )
+        return {
+            "task": args.task,
+            "expert": rec.expert_return_mean,
+            "expert_normalized": rec.expert_normalized,
+            "medium": rec.medium_return_mean,
+        }
+
+    return _train_then_ship(args, cfg, args.run_dir, ship)
+
+
+def _log(line: str) -> None:
+    print(line, flush=True)
+
+
+def _train_then_ship(
+    args: argparse.Namespace, cfg: Any, run_dir: Any, ship: Callable[[], dict[str, Any]]
+) -> int:
+    """Train (or resume) the run of ``cfg`` unless ``--ship-only``; once it is done (or with
+    ``--ship``), ``ship()`` it and print what it shipped as one JSON line. The one flow of
+    ``thesis data train-expert`` and ``train-expert --medium``."""
+    from thesis_lib.data.deep_experts import train_deep_expert
+
     if not args.ship_only:
         st = train_deep_expert(
             args.task,
             cfg,
-            run_dir=args.run_dir,
+            run_dir=run_dir,
             backend=args.backend,
             max_wall_s=args.max_wall_s,
-            log=lambda s: print(s, flush=True),
+            log=_log,
         )
         if not st.done and not args.ship:
             return 0
-    rec = ship_deep_expert(
-        args.task,
-        run_dir=args.run_dir,
-        out_dir=args.out,
-        n_eval_episodes=args.eval_episodes,
-        log=lambda s: print(s, flush=True),
-    )
-    print(
-        json.dumps(
-            {
-                "task": args.task,
-                "expert": rec.expert_return_mean,
-                "expert_normalized": rec.expert_normalized,
-                "medium": rec.medium_return_mean,
-            }
-        )
-    )
+    print(json.dumps(ship()))
     return 0
 
 
@@ -208,7 +224,6 @@ def _train_medium(args: argparse.Namespace) -> int:
         MEDIUM_RUN_CONFIGS,
         runs_dir,
         ship_medium_run,
-        train_deep_expert,
     )
 
     if args.task not in MEDIUM_RUN_CONFIGS:
@@ -221,35 +236,19 @@ def _train_medium(args: argparse.Namespace) -> int:
     if args.steps is not None:
         cfg = replace(cfg, total_steps=args.steps)
     run_dir = args.run_dir or runs_dir() / f"{args.task}-medium"
-    if not args.ship_only:
-        st = train_deep_expert(
-            args.task,
-            cfg,
-            run_dir=run_dir,
-            backend=args.backend,
-            max_wall_s=args.max_wall_s,
-            log=lambda s: print(s, flush=True),
+
+    def ship() -> dict[str, Any]:
+        rec = ship_medium_run(
+            args.task, run_dir, out_dir=args.out, n_eval_episodes=args.eval_episodes, log=_log
         )
-        if not st.done and not args.ship:
-            return 0
-    rec = ship_medium_run(
-        args.task,
-        run_dir,
-        out_dir=args.out,
-        n_eval_episodes=args.eval_episodes,
-        log=lambda s: print(s, flush=True),
-    )
-    print(
-        json.dumps(
-            {
-                "task": args.task,
-                "medium_step": rec.expert_step,
-                "medium_normalized": rec.medium_normalized,
-                "medium_sampled_normalized": rec.medium_sampled_normalized,
-            }
-        )
-    )
-    return 0
+        return {
+            "task": args.task,
+            "medium_step": rec.expert_step,
+            "medium_normalized": rec.medium_normalized,
+            "medium_sampled_normalized": rec.medium_sampled_normalized,
+        }
+
+    return _train_then_ship(args, cfg, run_dir, ship)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

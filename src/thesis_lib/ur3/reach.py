@@ -276,8 +276,8 @@ class TeleopController:
         elif self.order == "random":
             if self.route is None or len(self.route) != env.n_goals:
                 self.route = self.rng.permutation(env.n_goals)
-            open_ = [g for g in self.route if not env.reached[g]]
-            k = int(open_[0]) if open_ else -1
+            left = [g for g in self.route if not env.reached[g]]
+            k = int(left[0]) if left else -1
         else:
             open_ = np.flatnonzero(~env.reached)
             k = int(open_[0]) if open_.size else -1

@@ -19,7 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
@@ -355,8 +355,22 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
+class OfflineStudyConfig(Protocol):
+    """What :func:`study_task` reads of a chapter's Config (the HDT's and the Decision Mamba's)."""
+
+    @property
+    def eval_episodes(self) -> int: ...
+    @property
+    def max_eval_steps(self) -> int | None: ...
+    @property
+    def dataset_size(self) -> str: ...
+    @property
+    def n_transitions(self) -> int | None: ...
+    def train_spec(self, seed: int) -> TrainSpec: ...
+
+
 def study_task(
-    cfg: Any,
+    cfg: OfflineStudyConfig,
     method: str,
     dataset: str,
     seed: int,
