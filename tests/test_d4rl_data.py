@@ -188,6 +188,7 @@ KNOWN_OUTSIDE = {
     ("walker2d", "medium"): "TQC snapshot at 21 against D4RL's 62",
     ("walker2d", "medium-replay"): "replay up to that weak medium",
     ("walker2d", "medium-expert"): "its medium half",
+    # its own TQC medium run (step 110k): mean 42.6 against 40.7, but 1.1 points of spread
     ("halfcheetah", "medium"): "sampled TQC medium spreads 1.1 points against D4RL's 2.9",
 }
 
