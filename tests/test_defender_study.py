@@ -412,3 +412,42 @@ def test_demos_file_writes_once_by_content_and_leaves_no_part_file(tmp_path, mon
     assert [p.name for p in folder.iterdir()] == [name]
     back = ex.load_demos_file(name)
     np.testing.assert_array_equal(back.safe[0].observations, demos.safe[0].observations)
+
+
+def test_a_study_row_is_a_reduction_of_the_chapters_training_task(tmp_path, monkeypatch):
+    """The study runs the tables' task (``train_task``) with the final evaluation asked for:
+    its rows are the training episodes, then the evaluation's; ``study_row`` reduces them, and
+    the tables' ``runs_from_episodes`` reads the same run's training episodes alone."""
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))
+    cfg = ex.Config(**{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {}})
+    task = next(t for t in ex.study_tasks(cfg) if t.config["label"] == "SAC")
+    c = task.config
+    train_config = {k: c[k] for k in ("task", "algo", "seed", "strategy", "trajectory")}
+    rows = ex.train_task(
+        {
+            **train_config,
+            "paper_compat": False,
+            "demos": None,
+            "n_demos": 0,
+            "top_up": True,
+            "train": c["train"],
+            "eval_episodes": c["eval_episodes"],
+        }  # fmt: skip
+    )
+    n = c["eval_episodes"]
+    phases = [r["phase"] for r in rows]
+    assert n > 0 and phases[-n:] == ["eval"] * n and set(phases[:-n]) == {"train"}
+    assert all(r["steps"] == 200 for r in rows if r["phase"] == "train")
+    row = ex.study_row(c, rows)
+    run = ex.runs_from_episodes(pd.DataFrame(rows).assign(task_key="k")).iloc[0]
+    assert row["n_episodes"] == run["n_episodes"] == len(rows) - n
+    assert row["acc_reward"] == pytest.approx(run["acc_reward"])
+    evals = [r["return"] for r in rows if r["phase"] == "eval"]
+    assert row["eval_return"] == pytest.approx(np.mean(evals))
+    # the study's task gives the same row (the same seeds: the same run)
+    again = ex.study_run(c)[0]
+    skip = {"train_cpu_s", "train_wall_s", "wall_time_s", "log_speed"}
+    assert {k: v for k, v in again.items() if k not in skip} == pytest.approx(
+        {k: v for k, v in row.items() if k not in skip}, nan_ok=True
+    )

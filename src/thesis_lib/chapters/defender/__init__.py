@@ -21,7 +21,7 @@ their demonstrations from content-addressed files under ``results/03_defender/de
 
 The pre-registered study of claims C7-C9 (``params/03_defender.study.yml``, ``thesis study
 03_defender``) runs :func:`study_tasks`: one :func:`study_run` per training run, trained by the
-same :func:`train_run` as the tables and reduced to one row by :func:`training_run_numbers`
+same :func:`train_task` as the tables and reduced to one row by :func:`study_row`
 and a final evaluation without the filter. Its demonstrations are made once and kept beside
 its rows (:func:`pinned_demonstrations`), because a later session on a new machine made other
 ones for one task. The chapter's "Evidence at study scale" reads the rows back
@@ -68,11 +68,12 @@ from thesis_lib.chapters.defender.figures import (
 )
 from thesis_lib.chapters.defender.study import (
     CRASH_DEFINITION,
-    EVAL_SEED,
+    DEMO_INFO,
     STUDY_COLUMNS,
     STUDY_CURVE_BINS,
     THESIS_SAC_RETURN,
     study_label,
+    study_row,
     study_run,
     study_task,
     study_tasks,
@@ -98,6 +99,7 @@ from thesis_lib.chapters.defender.tables import (
     summarize_top_strategies,
 )
 from thesis_lib.chapters.defender.tasks import (
+    EVAL_SEED,
     RUN_COLUMNS,
     TRAIN_FIELDS,
     TableRuns,
@@ -117,6 +119,7 @@ __all__ = [
     "CRASH_DEFINITION",
     "DEMO_FIELDS",
     "DEMO_SOURCES",
+    "DEMO_INFO",
     "EVAL_SEED",
     "RUN_COLUMNS",
     "STUDY_COLUMNS",
@@ -160,6 +163,7 @@ __all__ = [
     "scale_note",
     "study_demonstrations",
     "study_label",
+    "study_row",
     "study_run",
     "study_task",
     "study_tasks",

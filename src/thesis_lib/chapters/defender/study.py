@@ -1,10 +1,10 @@
 """The DEFENDER chapter's pre-registered study of claims C7-C9 (``thesis study 03_defender``).
 
 :func:`study_tasks` is the grid (``params/03_defender.study.yml``): one :func:`study_run` per
-training run. Each trains through
-:func:`~thesis_lib.chapters.defender.tasks.train_run`, the training function of Tables
-4.3-4.5, and reduces its episode log to one row (:func:`training_run_numbers`), with a final
-evaluation without the filter. Its demonstrations are pinned beside the study's rows
+training run. Each runs :func:`~thesis_lib.chapters.defender.tasks.train_task`, the task of
+Tables 4.3-4.5, with the final policy's evaluation without the filter, and reduces its rows to
+one (:func:`study_row`: :func:`training_run_numbers` and the evaluation). Its demonstrations are
+pinned beside the study's rows
 (:func:`~thesis_lib.chapters.defender.demos.pinned_demonstrations`).
 
 Used in: DEFENDER chapter study (``thesis study 03_defender``).
@@ -12,7 +12,6 @@ Used in: DEFENDER chapter study (``thesis study 03_defender``).
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import numpy as np
@@ -22,12 +21,14 @@ import torch
 from thesis_lib.chapters.defender.config import Config
 from thesis_lib.chapters.defender.demos import (
     DEMO_FIELDS,
-    make_env,
-    study_demonstrations,
     thesis_env_name,
 )
-from thesis_lib.chapters.defender.tasks import RUN_COLUMNS, TRAIN_FIELDS, train_run
-from thesis_lib.rl import evaluate
+from thesis_lib.chapters.defender.tasks import (
+    RUN_COLUMNS,
+    TRAIN_FIELDS,
+    runs_from_episodes,
+    train_task,
+)
 from thesis_lib.sweep import Task, task_id
 
 #: The thesis's Table 4.3 plain-SAC Acc Reward per task: ``*_score`` columns are returns in
@@ -43,11 +44,6 @@ THESIS_SAC_RETURN: dict[str, float] = {
 STUDY_CURVE_BINS = 10
 """Training is cut into this many equal spans of environment steps; each study row carries the
 crash rate, filtered rate and mean return of the episodes that ended in each span."""
-
-
-EVAL_SEED = 100_000
-"""The final evaluation of a study run with training seed ``s`` resets its task with
-``EVAL_SEED + s``."""
 
 
 CRASH_DEFINITION = (
@@ -184,7 +180,8 @@ STUDY_COLUMNS = [
 
 @task_id("thesis_lib.chapters.defender:study_run")
 def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
-    """One study task: a training run (:func:`train_run`), reduced to one row.
+    """One study task: the chapter's training run (:func:`train_task`, with the study's pinned
+    demonstrations and the final policy's evaluation), reduced to one row (:func:`study_row`).
 
     ``config`` (:func:`study_task` builds it): ``label`` (the method's name in the study),
     ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``, ``n_demos``,
@@ -192,49 +189,69 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     filter), ``train`` (:data:`TRAIN_FIELDS`), ``eval_episodes``, ``bins`` and, for a scale
     check, ``scale``.
 
-    Returns:
-        One row: ``method`` (the label), ``setting`` (the thesis's task name), ``seed``,
-        ``scale``; the :data:`RUN_COLUMNS` of :func:`train_run` (``acc_reward``, ``crash_pct``,
-        ...: the chapter's tables read them); :func:`training_run_numbers`; the final policy's
-        evaluation **without the filter** over ``eval_episodes`` episodes (``eval_return``,
-        ``eval_return_std``, ``eval_crash_rate``, ``eval_length``); ``eval_score`` and
-        ``best_score`` (``eval_return`` and ``return_best`` in % of the thesis's plain-SAC
-        return on the task, :data:`THESIS_SAC_RETURN`); ``steps``, ``train_wall_s``,
-        ``train_cpu_s``, ``log_speed`` (ln of training steps per CPU-second: higher is
-        cheaper); and where the demonstrations came from (:func:`study_demonstrations`).
-
     Used in: DEFENDER chapter study (``thesis study 03_defender``).
     """
     torch.set_num_threads(1)  # small nets: one core per run; the study runs one run per core
-    task, seed = config["task"], int(config["seed"])
-    cfg = Config(**config["train"], tasks=[task])
-    demos: Any = None
-    info: dict[str, Any] = {}
-    if config["strategy"]:
-        demos, info = study_demonstrations(
-            task, config["demos"], int(config["n_demos"]), bool(config["top_up"])
-        )
-    c0 = time.process_time()
-    row, ep, res = train_run(
-        task, config["algo"], seed, cfg, demos, config["strategy"], config["trajectory"], False
+    run = {k: config[k] for k in ("task", "algo", "seed", "strategy", "trajectory")}
+    rows = train_task(
+        {
+            **run,
+            "paper_compat": False,
+            "demos": config["demos"],
+            "n_demos": config["n_demos"],
+            "top_up": config["top_up"],
+            "train": config["train"],
+            "eval_episodes": config["eval_episodes"],
+        }
     )
-    cpu = time.process_time() - c0
-    steps = int(res.model.num_timesteps)
-    ev = evaluate(
-        res.model,
-        make_env(task, cfg.max_episode_steps),
-        n_episodes=int(config["eval_episodes"]),
-        seed=EVAL_SEED + seed,
-    )
-    ref = THESIS_SAC_RETURN.get(task, np.nan)
+    return [study_row(config, rows)]
+
+
+#: What :func:`train_task` says of a run's pinned demonstrations (in a filtered run's rows).
+DEMO_INFO = (
+    "demos_file", "demos_safe", "demos_unsafe", "demos_safe_expert", "demos_unsafe_expert",
+    "sac_rollouts_safe", "sac_rollouts_unsafe",
+)  # fmt: skip
+
+
+def study_row(config: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """A study run's row: :func:`train_task`'s ``rows`` of one run (its training episodes and
+    its final evaluation) reduced.
+
+    Returns:
+        ``method`` (the label), ``setting`` (the thesis's task name), ``seed``, ``scale``;
+        the :data:`RUN_COLUMNS` of the run (``acc_reward``, ``crash_pct``, ...: the chapter's
+        tables read them, :func:`runs_from_episodes`); :func:`training_run_numbers`; the final
+        policy's evaluation **without the filter** (``eval_return``, ``eval_return_std``,
+        ``eval_crash_rate``, ``eval_length``); ``eval_score`` and ``best_score``
+        (``eval_return`` and ``return_best`` in % of the thesis's plain-SAC return on the task,
+        :data:`THESIS_SAC_RETURN`); ``steps``, ``train_wall_s``, ``train_cpu_s``,
+        ``log_speed`` (ln of training steps per CPU-second: higher is cheaper); and where the
+        demonstrations came from (:data:`DEMO_INFO`).
+    """
+    train = [r for r in rows if r.get("phase", "train") == "train"]
+    ev = pd.DataFrame([r for r in rows if r.get("phase") == "eval"])
+    first = train[0]
+    ep = pd.DataFrame([r for r in train if r["episode"] is not None])
+    if ep.empty:
+        ep = pd.DataFrame(columns=["return", "crashed", "filtered", "timestep"])
+    summary = runs_from_episodes(pd.DataFrame(train).assign(task_key="run")).iloc[0]
+    run_row = {k: summary[k] for k in RUN_COLUMNS}
+    for k in ("seed", "n_demos", "n_episodes"):
+        run_row[k] = int(run_row[k])
+    run_row["paper_compat"] = bool(run_row["paper_compat"])
+    for k in ("safe_strategy", "unsafe_strategy"):
+        run_row[k] = None if pd.isna(run_row[k]) else run_row[k]
+    steps, cpu = int(first["steps"]), float(first["train_cpu_s"])
+    ref = THESIS_SAC_RETURN.get(first["task"], np.nan)
     numbers = training_run_numbers(ep, steps, int(config["bins"]))
-    out: dict[str, Any] = {
+    return {
         "method": config["label"],
-        "setting": thesis_env_name(task),
-        "seed": seed,
+        "setting": thesis_env_name(first["task"]),
+        "seed": int(first["seed"]),
         "scale": config.get("scale", "study"),
         "top_up": bool(config["top_up"]) if config["strategy"] else None,
-        **row,
+        **run_row,
         **numbers,
         "eval_return": float(ev["return"].mean()),
         "eval_return_std": float(ev["return"].std(ddof=0)),
@@ -243,12 +260,11 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         "eval_score": 100.0 * float(ev["return"].mean()) / ref,
         "best_score": 100.0 * numbers["return_best"] / ref,
         "steps": steps,
-        "train_wall_s": float(res.wall_time_s),
-        "train_cpu_s": float(cpu),
+        "train_wall_s": float(first["wall_time_s"]),
+        "train_cpu_s": cpu,
         "log_speed": float(np.log(steps / max(cpu, 1e-9))),
-        **info,
+        **{k: first[k] for k in DEMO_INFO if k in first},
     }
-    return [out]
 
 
 def study_label(

@@ -10,14 +10,16 @@ stored under ``results/03_defender/tasks`` (an interrupted chapter resumes; a ru
   (:func:`run_tables_4_3_4_4`, :func:`run_table_4_5` build the grids;
   :func:`runs_from_episodes` reduces each run to one row, :data:`RUN_COLUMNS`).
 
-The study's runs (:mod:`thesis_lib.chapters.defender.study`) train through the same
-:func:`train_run`.
+The study's runs (:mod:`thesis_lib.chapters.defender.study`) are the same task, asked also for
+the final policy's evaluation and with the study's pinned demonstrations, and reduced to one
+row (:func:`~thesis_lib.chapters.defender.study.study_row`).
 
 Used in: DEFENDER chapter (thesis 4.3).
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any, Literal, NamedTuple, cast
 
 import numpy as np
@@ -33,11 +35,12 @@ from thesis_lib.chapters.defender.demos import (
     load_demos_file,
     make_env,
     rl_overrides,
+    study_demonstrations,
     thesis_env_name,
 )
 from thesis_lib.defender import DefenderWrapper, DemoRun, DemoSet
 from thesis_lib.defender.ablation import strategy_ablation
-from thesis_lib.rl import config_from_params, train
+from thesis_lib.rl import config_from_params, evaluate, train
 from thesis_lib.sweep import Task, run_tasks, task_id
 
 RUN_COLUMNS: tuple[str, ...] = (
@@ -131,8 +134,9 @@ def train_run(
 ) -> TrainedRun:
     """Train one agent, with DEFENDER when ``demos`` and ``strategy`` are given.
 
-    The one training function of the chapter: Tables 4.3-4.5 (:func:`train_task`) and the study
-    (:func:`~thesis_lib.chapters.defender.study.study_run`) both train through it.
+    The one training function of the chapter, run by its one training task, :func:`train_task`
+    (Tables 4.3-4.5, and the study through
+    :func:`~thesis_lib.chapters.defender.study.study_run`).
 
     Returns:
         ``(row, episodes, result)``: a summary row (:data:`RUN_COLUMNS`; Acc Reward = best
@@ -222,37 +226,88 @@ def _run_numbers(ep: pd.DataFrame) -> dict[str, Any]:
     }
 
 
+EVAL_SEED = 100_000
+"""The final evaluation of a run with training seed ``s`` (:func:`train_task` with
+``eval_episodes``) resets its task with ``EVAL_SEED + s``."""
+
+
 @task_id("thesis_lib.chapters.defender:train_task")
 def train_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """Sweep task: one training run (:func:`train_run`), its episodes as long-format rows.
 
     Config keys: ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``,
-    ``paper_compat``, ``demos`` (a :func:`demos_file` name, or None) and ``train`` (the
-    :data:`TRAIN_FIELDS` of the chapter's :class:`Config`).
+    ``paper_compat``, ``demos`` and ``train`` (the :data:`TRAIN_FIELDS` of the chapter's
+    :class:`Config`). ``demos`` is a :func:`demos_file` name, None, or (the study's) a
+    demonstration recipe (:data:`~thesis_lib.chapters.defender.demos.DEMO_FIELDS`) with
+    ``n_demos`` and ``top_up`` beside it: the pinned demonstrations of
+    :func:`~thesis_lib.chapters.defender.demos.study_demonstrations`, whose figures
+    (``demos_file``, ``demos_safe``, ...) every row then carries. ``eval_episodes`` (optional,
+    default 0): evaluate the final policy without the filter over that many episodes, reset
+    with ``EVAL_SEED + seed``.
 
     Returns:
-        One row per training episode, with the run's keys and ``wall_time_s``; a run that
-        finished no episode gives one row with ``episode`` None.
+        One row per training episode (``phase == "train"``), with the run's keys,
+        ``wall_time_s``, ``steps`` (environment steps trained) and ``train_cpu_s``; a run that
+        finished no episode gives one such row with ``episode`` None. Then, with
+        ``eval_episodes``, one row per evaluation episode (``phase == "eval"``: ``episode``,
+        ``return``, ``crashed``, ``length``).
 
     Used in: DEFENDER chapter (thesis 4.3.3), through :func:`run_tables_4_3_4_4` and
-    :func:`run_table_4_5`.
+    :func:`run_table_4_5`, and its study (:func:`~thesis_lib.chapters.defender.study.study_run`).
     """
-    cfg = Config(**config["train"])
-    demos = load_demos_file(config["demos"]) if config["demos"] else None
-    row, ep, _ = train_run(
-        config["task"],
+    task, seed = config["task"], int(config["seed"])
+    cfg = Config(**config["train"], tasks=[task])
+    demos: DemoSet | None = None
+    info: dict[str, Any] = {}
+    if isinstance(config["demos"], dict):
+        if config["strategy"]:
+            demos, info = study_demonstrations(
+                task, config["demos"], int(config["n_demos"]), bool(config.get("top_up", True))
+            )
+    elif config["demos"]:
+        demos = load_demos_file(config["demos"])
+    c0 = time.process_time()
+    row, ep, res = train_run(
+        task,
         config["algo"],
-        config["seed"],
+        seed,
         cfg,
         demos=demos,
         strategy=config["strategy"],
         trajectory=config["trajectory"],
         paper_compat=config["paper_compat"],
     )
+    run = {
+        "steps": int(res.model.num_timesteps),
+        "train_cpu_s": time.process_time() - c0,
+        **info,
+    }
+    keys = {k: row[k] for k in RUN_COLUMNS[:9]}
     if not len(ep):
-        keys = {k: row[k] for k in RUN_COLUMNS[:9]}
-        return [{**keys, "episode": None, "wall_time_s": row["wall_time_s"]}]
-    return ep.to_dict(orient="records")
+        rows = [{**keys, "episode": None, "wall_time_s": row["wall_time_s"]}]
+    else:
+        rows = ep.to_dict(orient="records")
+    rows = [{**r, "phase": "train", **run} for r in rows]
+    n_eval = int(config.get("eval_episodes", 0))
+    if n_eval:
+        ev = evaluate(
+            res.model,
+            make_env(task, cfg.max_episode_steps),
+            n_episodes=n_eval,
+            seed=EVAL_SEED + seed,
+        )
+        rows += [
+            {
+                **keys,
+                "phase": "eval",
+                "episode": i,
+                "return": float(e["return"]),
+                "crashed": bool(e["crashed"]),
+                "length": float(e["length"]),
+            }
+            for i, e in enumerate(ev.to_dict(orient="records"))
+        ]
+    return rows
 
 
 _RUN_KEYS = list(RUN_COLUMNS[:9])
@@ -261,6 +316,8 @@ _RUN_KEYS = list(RUN_COLUMNS[:9])
 def runs_from_episodes(episodes: pd.DataFrame) -> pd.DataFrame:
     """One summary row per run (:data:`RUN_COLUMNS`) from :func:`train_task`'s episode rows."""
     rows = []
+    if "phase" in episodes:  # a run's evaluation episodes are not training episodes
+        episodes = episodes[episodes["phase"].fillna("train") == "train"]
     for _, ep in episodes.groupby("task_key", sort=False):
         first = ep.iloc[0]
         ep = ep[ep["episode"].notna()]
