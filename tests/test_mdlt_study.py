@@ -351,3 +351,31 @@ def test_data_sha_names_the_numbers_of_the_data_set(monkeypatch):
         shas.append(ex.data_sha("aist", None, "smoke", 0))
     ex.data_sha.cache_clear()
     assert shas[0] == shas[1] != shas[2]  # one feature changed by 1e-6: another data set
+
+
+def test_the_study_reduces_the_chapters_fold_task_and_keeps_no_files(tmp_path, monkeypatch):
+    """A study run's songs are the chapter's fold task's rows (the tables' step), asked with
+    ``windowed`` and ``keep: False``: the same rows, no checkpoint or predictions written."""
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    t = next(
+        t
+        for t in ex.study_tasks(ex.Config(**TINY))
+        if (t.config["scope"], t.config["method"]) == (ex.PER_GENRE, "mamba")
+    )
+    songs = ex.study_songs("mamba", t.config, t.config["genre"], 0)
+    assert list(songs.method.unique()) == ["MDLT-M"] and set(songs.genre) == {"mHO"}
+    assert songs.aje_windowed.notna().all() and songs.aje_mean_pose.notna().all()
+    assert not [p for p in tmp_path.rglob("*") if p.is_file()]
+    kept = ex.fold_task(
+        {
+            "data": t.config["data"],
+            "experiment": "mHO",
+            "genre": "mHO",
+            "fold": 0,
+            "checkpoint_dir": None,
+            "cfg": t.config["cfg"],
+            "method": "baselines",
+            "seed_offset": 0,
+        }  # fmt: skip
+    )
+    assert set(kept.song_genre) == {"mHO"} and list(tmp_path.rglob("*.npz"))

@@ -19,7 +19,8 @@ The folds run through :func:`thesis_lib.sweep.run_tasks`, one task per model x f
 ``results/06_mdlt/tasks``; each task writes its checkpoint (under ``checkpoint_dir``, default
 ``results/06_mdlt/checkpoints``) and its predictions (``results/06_mdlt/predictions``), named by
 the hash of its config, so an interrupted run resumes and no run resumes another's checkpoint.
-Every fold, the C13 study's too (:func:`study_run`), runs the same step, :func:`fold_method`.
+Every fold, the C13 study's too (:func:`study_run`), runs the same task, :func:`fold_task`
+(its step :func:`fold_method`).
 
 The modules:
 

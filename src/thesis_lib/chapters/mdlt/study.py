@@ -1,14 +1,13 @@
 """The MDLT chapter's pre-registered study (claim C13, ``params/06_mdlt.study.yml``): its grid
 (:func:`study_tasks`) and its task (:func:`study_run`), whose rows are a reduction of the
-chapter's per-fold rows (:func:`~thesis_lib.chapters.mdlt.tasks.fold_method`, the step every
-table of the chapter runs) per method and genre.
+chapter's fold task's rows (:func:`~thesis_lib.chapters.mdlt.tasks.fold_task`, the task every
+table of the chapter runs; :func:`study_songs`) per method and genre.
 
 Used in: ``thesis study 06_mdlt`` (C13); MDLT chapter ("Evidence at study scale").
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import pandas as pd
@@ -26,7 +25,7 @@ from .config import (
     probe_config,
 )
 from .data import genre_label
-from .tasks import fold_method
+from .tasks import fold_task
 
 METHOD_INDEX = {"transformer": 0, "mamba": 1, "mamba_audio": 2}
 """A variant's place in the seed offset of its fold (``1000 * fold + index``)."""
@@ -73,23 +72,31 @@ def gain_vs_mean_pose(aje_rad: float, aje_mean_pose: float) -> float:
     return float(1.0 - aje_rad / aje_mean_pose) if aje_mean_pose > 0 else float("nan")
 
 
-def study_songs(
-    method: str, train: Sequence, val: Sequence, cfg: Config, fold: int
-) -> pd.DataFrame:
-    """Per validation song of one fold: the :func:`~thesis_lib.chapters.mdlt.tasks.fold_method`
-    row of ``method`` (a variant, trained with ``windowed=True``, or ``"mean_pose"`` /
+def study_songs(method: str, config: dict[str, Any], genre: str | None, fold: int) -> pd.DataFrame:
+    """Per validation song of one fold: the chapter's fold task
+    (:func:`~thesis_lib.chapters.mdlt.tasks.fold_task`, as every table of the chapter runs it)
+    for ``method`` (a variant, trained with ``windowed=True``, or ``"mean_pose"`` /
     ``"genre_mean"`` of the baselines, ``train_s`` 0), with the song's ``genre`` and the mean
-    training pose's AJE on it (``aje_mean_pose``)."""
-    base, _, _ = fold_method("baselines", train, val, cfg, fold, 0)
+    training pose's AJE on it (``aje_mean_pose``). ``config``: the study task's ``data`` and
+    ``cfg`` (its :data:`TRAIN_FIELDS`, the run's seed in it)."""
+    task = {
+        "data": config["data"],
+        "experiment": "study",
+        "genre": genre,
+        "fold": fold,
+        "checkpoint_dir": None,
+        "cfg": config["cfg"],
+        "keep": False,  # no checkpoint or predictions file per study fold
+    }
+    base = fold_task({**task, "method": "baselines", "seed_offset": 0})
     if method in ("mean_pose", "genre_mean"):
         rows = base[base["method"] == VARIANT_LABELS[method]].assign(train_s=0.0)
     else:
         offset = 1000 * fold + METHOD_INDEX[method]
-        rows, _, _ = fold_method(method, train, val, cfg, fold, offset, windowed=True)
+        rows = fold_task({**task, "method": method, "seed_offset": offset, "windowed": True})
     mean_pose = base[base["method"] == VARIANT_LABELS["mean_pose"]]
-    return rows.reset_index(drop=True).assign(
-        genre=[genre_label(s.genre) for s in val], aje_mean_pose=mean_pose["aje"].to_numpy()
-    )
+    rows = rows.drop(columns=["experiment", "fold"]).rename(columns={"song_genre": "genre"})
+    return rows.reset_index(drop=True).assign(aje_mean_pose=mean_pose["aje"].to_numpy())
 
 
 @task_id("thesis_lib.chapters.mdlt:study_run")  # the v1 study's name (the chapter as one module)
@@ -106,8 +113,8 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
 
     Each fold trains the method on the fold's training pieces (held-out music: the fold's
     validation pieces are never trained on) and translates every validation piece from its
-    first frame to its last, as every fold of the chapter's tables does
-    (:func:`~thesis_lib.chapters.mdlt.tasks.fold_method`); the per-song rows
+    first frame to its last, by the task every fold of the chapter's tables runs
+    (:func:`~thesis_lib.chapters.mdlt.tasks.fold_task`); the per-song rows
     (:func:`study_songs`) are averaged per genre of the song over all folds (every song weighs
     the same).
 
@@ -128,6 +135,7 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     torch.set_num_threads(1)  # small models: one core per run
     seed = int(config["seed"])
     cfg = Config(**{**config["cfg"], "seed": seed})
+    run = {"data": config["data"], "cfg": {f: getattr(cfg, f) for f in TRAIN_FIELDS}}
     method, scope = config["method"], config["scope"]
     if method == "probe":  # the task's cfg is already probe_config's
         variants, labels = ["mamba_audio"], [PROBE_LABEL]
@@ -144,10 +152,7 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
     for variant, label in zip(variants, labels):
         songs = pd.concat(
-            [
-                study_songs(variant, *data.fold_split(d, genre, int(fold)), cfg, int(fold))
-                for fold in config["folds"]
-            ],
+            [study_songs(variant, run, genre, int(fold)) for fold in config["folds"]],
             ignore_index=True,
         )
         for g, grp in songs.groupby("genre", sort=True):

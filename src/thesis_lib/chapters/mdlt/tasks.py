@@ -295,24 +295,38 @@ def fold_task(config: dict[str, Any]) -> pd.DataFrame:
     ``fold``, ``method``, ``seed_offset``, ``checkpoint_dir`` (None: under the results) and
     ``cfg`` (the :data:`TRAIN_FIELDS` of the chapter's :class:`Config`). Writes the
     predictions (:func:`predictions_path`) and the checkpoint (:func:`checkpoint_path`).
+    Optional (the C13 study's): ``windowed`` (MDLT-M also translated restarting every
+    ``K_mamba`` frames, :func:`fold_model`) and ``keep`` (``False``: write neither file).
 
     Returns:
-        One row per validation song, as :func:`run_fold`'s.
+        One row per validation song, as :func:`run_fold`'s, with the song's ``song_genre``.
 
-    Used in: MDLT chapter (thesis 6.5), through :func:`run_table_6_2` / :func:`run_table_6_3`.
+    Used in: MDLT chapter (thesis 6.5), through :func:`run_table_6_2` / :func:`run_table_6_3`,
+    and its study (:func:`~thesis_lib.chapters.mdlt.study.study_run`).
     """
     cfg = Config(**config["cfg"])
+    keep = bool(config.get("keep", True))
     train, val = data.fold_split(config["data"], config["genre"], config["fold"])
     ckpt = None
-    if config["method"] != "baselines":
+    if config["method"] != "baselines" and keep:
         ckpt = str(checkpoint_path(config, config["checkpoint_dir"]))
     rows, preds, _ = fold_method(
-        config["method"], train, val, cfg, config["fold"], config["seed_offset"], ckpt
+        config["method"],
+        train,
+        val,
+        cfg,
+        config["fold"],
+        config["seed_offset"],
+        ckpt,
+        windowed=bool(config.get("windowed", False)),
     )
-    arrays: dict[str, Any] = {
-        f"{m}/{i}": np.asarray(a) for m, ps in preds.items() for i, a in enumerate(ps)
-    }
-    np.savez_compressed(predictions_path(config), **arrays)
+    if keep:
+        arrays: dict[str, Any] = {
+            f"{m}/{i}": np.asarray(a) for m, ps in preds.items() for i, a in enumerate(ps)
+        }
+        np.savez_compressed(predictions_path(config), **arrays)
+    per_song = len(rows) // len(val)  # the baselines: several methods, each over every song
+    rows["song_genre"] = [genre_label(s.genre) for s in val] * per_song
     rows.insert(0, "fold", config["fold"])
     rows.insert(0, "experiment", config["experiment"])
     return rows
