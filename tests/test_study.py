@@ -352,6 +352,21 @@ def test_committed_claims_follow_from_the_committed_rows(monkeypatch):
             assert (c.kind, c.margin) == (r.kind, pytest.approx(r.margin))
 
 
+def test_committed_claims_list_every_registered_study_of_a_claim(monkeypatch):
+    """``history`` names every study file that registers the claim, first to last: a study file
+    added without ``thesis claims`` is caught here."""
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    committed = pd.read_csv(REPO / "studies" / "claims.csv").set_index("claim")
+    want: dict[str, list[str]] = {}
+    for f in st.study_files():
+        study = st.load_study(f)
+        for claim in dict.fromkeys(c["claim"] for c in study.comparisons):
+            want.setdefault(claim, []).append(study.study)
+    for claim, studies in want.items():
+        got = [h.split(":")[0] for h in str(committed.loc[claim, "history"]).split("; ")]
+        assert got == studies, (claim, "run thesis claims")
+
+
 READING = re.compile(
     r"\*\*Reading the verdicts\*\* \(study `([^`]+)`, complete: (\d+) runs, ([\d.]+) CPU-hours"
 )
