@@ -183,6 +183,11 @@ def test_thesis_study_names_a_later_study_by_tag_or_file(project, capsys):
     assert main(["study", str(project / "params" / "04_hdt.v2.study.yml")]) == 0
     assert len(CALLS) == 12 and (project / "studies" / "04_hdt" / "v2" / "rows.csv").is_file()
     assert not (project / "studies" / "04_hdt" / "rows.csv").exists()  # v1 untouched
+    assert main(["study", "--status"]) == 0  # every registered study, first to last
+    out = capsys.readouterr().out
+    assert out.index('"study": "fake-v1"') < out.index('"study": "fake-v2"')
+    with pytest.raises(SystemExit, match="only --status"):
+        main(["study"])
     assert main(["study", "04_hdt:V2"]) == 1
     assert "A study tag is lower-case" in capsys.readouterr().err
     assert main(["study", "04_hdt:v3"]) == 1

@@ -3,6 +3,7 @@
 thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
 thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate)
+thesis study --status                 # the same for every registered study
 thesis study params/04_hdt.study.yml  # the same, named by its study file
 thesis study 04_hdt:v2                # a later study of the chapter: params/04_hdt.v2.study.yml
 thesis study 05_decision_mamba 03_defender -j 2   # one study after the other
@@ -182,6 +183,13 @@ def _cmd_study(args: argparse.Namespace) -> int:
     from thesis_lib.book import study as st
     from thesis_lib.chapters import get_chapter
 
+    if not args.chapter:
+        if not args.status:
+            raise SystemExit(
+                "Name the studies to run (e.g. thesis study 04_hdt); without one, only --status "
+                "(every study) is allowed."
+            )
+        args.chapter = [st.load_study(p).ref for p in st.study_files()]
     # every study file first (names, values, metrics): a typo fails before hours of work
     args.chapter = [st.study_chapter(c) for c in args.chapter]
     for ref in args.chapter:
@@ -252,9 +260,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("study", help="run or resume a chapter's pre-registered study")
     p.add_argument(
         "chapter",
-        nargs="+",
+        nargs="*",
         help="e.g. 04_hdt or params/04_hdt.study.yml (reads params/<chapter>.study.yml), "
-        "04_hdt:v2 (a later study, params/04_hdt.v2.study.yml); several run one after another",
+        "04_hdt:v2 (a later study, params/04_hdt.v2.study.yml); several run one after another; "
+        "none, with --status: every study",
     )
     p.add_argument(
         "--executor",
