@@ -448,6 +448,22 @@ def test_cli_generate_list_card(capsys):
     assert _cli(["data", "card", "--experts"]) == 0
 
 
+def test_expert_quality_reports_the_policy_each_medium_tier_is_made_from():
+    """A task with a separate medium run reports that run's figures (the one its medium tiers
+    sample), not the expert run's medium snapshot."""
+    from thesis_lib.data.card import expert_quality
+    from thesis_lib.data.experts import has_medium_run, load_policy_record
+
+    q = expert_quality().set_index("task")
+    for task in ("hopper", "halfcheetah", "walker2d"):
+        med = load_policy_record(task, role="medium")
+        assert q.loc[task, "medium_source"] == (
+            "medium run" if has_medium_run(task) else "expert run"
+        )
+        assert q.loc[task, "medium_normalized"] == pytest.approx(med.medium_normalized)
+    assert has_medium_run("hopper") and q.loc["hopper", "medium_sampled_normalized"] > 40
+
+
 def test_robotics_environments_load_and_roll_out():
     df = data.check_environments(n_steps=5, tasks=["antmaze-umaze", "pen"])
     assert df["ok"].all(), df.to_dict("records")

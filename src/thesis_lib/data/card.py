@@ -17,7 +17,7 @@ import numpy as np
 
 from . import experts  # POLICY_DIR looked up per call, as load_policy does
 from .d4rl_reference import SOURCES, d4rl_stats, in_band
-from .experts import has_policies, load_policy_record
+from .experts import has_medium_run, has_policies, load_policy_record
 from .maze import WaypointExpert
 from .recipe import GENERATOR_VERSION, action_noise_for, make_env
 from .scores import normalized_score
@@ -239,8 +239,13 @@ def expert_quality() -> Any:
 
     Columns: ``task, algorithm, steps_trained, expert_return, expert_normalized, target,
     target_on`` (``normalized`` or ``return``), ``meets_target, shortfall`` (in the
-    target's unit), `` medium_return, medium_normalized, medium_in_range, n_eval_episodes`` and,
-    for the Maze2D rows (target = success rate 0.9), ``success_rate``.
+    target's unit), ``medium_source`` (``medium run`` where a separate one ships,
+    :func:`~thesis_lib.data.experts.has_medium_run`, else ``expert run``: the policy the medium
+    tiers are made from), ``medium_return, medium_normalized`` (deterministic),
+    ``medium_sampled_normalized`` (its own Gaussian, as the medium tier samples it; a medium run
+    records it), ``medium_in_range`` (of the sampled figure where recorded, else the
+    deterministic one), ``n_eval_episodes`` and, for the Maze2D rows (target =
+    success rate 0.9), ``success_rate``.
     """
     import pandas as pd
 
@@ -250,7 +255,10 @@ def expert_quality() -> Any:
             rows.append({"task": task, "target": target, "meets_target": False})
             continue
         rec = load_policy_record(task)
-        mn = rec.medium_normalized
+        med = load_policy_record(task, role="medium")
+        mn = med.medium_normalized
+        # the tier's figure: sampled, as the medium tier rolls its policy out, where recorded
+        tier_mn = med.medium_sampled_normalized if med.medium_sampled_normalized is not None else mn
         en = rec.expert_normalized
         score = en if en is not None else rec.expert_return_mean
         rows.append(
@@ -264,11 +272,13 @@ def expert_quality() -> Any:
                 "target_on": "normalized" if en is not None else "return",
                 "meets_target": score >= target,
                 "shortfall": max(0.0, target - score),
-                "medium_return": rec.medium_return_mean,
+                "medium_source": "medium run" if has_medium_run(task) else "expert run",
+                "medium_return": med.medium_return_mean,
                 "medium_normalized": mn,
+                "medium_sampled_normalized": med.medium_sampled_normalized,
                 "medium_in_range": None
-                if mn is None
-                else MEDIUM_NORMALIZED_RANGE[0] <= mn <= MEDIUM_NORMALIZED_RANGE[1],
+                if tier_mn is None
+                else MEDIUM_NORMALIZED_RANGE[0] <= tier_mn <= MEDIUM_NORMALIZED_RANGE[1],
                 "n_eval_episodes": rec.n_eval_episodes,
             }
         )
