@@ -311,13 +311,16 @@ Data sets are made here by D4RL's recipe (Fu et al. 2020) and stored in the Mina
   TQC (Kuznetsov et al. 2020; SAC's distributional successor, D4RL used SAC) with 256x256
   MLPs, `thesis data train-expert --task walker2d`, exported to NumPy. Ant: CrossQ (Bhatt et
   al. 2024; SAC without target networks, batch-renormalised), a 256x256 actor with its
-  normalisation folded in at export, `thesis data train-expert --task ant`. Medium is a
-  snapshot of the same run at about a third of the expert's return.
-  Hopper and InvertedDoublePendulum: ARS linear policies
-  (sb3-contrib, observation normalisation), `thesis data train-experts`, medium the
-  checkpoint of the same seeded training closest to a third of the expert's return. They act deterministically (`action_noise=` adds noise);
-  episodes differ through the environments' reset noise.
-- **medium-replay**: the experience of training up to medium. TQC / CrossQ: the run's uniform-random
+  normalisation folded in at export, `thesis data train-expert --task ant`. Hopper and
+  InvertedDoublePendulum experts: ARS linear policies (sb3-contrib, observation
+  normalisation), `thesis data train-experts`. Experts act deterministically; episodes differ
+  through the environments' reset noise. **Medium**: Hopper (SAC), Walker2d and HalfCheetah
+  (TQC) have a medium run of their own (`thesis data train-expert --task <task> --medium`),
+  shipped at the snapshot whose *sampled* return is nearest D4RL's published medium mean;
+  Ant and InvertedDoublePendulum take a snapshot of the expert's run at about a third of
+  its return. The medium policy is sampled (its own Gaussian; ARS's weight noise), as D4RL
+  sampled its SAC medium policies, so that the returns spread.
+- **medium-replay**: the experience of training up to medium. Deep runs: the run's uniform-random
   warm-up steps, then its snapshots up to medium, each sampling from its own Gaussian, for as
   many transitions as the training steps it stands for. ARS: the zero policy and every
   checkpoint up to medium, each with ARS's ± weight perturbations, in training order.
@@ -325,9 +328,9 @@ Data sets are made here by D4RL's recipe (Fu et al. 2020) and stored in the Mina
   D4RL); each tier has its own seed, so the halves start from independent states.
 - **random**: uniform random actions.
 - **Maze2D** (PointMaze umaze/medium/large/open): BFS over the maze cells + PD waypoint
-  controller + N(0, 0.5) action noise, sparse reward, a random start and goal per episode
-  (D4RL's maze2d was one long run with goals re-sampled; its fixed-goal evaluation gives the
-  reference scores, so our data's normalised returns exceed 100).
+  controller + N(0, 0.5) action noise, driven to random goals one after another as D4RL's
+  recorder was; the sparse rewards count D4RL's fixed evaluation target of the layout (its
+  `G` cell, reached within 0.5), the target every evaluation scores against.
 - Deviation from the thesis: its locomotion sets were D4RL's PyBullet ones; these are MuJoCo
   v5 (gymnasium), as D4RL's MuJoCo sets.
 """

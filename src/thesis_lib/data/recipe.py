@@ -5,12 +5,15 @@ Tiers (D4RL, Fu et al. 2020):
 - ``expert``: the shipped expert policy (deterministic actions plus Gaussian action noise
   of :func:`action_noise_for`, which is 0 for the MuJoCo tasks: the reset noise alone
   makes the episodes differ).
-- ``medium``: a policy of the same training run at about one third of the expert's
-  return, sampled as D4RL sampled its SAC medium policy, so that the returns spread: a
-  TQC/SAC actor draws its actions from its own Gaussian; an ARS linear policy (Hopper,
-  InvertedDoublePendulum) gets ARS's own exploration, new weight noise each episode.
-- ``medium-replay``: the experience of training up to medium. For the TQC experts
-  (Walker2d, HalfCheetah, Ant): uniform random actions for the run's warm-up steps, then
+- ``medium``: the task's medium run where one is shipped (``policies/<task>-medium``:
+  Hopper's SAC, Walker2d's and HalfCheetah's TQC, each at the snapshot whose sampled return
+  is nearest D4RL's published medium mean), else a policy of the expert's training run at
+  about one third of the expert's return; sampled as D4RL sampled its SAC medium policy, so
+  that the returns spread: a TQC/SAC actor draws its actions from its own Gaussian; an ARS
+  linear policy (InvertedDoublePendulum) gets ARS's own exploration, new weight noise each
+  episode.
+- ``medium-replay``: the experience of training up to medium. For the deep runs
+  (the medium runs, Ant's CrossQ): uniform random actions for the run's warm-up steps, then
   the shipped snapshots up to the medium one, each sampling from its own Gaussian (SAC's
   exploration), for as many transitions as the training steps it stands for. For the ARS
   experts (Hopper, InvertedDoublePendulum): the zero policy ARS starts from and every
