@@ -282,6 +282,44 @@ def test_sampling_is_proportional_to_length_and_uses_its_own_generator():
     assert b1.states.shape == (20_000, 5, 3) and b1.mask.dtype == bool
 
 
+def test_end_sampling_makes_every_step_the_last_of_a_window_equally_often():
+    """The default (d3rlpy's DT): a step uniform over all steps, the window the K steps ending
+    at it. An episode's first steps are last steps as often as any other; under "start"
+    sampling (the original DT code) step t < K - 1 is covered by only (t + 1) / K of its share."""
+    eps = _toy(lengths=(10, 30, 60))
+    ds = SequenceDataset(eps, K=5, seed=3, normalize_states=False)
+    assert ds.sampling == "end"
+    b = ds.sample(60_000)
+    n = b.mask.sum(axis=1)
+    assert np.all(b.mask[np.arange(len(n)), n - 1]) and np.all(b.mask.cumsum(1) <= n[:, None])
+    last = b.start + n - 1  # the window's last real step, in its episode
+    flat = ds.offsets[b.episode_index] + last
+    freq = np.bincount(flat, minlength=len(ds)) / len(flat)
+    np.testing.assert_allclose(freq, 1 / len(ds), atol=0.004)  # uniform over the 100 steps
+    # a window holds the K steps up to its last one, or all of them from the episode's start
+    assert np.all(n == np.minimum(last + 1, 5)) and np.all(b.start == np.maximum(last - 4, 0))
+    i = int(np.flatnonzero((b.episode_index == 2) & (last == 7))[0])
+    np.testing.assert_allclose(b.actions[i, :5], eps[2].actions[3:8], rtol=1e-6)
+    for arr in (b.states, b.actions, b.returns_to_go, b.timesteps):
+        assert not np.any(arr[~b.mask])
+    # the first steps of an episode as often as its middle under "end", less under "start"
+    s = SequenceDataset(eps, K=5, seed=3, sampling="start").sample(60_000)
+    covered = lambda bb, t: np.mean(
+        (bb.episode_index == 2) & (bb.start <= t) & (t < bb.start + bb.mask.sum(1))
+    )
+    assert covered(b, 0) == pytest.approx(covered(b, 30), rel=0.15)
+    assert covered(s, 0) == pytest.approx(covered(s, 30) / 5, rel=0.2)
+
+
+def test_sampling_defaults_and_errors():
+    eps = _toy()
+    assert SequenceDataset(eps, K=4).sampling == "end"
+    assert SequenceDataset(eps, K=4, paper_compat=True).sampling == "start"  # the authors' code
+    assert SequenceDataset(eps, K=4, paper_compat=True, sampling="end").sampling == "end"
+    with pytest.raises(ValueError, match="Unknown sampling 'middle'. Valid: end, start"):
+        SequenceDataset(eps, K=4, sampling="middle")
+
+
 # --- errors --------------------------------------------------------------------------------
 
 

@@ -400,7 +400,8 @@ def test_batch_prev_subgoals_are_the_shifted_episode_subgoals():
     for b in range(64):
         e, st = batch.episode_index[b], batch.start[b]
         g = seq.subgoals[seq.offsets[e] : seq.offsets[e] + seq.lengths[e]]
-        want = np.vstack([np.zeros((1, SD)), g[:-1]])[st : st + K]  # g_{t-1}, zero at t = 0
+        n = int(batch.mask[b].sum())  # the window's real steps (they come first)
+        want = np.vstack([np.zeros((1, SD)), g[:-1]])[st : st + n]  # g_{t-1}, zero at t = 0
         np.testing.assert_array_equal(batch.prev_subgoals[b, : len(want)], want)
         assert not batch.prev_subgoals[b, len(want) :].any()  # padding
     assert SequenceDataset(_episodes(), K=K).sample(2).prev_subgoals is None

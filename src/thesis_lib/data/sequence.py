@@ -3,9 +3,16 @@
 :class:`SequenceDataset` flattens the episodes once into contiguous arrays, then samples a
 batch of windows with array indexing only (no Python loop per sample):
 
-- an episode is drawn with probability ∝ its length, a start uniformly inside it;
-- a window shorter than K (it ran past the episode's end) is **right-padded**: the real
-  steps come first, ``mask`` is ``True`` on them and ``False`` on the padding;
+- a step is drawn uniformly over all the data set's steps and the window is the K steps
+  *ending* at it (d3rlpy's ``DecisionTransformer``), so every step is the last one of a
+  window equally often, and so the first steps of an episode, which evaluation meets with a
+  short history, are trained as often as the others (issue #33). ``sampling="start"`` (the
+  original DT code, CORL, and ``paper_compat``) draws an episode ∝ its length and a *start*
+  uniformly inside it: an episode's first K - 1 steps then fall in fewer windows (step ``t``
+  in ``(t + 1) / K`` of its share) and its last ones in windows that run past its end;
+- a window shorter than K (it reached back before the episode's start, or ran past its end)
+  is **right-padded**: the real steps come first, ``mask`` is ``True`` on them and ``False``
+  on the padding (under the causal mask, the same as d3rlpy's left padding);
 - time-steps stay with their states. The authors' code right-padded the states but
   left-padded the time-steps (``notes/original-code.md``); ``paper_compat=True`` does that.
 """
@@ -19,6 +26,9 @@ import numpy as np
 import scipy.signal
 
 from .storage import Episode, OfflineDataset
+
+SAMPLINGS: tuple[str, ...] = ("end", "start")
+"""How :meth:`SequenceDataset.sample` draws windows (see the module docstring)."""
 
 
 class SequenceBatch(NamedTuple):
@@ -127,7 +137,12 @@ class SequenceDataset:
         subgoal_fn: HDT hook, ``fn(episode) -> (T, goal_dim)`` sub-goal per step; computed
             once here. Sub-goals of the states' size are z-scored with the state statistics.
         paper_compat: left-pad the time-steps of short windows as the authors' code did
-            (states stay right-padded, so time-steps no longer line up with their states).
+            (states stay right-padded, so time-steps no longer line up with their states),
+            and sample windows by their start (``sampling="start"``), as it did.
+        sampling: how :meth:`sample` draws windows: ``"end"`` (a step uniform over all
+            steps, the window ending at it) or ``"start"`` (an episode ∝ length, a start
+            uniform inside it); ``None``: ``"start"`` with ``paper_compat``, else ``"end"``.
+            See the module docstring.
         seed: seed of this dataset's own ``np.random.Generator``.
 
     Attributes:
@@ -148,9 +163,14 @@ class SequenceDataset:
         prepend_zero_action: bool = True,
         subgoal_fn: SubgoalFn | None = None,
         paper_compat: bool = False,
+        sampling: str | None = None,
         seed: int = 0,
     ) -> None:
         episodes = list(data.episodes if isinstance(data, OfflineDataset) else data)
+        if sampling is None:
+            sampling = "start" if paper_compat else "end"
+        if sampling not in SAMPLINGS:
+            raise ValueError(f"Unknown sampling {sampling!r}. Valid: {', '.join(SAMPLINGS)}.")
         if K < 1:
             raise ValueError(f"K must be at least 1, got {K}.")
         if rtg_scale <= 0:
@@ -165,6 +185,7 @@ class SequenceDataset:
         self.rtg_scale = float(rtg_scale)
         self.gamma = float(gamma)
         self.paper_compat = paper_compat
+        self.sampling = sampling
         self.prepend_zero_action = prepend_zero_action
         self.rng = np.random.default_rng(seed)
 
@@ -225,12 +246,16 @@ class SequenceDataset:
             return np.asarray(states)
         return (np.asarray(states) - self.state_mean) / self.state_std
 
-    def windows(self, episode_index: np.ndarray, start: np.ndarray) -> SequenceBatch:
+    def windows(
+        self, episode_index: np.ndarray, start: np.ndarray, stop: np.ndarray | None = None
+    ) -> SequenceBatch:
         """The windows starting at step ``start[b]`` of episode ``episode_index[b]``.
 
         Args:
             episode_index: ``(B,)`` episode indices.
             start: ``(B,)`` first step of each window, ``0 ≤ start < T``.
+            stop: ``(B,)`` optional end of each window (exclusive; ``start < stop``): the
+                steps from ``stop`` on are padding. Default: ``start + K`` (or the episode's end).
 
         Returns:
             The :class:`SequenceBatch` (right-padded, see the module docstring).
@@ -239,7 +264,10 @@ class SequenceDataset:
         st = np.asarray(start, dtype=np.int64)
         k = np.arange(self.K, dtype=np.int64)
         pos = st[:, None] + k[None, :]  # (B, K) step within the episode
-        mask = pos < self.lengths[ei][:, None]  # True on real steps
+        end = self.lengths[ei]
+        if stop is not None:
+            end = np.minimum(end, np.asarray(stop, dtype=np.int64))
+        mask = pos < end[:, None]  # True on real steps
         flat = self.offsets[ei][:, None] + np.minimum(pos, self.lengths[ei][:, None] - 1)
 
         def take(a: np.ndarray) -> np.ndarray:
@@ -268,11 +296,18 @@ class SequenceDataset:
         )
 
     def sample(self, batch_size: int) -> SequenceBatch:
-        """Draw ``batch_size`` windows: episodes ∝ length, starts uniform in the episode.
+        """Draw ``batch_size`` windows by :attr:`sampling`: ``"end"``, a step uniform over all
+        steps and the window ending at it; ``"start"``, an episode ∝ length and a start
+        uniform inside it (see the module docstring).
 
         Returns:
             The :class:`SequenceBatch`, each array with leading dims ``(batch_size, K)``.
         """
+        if self.sampling == "end":
+            flat = self.rng.integers(0, len(self), size=batch_size)
+            ei = np.searchsorted(self.offsets, flat, side="right") - 1
+            last = flat - self.offsets[ei]  # the window's last step
+            return self.windows(ei, np.maximum(last - self.K + 1, 0), stop=last + 1)
         ei = self.rng.choice(self.n_episodes, size=batch_size, p=self.p_episode)
         st = np.floor(self.rng.random(batch_size) * self.lengths[ei]).astype(np.int64)
         return self.windows(ei, st)

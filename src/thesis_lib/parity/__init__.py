@@ -8,7 +8,9 @@ Every (side, seed) run is one :class:`~thesis_lib.sweep.Task`, stored at once un
 :func:`parity_table` is written to ``studies/parity/parity.csv``.
 
 * **ours** (:func:`ours_run`): :func:`~thesis_lib.seq.runner.run_offline` with the
-  comparison's ``init`` (``auto``, or ``torch`` for the v1 code's scheme);
+  comparison's ``init`` (``auto``, or ``torch`` for the v1 code's scheme) and window
+  ``sampling`` (``end``, d3rlpy's and today's default; comparisons that name none ran with
+  ``start``, the default before, and keep their stored runs);
 * **peer** (:func:`peer_run`): d3rlpy 2.8.1 (``DecisionTransformer``, ``BC``) in its own venv
   (``$THESIS_CACHE_DIR/peer-venv``, made by ``thesis parity --setup``: d3rlpy pins gymnasium
   1.0.0), on the same episodes exported to ``.npz``, evaluated on the same Hopper-v5 (MuJoCo
@@ -41,6 +43,7 @@ from thesis_lib._io import hash_arrays
 from thesis_lib.data import normalized_score
 from thesis_lib.data.minari_sets import is_minari_id, open_dataset
 from thesis_lib.data.recipe import GENERATOR_VERSION
+from thesis_lib.data.sequence import SAMPLINGS
 from thesis_lib.paths import cache_dir
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.evaluation import target_returns
@@ -121,6 +124,10 @@ class Comparison:
     dataset_size: str = "smoke"
     seeds: tuple[int, ...] = (0, 1, 2)
     init: str = "auto"
+    sampling: str | None = None
+    """How our side draws its training windows (``end`` / ``start``,
+    :class:`~thesis_lib.data.SequenceDataset`); ``None``: the runs made before the option, with
+    ``start`` (their task keys hold no ``sampling``)."""
     arch: dict[str, Any] = field(default_factory=dict)
     train: dict[str, Any] = field(default_factory=dict)
     episodes: int = 10
@@ -133,6 +140,11 @@ class Comparison:
     def __post_init__(self) -> None:
 
         check_methods([self.method])
+        if self.sampling is not None and self.sampling not in SAMPLINGS:
+            raise ValueError(
+                f"Unknown sampling {self.sampling!r} in parity comparison {self.name!r}. "
+                f"Valid: {', '.join(SAMPLINGS)}."
+            )
         if self.peer and self.method not in PEER_METHODS:
             raise ValueError(
                 f"No peer for {self.method!r} (d3rlpy has {', '.join(PEER_METHODS)}); "
@@ -246,7 +258,7 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         config["dataset"], config["dataset_size"], config.get("data_recipe", LEGACY_DATA_RECIPE)
     )
     arch = ArchSpec(**config["arch"], init=config["init"])
-    train = TrainSpec(**config["train"], eval_every=0)
+    train = TrainSpec(**config["train"], eval_every=0, sampling=config.get("sampling", "start"))
     ev = EvalSpec(episodes=config["episodes"], targets=("max",), episode_seed="run")
     t0 = time.process_time()
     rows = run_offline(config["method"], ds, arch, train, ev, task=config["dataset"].split("/")[0])
@@ -397,8 +409,9 @@ def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
 def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]]]:
     """Each comparison's tasks, one per side and seed: ``{name: {"ours": [...], "peer": [...]}}``.
 
-    A peer run's config holds no ``init`` (it is ours to vary), so comparisons that differ only
-    there share their peer runs (the same task keys: run and stored once).
+    A peer run's config holds no ``init`` or ``sampling`` (they are ours to vary), so
+    comparisons that differ only there share their peer runs (the same task keys: run and
+    stored once).
     """
     out: dict[str, dict[str, list[Any]]] = {}
     for c in comparisons:
@@ -415,7 +428,10 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
             recipe = data_recipe(c)
             if recipe is not None and recipe != LEGACY_DATA_RECIPE:  # old runs keep their keys
                 config["data_recipe"] = recipe
-            sides["ours"].append(Task(ours_run, {**config, "init": c.init}))
+            ours = {**config, "init": c.init}
+            if c.sampling is not None:  # runs from before the option keep their keys
+                ours["sampling"] = c.sampling
+            sides["ours"].append(Task(ours_run, ours))
             if c.peer:
                 sides["peer"].append(Task(peer_run, config))
         out[c.name] = sides
@@ -481,6 +497,7 @@ def parity_table(
             "comparison": c.name,
             "method": c.method,
             "init": c.init if c.method != "BC" else "",
+            "sampling": c.sampling or "start",
             "dataset": f"{c.dataset} ({c.dataset_size})",
             "arch": f"d{size['d_model']} L{size['n_layers']}" if c.method != "BC" else "MLP",
             "updates": c.train.get("iterations"),

@@ -68,6 +68,9 @@ class TrainSpec:
     """Evaluate every this many iterations and at the end; ``0``: only at the end."""
     rtg_scale: float | None = None
     """Returns-to-go divisor of the data set (``None``: the data set's default)."""
+    sampling: str | None = None
+    """How the windows are drawn (:class:`~thesis_lib.data.SequenceDataset`'s ``sampling``:
+    ``"end"`` or ``"start"``; ``None``: ``"start"`` with ``paper_compat``, else ``"end"``)."""
     device: str = "cpu"
     """Training device (``cpu``, ``cuda``, ``auto``)."""
     progress: bool = False
@@ -185,7 +188,13 @@ def run_offline(
     sg = subgoal_fn(arch.paper_compat) if method in HIERARCHICAL_METHODS else None
     extra: dict[str, Any] = {} if train.rtg_scale is None else {"rtg_scale": train.rtg_scale}
     seq = SequenceDataset(
-        dataset, K=arch.K, subgoal_fn=sg, paper_compat=arch.paper_compat, seed=seed, **extra
+        dataset,
+        K=arch.K,
+        subgoal_fn=sg,
+        paper_compat=arch.paper_compat,
+        sampling=train.sampling,
+        seed=seed,
+        **extra,
     )
     own_envs = envs is None
     pool: Any = VectorEnvPool(cast(str, task)) if envs is None else envs
