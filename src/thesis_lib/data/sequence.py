@@ -296,7 +296,7 @@ class SequenceDataset:
         )
 
     def sample(self, batch_size: int) -> SequenceBatch:
-        """Draw ``batch_size`` windows by :attr:`sampling`: ``"end"``, a step uniform over all
+        """Draw ``batch_size`` windows by ``self.sampling``: ``"end"``, a step uniform over all
         steps and the window ending at it; ``"start"``, an episode ∝ length and a start
         uniform inside it (see the module docstring).
 

@@ -88,8 +88,10 @@ KNOWN_DIFFERENCES: dict[str, str] = {
     "init": "d3rlpy draws the trunk and the time-step table from N(0, 0.02) and leaves the "
     "state, action and return embeddings and the head at PyTorch's defaults",
     "timesteps": "d3rlpy counts time steps from 1, ours from 0",
-    "windows": "d3rlpy samples a window ending at a uniformly drawn step (left-padded); ours "
-    "starts a window at a uniformly drawn step (right-padded)",
+    "windows": "both draw a window's last step uniformly (d3rlpy left-pads, ours right-pads: the "
+    "same under the causal mask); comparisons that name no `sampling` ran with ours drawing "
+    "the window's start",
+    "layer norm": "d3rlpy's blocks and final LayerNorm use eps 0.003, ours PyTorch's 1e-5",
     "environment": "gymnasium 1.0.0's Hopper-v5 against 1.4.0's, both on MuJoCo 3.11",
 }
 """What the harness cannot make equal between the two sides."""

@@ -44,6 +44,7 @@ from thesis_lib.seq.models import (
 )
 
 __all__ = [
+    "LEGACY_SAMPLING",
     "HIERARCHICAL_METHODS",
     "MAMBA_METHODS",
     "METHODS",
@@ -171,6 +172,10 @@ class ArchSpec:
 
 LEGACY_INIT = "torch"
 """The initialisation of every stored task and study file that names none (the v1 studies)."""
+
+LEGACY_SAMPLING = "start"
+"""The window sampling of every stored task and study file that names none (the v1 studies):
+:class:`~thesis_lib.data.SequenceDataset` drew a window's start before ``sampling`` existed."""
 
 
 def build_model(method: str, seq: Any, arch: ArchSpec, max_action: float = 1.0) -> torch.nn.Module:

@@ -20,8 +20,8 @@ Used in: HDT chapter, Decision Mamba chapter, UR3 deployment chapter.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
 from typing import Any, cast
 
 import numpy as np
@@ -29,9 +29,11 @@ import torch
 
 from thesis_lib.data import SequenceDataset, make_env
 from thesis_lib.data.minari_sets import is_minari_id, make_minari_env
+from thesis_lib.data.sequence import SAMPLINGS
 from thesis_lib.seq.evaluation import eval_step_cap, evaluate, target_returns
 from thesis_lib.seq.registry import (
     HIERARCHICAL_METHODS,
+    LEGACY_SAMPLING,
     MAMBA_METHODS,
     RTG_METHODS,
     ArchSpec,
@@ -82,6 +84,33 @@ class TrainSpec:
                 raise ValueError(f"Expect `{name}` >= 1, actually: {getattr(self, name)!r}.")
         if self.eval_every < 0:
             raise ValueError(f"Expect `eval_every` >= 0, actually: {self.eval_every!r}.")
+        if self.sampling is not None and self.sampling not in SAMPLINGS:
+            raise ValueError(f"Unknown sampling {self.sampling!r}. Valid: {', '.join(SAMPLINGS)}.")
+
+    def task_dict(self) -> dict[str, Any]:
+        """The spec as a sweep task's JSON: every field, ``sampling`` left out where it is
+        ``start``, the sampling of every task stored before the field existed (so their keys
+        stay valid; :meth:`from_task` reads a missing ``sampling`` as ``start``).
+
+        Example:
+            >>> "sampling" in TrainSpec(sampling="start").task_dict(), TrainSpec().task_dict()["sampling"]
+            (False, None)
+        """
+        d = asdict(self)
+        if d["sampling"] == LEGACY_SAMPLING:
+            del d["sampling"]
+        return d
+
+    @classmethod
+    def from_task(cls, d: Mapping[str, Any]) -> TrainSpec:
+        """The spec of a task's ``train`` dict (:meth:`task_dict`); a missing ``sampling`` is
+        ``start``, as every task stored before the field existed ran.
+
+        Example:
+            >>> TrainSpec.from_task({"seed": 1}).sampling
+            'start'
+        """
+        return cls(**{"sampling": LEGACY_SAMPLING, **d})
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ from thesis_lib.seq import (
     HDTConfig,
 )
 from thesis_lib.seq.evaluation import evaluate, target_returns
-from thesis_lib.seq.registry import LEGACY_INIT, build_model
+from thesis_lib.seq.registry import LEGACY_INIT, LEGACY_SAMPLING, build_model
 from thesis_lib.seq.runner import EvalSpec
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
@@ -73,7 +73,7 @@ __all__ = [
     "timing_task",
 ]
 
-STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT}
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT, "sampling": LEGACY_SAMPLING}
 """What a study file that does not name these fields ran with (the v1 studies, registered
 before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
 
@@ -140,7 +140,7 @@ def sweep_task(
             "dataset_size": cfg.dataset_size,
             "n_transitions": cfg.n_transitions,
             "arch": cfg.arch_spec(arch).task_dict(),
-            "train": asdict(cfg.train_spec(seed)),
+            "train": cfg.train_spec(seed).task_dict(),
             "eval": asdict(ev),
         },
     )

@@ -29,7 +29,7 @@ from thesis_lib.chapters.hdt.config import CHAPTER, Config, split_dataset
 from thesis_lib.data import cards_table
 from thesis_lib.data.minari_sets import env_name, open_dataset
 from thesis_lib.paths import results_dir
-from thesis_lib.seq.registry import LEGACY_INIT, MAMBA_METHODS, ArchSpec
+from thesis_lib.seq.registry import LEGACY_INIT, LEGACY_SAMPLING, MAMBA_METHODS, ArchSpec
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.subgoals import select_subgoal_indices
 from thesis_lib.sweep import Task, run_tasks, task_id
@@ -61,7 +61,7 @@ CURVE_COLUMNS = [
     "return_mean", "return_std", "score_mean", "length_mean", "loss",
 ]  # fmt: skip
 
-STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT}
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT, "sampling": LEGACY_SAMPLING}
 """What a study file that does not name these fields ran with (the v1 studies, registered
 before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
 
@@ -201,7 +201,7 @@ def offline_rows(config: Mapping[str, Any], columns: Sequence[str]) -> list[dict
         config["method"],
         data,
         ArchSpec.from_task(config["arch"]),
-        TrainSpec(**config["train"]),
+        TrainSpec.from_task(config["train"]),
         EvalSpec(**ev),
         task=env_name(config["dataset"]),
     )
@@ -234,7 +234,7 @@ def sweep_tasks(cfg: Config, datasets: list[str], methods: list[str], compat: bo
                 "dataset_size": cfg.dataset_size,
                 "n_transitions": cfg.n_transitions,
                 "arch": arch,
-                "train": asdict(cfg.train_spec(s)),
+                "train": cfg.train_spec(s).task_dict(),
                 "eval": ev,
             },
         )
@@ -389,7 +389,7 @@ def study_task(
         "dataset_size": cfg.dataset_size,
         "n_transitions": cfg.n_transitions,
         "arch": arch_fields(method, arch),
-        "train": asdict(train) | {"progress": False},
+        "train": train.task_dict() | {"progress": False},
         "eval": asdict(ev),
     }
     if label and label != method:

@@ -89,6 +89,11 @@ class Config:
     ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
     Hugging Face's DT) or ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
     names no ``init`` ran with it)."""
+    sampling: Literal["end", "start"] | None = None
+    """How the training windows are drawn (:class:`~thesis_lib.data.SequenceDataset`): ``end``
+    (a step uniform over all steps, the window ending at it: d3rlpy's DT), ``start`` (the
+    window's start: the original DT code's, the v1 studies'; a study file that names no
+    ``sampling`` ran with it), ``None``: ``start`` with ``paper_compat``, else ``end``."""
     device: str = "cpu"
     """Training device."""
     progress: bool = False

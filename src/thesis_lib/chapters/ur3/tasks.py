@@ -15,7 +15,6 @@ Used in: UR3 deployment chapter (Table 5.4, dance playback) and ``thesis study
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from functools import partial
 from typing import Any
 
@@ -28,7 +27,7 @@ from thesis_lib.chapters.ur3.config import CHAPTER, N_DEMOS, N_GOALS, Config
 from thesis_lib.mdlt import readers as mdlt_readers
 from thesis_lib.mdlt import synth as mdlt_synth
 from thesis_lib.paths import results_dir
-from thesis_lib.seq.registry import LEGACY_INIT, ArchSpec
+from thesis_lib.seq.registry import LEGACY_INIT, LEGACY_SAMPLING, ArchSpec
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.sweep import Task, run_tasks, task_id
 from thesis_lib.ur3.dance import demo_angles
@@ -70,7 +69,7 @@ STUDY_COLUMNS = [
     "episodes",
 ]  # fmt: skip
 
-STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT}
+STUDY_FILE_DEFAULTS: dict[str, Any] = {"init": LEGACY_INIT, "sampling": LEGACY_SAMPLING}
 """What a study file that does not name these fields ran with (the v1 studies, registered
 before the transformers' ``init`` existed): :func:`thesis_lib.book.study.study_config`."""
 
@@ -197,7 +196,7 @@ def reach_task(config: dict[str, Any]) -> list[dict[str, Any]]:
         demos.train[: config["train_demos"]],
         demos.test_starts,
         ArchSpec.from_task(config["arch"]),
-        TrainSpec(**config["train"]),
+        TrainSpec.from_task(config["train"]),
         config["max_eval_steps"],
     )
     n = config["train_demos"]
@@ -214,7 +213,7 @@ def reach_config(cfg: Config, method: str, train_demos: int, seed: int) -> dict[
         "data_seed": cfg.seed,
         "max_eval_steps": cfg.max_eval_steps,
         "arch": cfg.arch().task_dict(),
-        "train": asdict(cfg.train_spec(seed)),
+        "train": cfg.train_spec(seed).task_dict(),
     }
     if cfg.reach_set != "teleop":
         config["reach_set"] = cfg.reach_set
