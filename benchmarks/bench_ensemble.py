@@ -20,6 +20,14 @@ Measured here (2026-11-24, 2-core CPU, beside a running study; 5 seeds, 20 updat
 repeats): sequential 91 ms, ensemble 97 ms per seed-update, ratio 0.94. The ensemble does not
 pay on this CPU, so the studies train one seed per task and use both cores as two tasks.
 
+Why (2026-11-27, same machine, one process, in turns; issue #36's throughput question): an
+update at this size is compute-bound, not overhead-bound. One ``Trainer.step`` of the d32
+1-layer DT at batch 320 (five seeds' batches in one) costs 4.6x the step at batch 64 (88 against
+19 ms), so stacking five seeds can save at most about 8%. Dropout is 30% of a step (20.5 ms
+with p = 0.1, 14.5 ms without: PyTorch's CPU Bernoulli draws cost about 12 ns an element, and
+the attention weights alone are 64 x 60 x 60 per step). ``torch.compile`` of the GPT blocks made
+the step slower (34 against 20 ms). A 2x at equal config needs another lever than batching.
+
     python benchmarks/bench_ensemble.py                 # 5 seeds, d32, 1 layer, batch 64
     python benchmarks/bench_ensemble.py --d-model 128 --n-layer 3
 """
