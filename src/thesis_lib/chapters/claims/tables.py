@@ -174,6 +174,7 @@ def parity_view(table: pd.DataFrame) -> pd.DataFrame:
         "comparison": table["comparison"],
         "method": table["method"],
         "init": table["init"].fillna(""),
+        "windows": table["sampling"] if "sampling" in table else "start",  # drawn by
         "model": table["arch"],
         "updates": table["updates"],
         "ours (seeds)": [side(m, s) for m, s in zip(table["ours"], table["ours_seeds"], strict=True)],
