@@ -53,9 +53,10 @@ def _tiny_hdt(**kw):
 def test_task_keys_of_task_tier_sets_are_unchanged():
     """The keys of the stored study/sweep tasks of 'task/tier' sets (computed on f33c85f, before
     Minari ids were accepted): a change here would orphan the committed studies' results. Those
-    ran before the transformers' ``init`` existed, with PyTorch's defaults (``init="torch"``,
-    what a study file that names no ``init`` reads as); the default ``init`` makes new keys for
-    the transformers only."""
+    ran before the transformers' ``init`` and the windows' ``sampling`` existed, with PyTorch's
+    defaults (``init="torch"``) and start-drawn windows (``sampling="start"``), what a study file
+    that names neither reads as; today's defaults make new keys for every method (BC's windows
+    are drawn by their last step too)."""
     from thesis_lib.chapters import decision_mamba as dm
     from thesis_lib.chapters import hdt
     from thesis_lib.seq.runner import EvalSpec
@@ -64,9 +65,13 @@ def test_task_keys_of_task_tier_sets_are_unchanged():
     new_keys = {
         m: hdt.study_task(new, m, "hopper/medium", 0, new.arch(False)).key for m in new.methods
     }
-    assert new_keys["BC"] == "654399e8f19a64b3"  # BC has no init: its runs are the same
+    assert new_keys["BC"] != "654399e8f19a64b3"  # BC: no init, but its windows are drawn anew
     assert new_keys["DT"] != "44c79d1a5285a803" and new_keys["HDT"] != "748967226e6598ff"
-    cfg = _tiny_hdt(init="torch")
+    torch_only = _tiny_hdt(init="torch")  # the legacy keys need both legacy values
+    assert hdt.study_task(torch_only, "DT", "hopper/medium", 0, torch_only.arch(False)).key != (
+        "44c79d1a5285a803"
+    )
+    cfg = _tiny_hdt(init="torch", sampling="start")
     keys = {m: hdt.study_task(cfg, m, "hopper/medium", 0, cfg.arch(False)).key for m in cfg.methods}
     assert keys == {"BC": "654399e8f19a64b3", "DT": "44c79d1a5285a803", "HDT": "748967226e6598ff"}
     compat = hdt.study_task(cfg, "DT", "hopper/medium", 0, cfg.arch(True), label="DT-compat")
@@ -78,6 +83,7 @@ def test_task_keys_of_task_tier_sets_are_unchanged():
     ]
     c5 = dm.Config(
         init="torch",
+        sampling="start",
         datasets=["hopper/medium"],
         methods=["DT", "DM-noRTG"],
         iterations=10,
