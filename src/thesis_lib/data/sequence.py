@@ -31,6 +31,22 @@ SAMPLINGS: tuple[str, ...] = ("end", "start")
 """How :meth:`SequenceDataset.sample` draws windows (see the module docstring)."""
 
 
+def resolve_sampling(sampling: str | None, paper_compat: bool = False, where: str = "") -> str:
+    """``sampling`` checked against :data:`SAMPLINGS`, ``None`` resolved: ``"start"`` with
+    ``paper_compat`` (the authors' code), else ``"end"``. ``where`` names the setting's owner in
+    the error.
+
+    Example:
+        >>> resolve_sampling(None), resolve_sampling(None, paper_compat=True), resolve_sampling("end", True)
+        ('end', 'start', 'end')
+    """
+    if sampling is None:
+        return "start" if paper_compat else "end"
+    if sampling not in SAMPLINGS:
+        raise ValueError(f"Unknown sampling {sampling!r}{where}. Valid: {', '.join(SAMPLINGS)}.")
+    return sampling
+
+
 class SequenceBatch(NamedTuple):
     """A batch of B windows of K steps (NumPy arrays).
 
@@ -167,10 +183,7 @@ class SequenceDataset:
         seed: int = 0,
     ) -> None:
         episodes = list(data.episodes if isinstance(data, OfflineDataset) else data)
-        if sampling is None:
-            sampling = "start" if paper_compat else "end"
-        if sampling not in SAMPLINGS:
-            raise ValueError(f"Unknown sampling {sampling!r}. Valid: {', '.join(SAMPLINGS)}.")
+        sampling = resolve_sampling(sampling, paper_compat)
         if K < 1:
             raise ValueError(f"K must be at least 1, got {K}.")
         if rtg_scale <= 0:

@@ -43,11 +43,11 @@ from thesis_lib._io import hash_arrays
 from thesis_lib.data import normalized_score
 from thesis_lib.data.minari_sets import is_minari_id, open_dataset
 from thesis_lib.data.recipe import GENERATOR_VERSION
-from thesis_lib.data.sequence import SAMPLINGS
+from thesis_lib.data.sequence import resolve_sampling
 from thesis_lib.paths import cache_dir
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.evaluation import target_returns
-from thesis_lib.seq.registry import check_methods
+from thesis_lib.seq.registry import LEGACY_SAMPLING, check_methods
 from thesis_lib.seq.trainer import TrainConfig
 from thesis_lib.sweep import Task
 
@@ -142,11 +142,7 @@ class Comparison:
     def __post_init__(self) -> None:
 
         check_methods([self.method])
-        if self.sampling is not None and self.sampling not in SAMPLINGS:
-            raise ValueError(
-                f"Unknown sampling {self.sampling!r} in parity comparison {self.name!r}. "
-                f"Valid: {', '.join(SAMPLINGS)}."
-            )
+        resolve_sampling(self.sampling, where=f" in parity comparison {self.name!r}")
         if self.peer and self.method not in PEER_METHODS:
             raise ValueError(
                 f"No peer for {self.method!r} (d3rlpy has {', '.join(PEER_METHODS)}); "
@@ -260,7 +256,9 @@ def ours_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         config["dataset"], config["dataset_size"], config.get("data_recipe", LEGACY_DATA_RECIPE)
     )
     arch = ArchSpec(**config["arch"], init=config["init"])
-    train = TrainSpec(**config["train"], eval_every=0, sampling=config.get("sampling", "start"))
+    train = TrainSpec(
+        **config["train"], eval_every=0, sampling=config.get("sampling", LEGACY_SAMPLING)
+    )
     ev = EvalSpec(episodes=config["episodes"], targets=("max",), episode_seed="run")
     t0 = time.process_time()
     rows = run_offline(config["method"], ds, arch, train, ev, task=config["dataset"].split("/")[0])
@@ -499,7 +497,7 @@ def parity_table(
             "comparison": c.name,
             "method": c.method,
             "init": c.init if c.method != "BC" else "",
-            "sampling": c.sampling or "start",
+            "sampling": c.sampling or LEGACY_SAMPLING,
             "dataset": f"{c.dataset} ({c.dataset_size})",
             "arch": f"d{size['d_model']} L{size['n_layers']}" if c.method != "BC" else "MLP",
             "updates": c.train.get("iterations"),

@@ -29,7 +29,7 @@ import torch
 
 from thesis_lib.data import SequenceDataset, make_env
 from thesis_lib.data.minari_sets import is_minari_id, make_minari_env
-from thesis_lib.data.sequence import SAMPLINGS
+from thesis_lib.data.sequence import resolve_sampling
 from thesis_lib.seq.evaluation import eval_step_cap, evaluate, target_returns
 from thesis_lib.seq.registry import (
     HIERARCHICAL_METHODS,
@@ -84,8 +84,7 @@ class TrainSpec:
                 raise ValueError(f"Expect `{name}` >= 1, actually: {getattr(self, name)!r}.")
         if self.eval_every < 0:
             raise ValueError(f"Expect `eval_every` >= 0, actually: {self.eval_every!r}.")
-        if self.sampling is not None and self.sampling not in SAMPLINGS:
-            raise ValueError(f"Unknown sampling {self.sampling!r}. Valid: {', '.join(SAMPLINGS)}.")
+        resolve_sampling(self.sampling)  # validates
 
     def task_dict(self) -> dict[str, Any]:
         """The spec as a sweep task's JSON: every field, ``sampling`` left out where it is
