@@ -16,7 +16,7 @@ from typing import Any, Literal, overload
 import numpy as np
 
 from . import experts  # POLICY_DIR looked up per call, as load_policy does
-from .d4rl_reference import SOURCES, d4rl_stats, in_band
+from .d4rl_reference import BAND_MIN_EPISODES, SOURCES, band_transitions, d4rl_stats, in_band
 from .experts import has_medium_run, has_policies, load_policy_record
 from .maze import WaypointExpert
 from .recipe import GENERATOR_VERSION, action_noise_for, make_env
@@ -157,18 +157,29 @@ def d4rl_comparison(card: dict[str, Any]) -> dict[str, Any] | None:
     (:mod:`thesis_lib.data.d4rl_reference`), or ``None`` where D4RL has no such set.
 
     Returns:
-        ``{"d4rl": D4RLStats, "in_band": bool | None, "why": str}``: ``in_band`` is ``None``
-        where D4RL publishes no return statistics (Maze2D), else whether our normalised mean
-        is within 10 points of D4RL's and our std at least half of D4RL's.
+        ``{"d4rl": D4RLStats, "in_band": bool | None, "why": str, "band_transitions": int |
+        None}``: ``in_band`` is ``None`` where D4RL publishes no return statistics (Maze2D),
+        else whether our normalised mean is within 10 points of D4RL's and our std at least
+        half of D4RL's. ``band_transitions``: where the set holds fewer than
+        :data:`~thesis_lib.data.d4rl_reference.BAND_MIN_EPISODES` episodes, the size that would
+        (its spread is a rough estimate until then; ``why`` says so), else ``None``.
     """
     task, tier = _our_task_tier(card["id"])
     ref = d4rl_stats(task, tier) if task and tier else None
     if ref is None:
         return None
     if ref.mean is None or card.get("normalized_mean") is None:
-        return {"d4rl": ref, "in_band": None, "why": ref.computed}
+        return {"d4rl": ref, "in_band": None, "why": ref.computed, "band_transitions": None}
     ok, why = in_band(card["normalized_mean"], card["normalized_std"], ref)
-    return {"d4rl": ref, "in_band": ok, "why": why}
+    # the size it was made at (medium-expert: each half's, as --n-transitions takes it)
+    made_at = card.get("info", {}).get("n_transitions") or card["transitions"]
+    size = band_transitions(int(made_at), int(card["episodes"]))
+    if size is not None:
+        why += (
+            f" (from {card['episodes']} episodes; the band is judged on {BAND_MIN_EPISODES}: "
+            f"--n-transitions {size})"
+        )
+    return {"d4rl": ref, "in_band": ok, "why": why, "band_transitions": size}
 
 
 def _version_lines(card: dict[str, Any]) -> list[str]:
@@ -331,6 +342,9 @@ Data sets are made here by D4RL's recipe (Fu et al. 2020) and stored in the Mina
   controller + N(0, 0.5) action noise, driven to random goals one after another as D4RL's
   recorder was; the sparse rewards count D4RL's fixed evaluation target of the layout (its
   `G` cell, reached within 0.5), the target every evaluation scores against.
+- Beside D4RL: a set is inside the band when its normalised mean is within 10 points of
+  D4RL's and its std at least half of D4RL's, judged on 100 episodes or more (a smaller set's
+  line names the size that holds them): part of D4RL's spread is rare failed episodes.
 - Deviation from the thesis: its locomotion sets were D4RL's PyBullet ones; these are MuJoCo
   v5 (gymnasium), as D4RL's MuJoCo sets.
 """

@@ -39,6 +39,11 @@ SOURCES: dict[str, str] = {
 #: this many points of D4RL's, and a normalised std of at least this share of D4RL's.
 MEAN_BAND = 10.0
 STD_SHARE = 0.5
+#: The episodes a set needs before its spread is judged against D4RL's: D4RL's sets hold
+#: 1,000 to 3,214, and part of their spread comes from rare failed episodes (halfcheetah-medium:
+#: 40.7 +- 2.9 with a minimum of -0.2), which a set of 20 seldom holds. A smaller set's verdict
+#: is printed with the size that would hold enough episodes (:func:`band_transitions`).
+BAND_MIN_EPISODES = 100
 
 
 @dataclass(frozen=True)
@@ -188,4 +193,30 @@ def in_band(mean: float, std: float, ref: D4RLStats) -> tuple[bool, str]:
     return near and spread, why
 
 
-__all__ = ["D4RL_STATS", "MEAN_BAND", "SOURCES", "STD_SHARE", "D4RLStats", "d4rl_stats", "in_band"]
+def band_transitions(n_transitions: int, n_episodes: int) -> int | None:
+    """The size (transitions, rounded up to 10k) at which a set like this one, of
+    ``n_transitions`` in ``n_episodes`` episodes, would hold :data:`BAND_MIN_EPISODES`; ``None``
+    where it holds that many already.
+
+    >>> band_transitions(20_000, 20), band_transitions(20_000, 44), band_transitions(20_000, 134)
+    (100000, 50000, None)
+    """
+    if n_episodes <= 0:
+        raise ValueError(f"n_episodes must be positive, got {n_episodes}")
+    if n_episodes >= BAND_MIN_EPISODES:
+        return None
+    need = n_transitions * BAND_MIN_EPISODES / n_episodes
+    return int(-(-need // 10_000) * 10_000)
+
+
+__all__ = [
+    "BAND_MIN_EPISODES",
+    "D4RL_STATS",
+    "MEAN_BAND",
+    "SOURCES",
+    "STD_SHARE",
+    "D4RLStats",
+    "band_transitions",
+    "d4rl_stats",
+    "in_band",
+]
