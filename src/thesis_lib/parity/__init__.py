@@ -439,12 +439,24 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
 
 
 def unique_tasks(tasks: dict[str, dict[str, list[Any]]]) -> list[Any]:
-    """Every task of :func:`parity_tasks` once (by key), ours first."""
+    """Every task of :func:`parity_tasks` once (by key), in the order that gives a comparison
+    both sides early: its first seed ours then the peer's, then its second seed, and so on.
+    A run cut short (a session's end) then leaves seeds a side to compare, not one side done.
+
+    Example:
+        >>> from types import SimpleNamespace as T
+        >>> run = lambda k: T(key=k)
+        >>> tasks = {"a": {"ours": [run("o0"), run("o1")], "peer": [run("p0"), run("p1")]}}
+        >>> [t.key for t in unique_tasks(tasks)]
+        ['o0', 'p0', 'o1', 'p1']
+    """
     seen: dict[str, Any] = {}
-    for side in ("ours", "peer"):
-        for sides in tasks.values():
-            for t in sides[side]:
-                seen.setdefault(t.key, t)
+    for sides in tasks.values():
+        n = max(len(sides["ours"]), len(sides["peer"]))
+        for i in range(n):
+            for side in ("ours", "peer"):
+                if i < len(sides[side]):
+                    seen.setdefault(sides[side][i].key, sides[side][i])
     return list(seen.values())
 
 
