@@ -28,6 +28,22 @@ with p = 0.1, 14.5 ms without: PyTorch's CPU Bernoulli draws cost about 12 ns an
 the attention weights alone are 64 x 60 x 60 per step). ``torch.compile`` of the GPT blocks made
 the step slower (34 against 20 ms). A 2x at equal config needs another lever than batching.
 
+Where a whole v1 run goes (2026-11-27, cProfile of one ``hdt:study_run`` task, DT on
+hopper/medium smoke, 10k updates, 5 evaluations, beside two other processes): 194 s, of which
+the 10k ``Trainer.step`` calls take 186 s (forward 96 s: the attention call 34 s, dropout 24 s,
+the Linears 16 s; backward 58 s; AdamW 14 s), the 5 evaluations 5 s (already batched over the
+10 episodes), batch sampling 4 s and data loading under 1 s. Tried, in one process and in turns:
+
+* a cheaper dropout mask (16/32-bit lanes of ``random_`` on int64, 4x cheaper than
+  ``bernoulli_`` per element) in every Dropout and in a hand-written attention, plus AdamW
+  ``fused=True``: 10-15% off a step (17 against 19.5 ms), since the hand-written attention
+  gives back part of what the mask saves;
+* ``torch.compile`` of the whole model, with a static-shape loss (no boolean indexing) and no
+  data-dependent branch: 36 against 21 ms, slower still.
+
+So on this CPU the levers add up to about 1.3x at most (ensemble 8%, dropout and optimizer
+10-15%); the 2x of issue #36 needs the GPU, where stacking seeds does pay.
+
     python benchmarks/bench_ensemble.py                 # 5 seeds, d32, 1 layer, batch 64
     python benchmarks/bench_ensemble.py --d-model 128 --n-layer 3
 """
