@@ -5,7 +5,8 @@ The floors, top to bottom (a module's floor is its top-level package under ``the
 ====  =========================================================================
 5     ``cli``: ``thesis_lib.cli`` and its sub-commands (``thesis data``, ``thesis mdlt``, ...)
 4     ``chapters``: one module per notebook
-3     ``book`` (running notebooks, studies, params) and ``parity`` (our DT/BC beside a peer's)
+3     ``book`` (running notebooks, studies, params), ``parity`` (our DT/BC beside a peer's)
+      and ``ladder`` (the sequence models' scale ladder)
 2     the methods: ``seq``, ``defender``, ``clfd``, ``mdlt``, ``ur3``
 1     the base: ``data``, ``sweep``, ``stats``, ``rl``, ``dtw``
 0     the ground: ``_io``, ``paths``, ``provenance`` and the root ``thesis_lib/__init__.py``
@@ -52,6 +53,7 @@ FLOORS: dict[str, int] = {
     "chapters": 4,
     "book": 3,
     "parity": 3,
+    "ladder": 3,
     "seq": 2,
     "defender": 2,
     "clfd": 2,
@@ -88,6 +90,7 @@ CLEANED = {
     "sweep",
     "stats",
     "parity",
+    "ladder",
     "_io",
     "paths",
     "provenance",

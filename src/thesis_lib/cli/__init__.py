@@ -11,6 +11,7 @@ The CLI and the notebooks are the only code that imports ``thesis_lib.chapters``
     thesis data generate --task hopper --tier medium    # see 'thesis data --help'
     thesis bench dtw                                    # benchmarks/bench_dtw.py
     thesis parity                                       # our DT/BC against d3rlpy's, see --help
+    thesis ladder --rungs "d32 L1" -j 2                 # the sequence models' scale ladder
 
 Errors in what you typed are reported in one line; THESIS_DEBUG=1 shows the traceback.
 """
@@ -300,6 +301,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "thesis_lib.cli.parity",
         "our DT and BC against d3rlpy's at equal config (params/parity.yml)",
     ),
+    "ladder": ("thesis_lib.cli.ladder", "the sequence models' scale ladder (params/ladder.yml)"),
 }
 
 

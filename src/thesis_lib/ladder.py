@@ -1,0 +1,415 @@
+"""The scale ladder (issue #36): the cheapest model size at which the sequence-model studies
+can show their effects, chosen before their second studies are pre-registered.
+
+``thesis ladder`` reads ``params/ladder.yml``: data sets (D4RL's size), methods, seeds,
+*rungs* (model sizes, cheapest first), *checkpoints* (updates) and the training and evaluation
+every run shares. Each (data set, rung, method, seed) is one run, a
+:class:`~thesis_lib.sweep.Task` trained once to the last checkpoint and evaluated at every
+checkpoint (so the 10k and the 30k rungs of one size cost one 30k run), stored at once under
+``studies/ladder/tasks/`` (resumable, committed); :func:`ladder_table` is written to
+``studies/ladder/ladder.csv``.
+
+The table holds, per data set x rung x checkpoint, each method's mean D4RL-normalised score of
+the final evaluation over seeds with a 95% t interval, and the rung's verdicts:
+
+* **level**: every method scores at least the file's ``relative_to`` method (BC) minus
+  ``slack`` points on every data set: below that, a comparison describes a model that has
+  not learned its data (the validity gates of CLAIMS.md);
+* **targets**: D4RL's published relations hold (the DT at or above BC on hopper-medium and
+  well above it on medium-replay), each ``x - y >= min_difference`` on the means;
+* **stable**: no pair of methods swaps order by more than ``tolerance`` points against the
+  largest rung run, at the same checkpoint.
+
+:func:`choose_rung` names the cheapest (rung, checkpoint) where all three hold, with the
+reason; ``None`` with the reasons where none does.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from thesis_lib.data.card import data_card
+from thesis_lib.data.minari_sets import dataset_key, open_dataset
+from thesis_lib.data.recipe import DATASET_SIZES, GENERATOR_VERSION
+from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
+from thesis_lib.seq.registry import RTG_METHODS, check_methods
+from thesis_lib.sweep import Task, task_id
+
+__all__ = [
+    "LADDER_COLUMNS",
+    "Ladder",
+    "Rung",
+    "choose_rung",
+    "ladder_run",
+    "ladder_table",
+    "ladder_tasks",
+    "load_ladder_file",
+    "parse_rung",
+]
+
+#: The columns of :func:`ladder_table`.
+LADDER_COLUMNS = [
+    "dataset", "rung", "updates", "method", "seeds", "mean", "ci_low", "ci_high", "scores",
+    "data_mean", "level", "targets", "stable", "passes",
+]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Rung:
+    """One model size of the ladder: ``d_model`` and layers (per level for the HDT)."""
+
+    d_model: int
+    n_layers: int
+
+    @property
+    def label(self) -> str:
+        """``"d32 L1"``."""
+        return f"d{self.d_model} L{self.n_layers}"
+
+
+def parse_rung(text: str) -> Rung:
+    """``"d32 L1"`` (or ``"d32L1"``) -> :class:`Rung`.
+
+    Example:
+        >>> parse_rung("d64 L2")
+        Rung(d_model=64, n_layers=2)
+        >>> parse_rung("64/2")
+        Traceback (most recent call last):
+        ...
+        ValueError: Expect a rung as 'd<d_model> L<layers>', e.g. 'd32 L1'; got '64/2'.
+    """
+    s = str(text).replace(" ", "").lower()
+    head, sep, tail = s.partition("l")
+    ok = sep and head.startswith("d") and head[1:].isdigit() and tail.isdigit()
+    if not ok or int(head[1:]) < 1 or int(tail) < 1:
+        raise ValueError(f"Expect a rung as 'd<d_model> L<layers>', e.g. 'd32 L1'; got '{text}'.")
+    return Rung(int(head[1:]), int(tail))
+
+
+@dataclass(frozen=True)
+class Ladder:
+    """A ladder file (``params/ladder.yml``): what runs, and the rule that reads the runs."""
+
+    datasets: tuple[str, ...]
+    methods: tuple[str, ...]
+    seeds: tuple[int, ...]
+    rungs: tuple[Rung, ...]
+    checkpoints: tuple[int, ...]
+    dataset_size: str = "full"
+    arch: Mapping[str, Any] = field(default_factory=dict)
+    """ArchSpec fields every rung shares (``K``, ``dropout``, ...)."""
+    train: Mapping[str, Any] = field(default_factory=dict)
+    """TrainSpec fields every run shares (``batch_size``, ``lr``, ``warmup_steps``, ...)."""
+    episodes: int = 10
+    relative_to: str = "BC"
+    slack: float = 5.0
+    targets: tuple[Mapping[str, Any], ...] = ()
+    tolerance: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("datasets", "methods", "seeds", "rungs", "checkpoints"):
+            if not getattr(self, name):
+                raise ValueError(f"The ladder needs at least one of `{name}`.")
+        check_methods(self.methods)
+        for d in self.datasets:
+            dataset_key(d)  # a clear error for a malformed name
+        if self.dataset_size not in DATASET_SIZES:
+            raise ValueError(
+                f"Unknown dataset_size {self.dataset_size!r}. Valid: {', '.join(DATASET_SIZES)}."
+            )
+        cps = list(self.checkpoints)
+        if cps != sorted(set(cps)) or cps[0] < 1:
+            raise ValueError(f"Expect `checkpoints` positive and ascending, got {cps}.")
+        if self.relative_to not in self.methods:
+            raise ValueError(f"relative_to {self.relative_to!r} is not one of the methods.")
+        for t in self.targets:
+            if set(t) != {"dataset", "x", "y", "min_difference"}:
+                raise ValueError(f"A target names dataset, x, y and min_difference, got {dict(t)}.")
+            if t["dataset"] not in self.datasets or {t["x"], t["y"]} - set(self.methods):
+                raise ValueError(f"Target {dict(t)} names a data set or method not in the ladder.")
+        owned = {"d_model", "n_layers"} & set(self.arch) | {
+            "seed",
+            "iterations",
+            "eval_every",
+        } & set(self.train)
+        if owned:
+            raise ValueError(
+                f"{sorted(owned)} are the ladder's to set (rungs, seeds, checkpoints); "
+                "leave them out of `arch` and `train`."
+            )
+        ArchSpec(**self.arch)  # unknown fields fail here
+        TrainSpec(**self.train)
+
+    @property
+    def eval_every(self) -> int:
+        """Evaluate where every checkpoint falls: their greatest common divisor."""
+        return math.gcd(*self.checkpoints)
+
+
+def load_ladder_file(path: str | Path) -> Ladder:
+    """The :class:`Ladder` of a ladder file (unknown keys are errors)."""
+    import yaml
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"No ladder file {p}.")
+    data = yaml.safe_load(p.read_text()) or {}
+    data.pop("notes", None)
+    data.pop("budget_cpu_hours", None)
+    valid = set(Ladder.__dataclass_fields__)
+    bad = set(data) - valid
+    if bad:
+        raise ValueError(f"Unknown key(s) {sorted(bad)} in {p}; valid: {sorted(valid)}.")
+    for k in ("datasets", "methods", "seeds", "checkpoints", "targets"):
+        if k in data:
+            if isinstance(data[k], str):
+                raise ValueError(f"Expect `{k}` to be a list in {p}, got {data[k]!r}.")
+            data[k] = tuple(data[k])
+    data["rungs"] = tuple(parse_rung(r) for r in data.get("rungs", ()))
+    return Ladder(**data)
+
+
+# ----------------------------------------------------------------------------------------------
+# The runs
+
+
+def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Task]:
+    """One task per data set x rung x method x seed (``rungs``: a subset; default all), in the
+    order that gives every cell its first seeds early: seed by seed, cheapest rung first."""
+    chosen = list(ladder.rungs if rungs is None else rungs)
+    unknown = [r.label for r in chosen if r not in ladder.rungs]
+    if unknown:
+        valid = ", ".join(r.label for r in ladder.rungs)
+        raise ValueError(f"Unknown rung(s) {unknown}; the ladder's: {valid}.")
+    ev = EvalSpec(episodes=ladder.episodes, targets=("max",))
+    tasks = []
+    for seed, rung, d, m in itertools.product(
+        ladder.seeds, chosen, ladder.datasets, ladder.methods
+    ):
+        arch = ArchSpec(**{**ladder.arch, "d_model": rung.d_model, "n_layers": rung.n_layers})
+        train = TrainSpec(
+            **{**ladder.train, "seed": int(seed)},
+            iterations=ladder.checkpoints[-1],
+            eval_every=ladder.eval_every,
+        )
+        config = {
+            "method": m,
+            "dataset": d,
+            "dataset_size": ladder.dataset_size,
+            "data_recipe": GENERATOR_VERSION,
+            "arch": arch.task_dict(),
+            "train": train.task_dict(),
+            "eval": asdict(ev),
+            "checkpoints": list(ladder.checkpoints),
+        }
+        tasks.append(Task(ladder_run, config))
+    return tasks
+
+
+@task_id("thesis_lib.ladder:ladder_run")
+def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One ladder run (a sweep task): train to the last checkpoint, one row per checkpoint
+    (the evaluation at that many updates, at the data set's best return for RTG methods)."""
+    import torch  # lazy: a worker process sets its threads before the first model
+
+    torch.set_num_threads(1)
+    if config.get("data_recipe", GENERATOR_VERSION) != GENERATOR_VERSION:
+        raise ValueError(
+            f"This run's data is of recipe {config['data_recipe']}, this checkout makes "
+            f"{GENERATOR_VERSION}: its rows stay a record and cannot be redone."
+        )
+    ds = open_dataset(config["dataset"], config["dataset_size"])
+    ev = dict(config["eval"])
+    ev["targets"] = tuple(ev["targets"])
+    arch = ArchSpec.from_task(config["arch"])
+    t0 = time.process_time()
+    rows = run_offline(
+        config["method"],
+        ds,
+        arch,
+        TrainSpec.from_task(config["train"]),
+        EvalSpec(**ev),
+        task=dataset_key(config["dataset"])[0],
+    )
+    train_s = round(time.process_time() - t0, 1)
+    data_mean = data_card(ds).get("normalized_mean")
+    want = "max" if config["method"] in RTG_METHODS else "none"
+    by_iteration = {int(r["iteration"]): r for r in rows if r["target"] == want}
+    missing = [c for c in config["checkpoints"] if c not in by_iteration]
+    if missing:
+        raise RuntimeError(
+            f"No evaluation at checkpoint(s) {missing} (got {sorted(by_iteration)})."
+        )
+    return [
+        {
+            "dataset": config["dataset"],
+            "rung": Rung(arch.d_model, arch.n_layers).label,
+            "updates": c,
+            "method": config["method"],
+            "seed": int(config["train"]["seed"]),
+            "score": float(by_iteration[c]["score_mean"]),
+            "return_mean": float(by_iteration[c]["return_mean"]),
+            "length_mean": float(by_iteration[c]["length_mean"]),
+            "data_mean": None if data_mean is None else float(data_mean),
+            "train_s": train_s,
+        }
+        for c in config["checkpoints"]
+    ]
+
+
+# ----------------------------------------------------------------------------------------------
+# The table and the choice
+
+
+def _interval(x: np.ndarray) -> tuple[float, float]:
+    """The 95% t interval of the mean of ``x`` (NaN for fewer than 2 values)."""
+    from scipy import stats
+
+    if len(x) < 2:
+        return math.nan, math.nan
+    half = float(stats.t.ppf(0.975, len(x) - 1) * x.std(ddof=1) / math.sqrt(len(x)))
+    return float(x.mean()) - half, float(x.mean()) + half
+
+
+def _swapped(a: Mapping[str, float], b: Mapping[str, float], tolerance: float) -> list[str]:
+    """The pairs of methods ordered one way by more than ``tolerance`` in ``a`` and the other
+    way by more than ``tolerance`` in ``b``.
+
+    Example:
+        >>> _swapped({"BC": 30, "DT": 40}, {"BC": 41, "DT": 36}, 3.0)
+        ['DT > BC became DT < BC']
+        >>> _swapped({"BC": 30, "DT": 40}, {"BC": 38, "DT": 36}, 3.0)
+        []
+    """
+    out = []
+    for x, y in itertools.combinations(sorted(set(a) & set(b)), 2):
+        da, db = a[x] - a[y], b[x] - b[y]
+        if abs(da) > tolerance and abs(db) > tolerance and (da > 0) != (db > 0):
+            first, second = (y, x) if da > 0 else (x, y)  # the larger first
+            out.append(f"{second} > {first} became {second} < {first}")
+    return out
+
+
+def ladder_table(ladder: Ladder, rows: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
+    """One row per data set x rung x checkpoint x method with runs (:data:`LADDER_COLUMNS`).
+
+    ``level``, ``targets``, ``stable`` and ``passes`` are the rung's verdicts at that
+    checkpoint (the same on each of its rows): ``True``, ``False``, or ``None`` where a method
+    or a seed is missing (``stable``: also at the largest rung itself, or without it).
+    """
+    df = pd.DataFrame(list(rows))
+    if df.empty:
+        return pd.DataFrame(columns=LADDER_COLUMNS)
+    cells = []
+    for (d, rung, n, m), g in df.groupby(["dataset", "rung", "updates", "method"], sort=False):
+        x = g.sort_values("seed")["score"].to_numpy(dtype=float)
+        lo, hi = _interval(x)
+        cells.append(
+            {
+                "dataset": d,
+                "rung": rung,
+                "updates": int(n),
+                "method": m,
+                "seeds": len(x),
+                "mean": float(x.mean()),
+                "ci_low": lo,
+                "ci_high": hi,
+                "scores": " ".join(f"{v:.1f}" for v in x),
+                "data_mean": g["data_mean"].dropna().mean()
+                if g["data_mean"].notna().any()
+                else None,
+            }
+        )
+    table = pd.DataFrame(cells)
+    means: dict[tuple[Any, ...], dict[str, float]] = {
+        (r.dataset, r.rung, r.updates): {} for r in table.itertuples()
+    }
+    complete = set()
+    for r in table.itertuples():
+        means[(r.dataset, r.rung, r.updates)][r.method] = r.mean
+        if r.seeds == len(ladder.seeds):
+            complete.add((r.dataset, r.rung, r.updates, r.method))
+    labels = [r.label for r in ladder.rungs]
+    ran = [lab for lab in labels if lab in set(table["rung"])]
+    top = ran[-1] if ran else None
+    verdicts: dict[tuple[Any, Any], tuple[bool | None, ...]] = {}
+    for rung, n in {(r.rung, r.updates) for r in table.itertuples()}:
+        full = all((d, rung, n, m) in complete for d in ladder.datasets for m in ladder.methods)
+        if not full:
+            verdicts[(rung, n)] = (None, None, None, None)
+            continue
+        level = all(
+            means[(d, rung, n)][m] >= means[(d, rung, n)][ladder.relative_to] - ladder.slack
+            for d in ladder.datasets
+            for m in ladder.methods
+        )
+        targets = all(
+            means[(t["dataset"], rung, n)][t["x"]] - means[(t["dataset"], rung, n)][t["y"]]
+            >= t["min_difference"]
+            for t in ladder.targets
+        )
+        stable: bool | None = None
+        top_full = top is not None and all(
+            (d, top, n, m) in complete for d in ladder.datasets for m in ladder.methods
+        )
+        if top_full and rung != top:
+            stable = not any(
+                _swapped(means[(d, rung, n)], means[(d, top, n)], ladder.tolerance)
+                for d in ladder.datasets
+            )
+        passes = None if stable is None else bool(level and targets and stable)
+        verdicts[(rung, n)] = (level, targets, stable, passes)
+    for i, key in enumerate(("level", "targets", "stable", "passes")):
+        table[key] = [verdicts[(r.rung, r.updates)][i] for r in table.itertuples()]
+    order = {lab: i for i, lab in enumerate(labels)}
+    table["_r"] = table["rung"].map(order)
+    table["_d"] = table["dataset"].map({d: i for i, d in enumerate(ladder.datasets)})
+    table["_m"] = table["method"].map({m: i for i, m in enumerate(ladder.methods)})
+    table = table.sort_values(["_r", "updates", "_d", "_m"]).drop(columns=["_r", "_d", "_m"])
+    return table[LADDER_COLUMNS].reset_index(drop=True)
+
+
+def _verdict(x: Any) -> bool | None:
+    """A verdict cell as ``True``, ``False`` or ``None`` (whatever dtype the column took)."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return None
+    return bool(x)
+
+
+def choose_rung(ladder: Ladder, table: pd.DataFrame) -> tuple[tuple[str, int] | None, str]:
+    """The cheapest (rung, updates) whose verdicts all pass (rungs in the file's order, fewer
+    updates first), and why; ``(None, why)`` where none does yet."""
+    if table.empty:
+        return None, "no runs yet"
+    why = []
+    for rung in ladder.rungs:
+        for n in ladder.checkpoints:
+            cell = table[(table["rung"] == rung.label) & (table["updates"] == n)]
+            if cell.empty:
+                why.append(f"{rung.label} @ {n:,}: not run")
+                continue
+            v = {k: _verdict(cell.iloc[0][k]) for k in ("level", "targets", "stable", "passes")}
+            if v["passes"]:
+                return (rung.label, n), (
+                    f"{rung.label} @ {n:,} updates: every method within {ladder.slack:g} of "
+                    f"{ladder.relative_to}, the targets hold, and no pair of methods swaps by "
+                    f"more than {ladder.tolerance:g} points against the largest rung"
+                )
+            failed = [k for k in ("level", "targets", "stable") if v[k] is False]
+            unknown = [k for k in ("level", "targets", "stable") if v[k] is None]
+            why.append(
+                f"{rung.label} @ {n:,}: "
+                + (f"fails {', '.join(failed)}" if failed else "")
+                + ("; " if failed and unknown else "")
+                + (f"{', '.join(unknown)} not known yet" if unknown else "")
+            )
+    return None, "; ".join(why)

@@ -1,0 +1,190 @@
+"""The scale ladder (issue #36): its file, its tasks, the table's verdicts and the chosen size,
+and one tiny ladder run end to end through ``thesis ladder``."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+import pytest
+
+from thesis_lib.ladder import (
+    LADDER_COLUMNS,
+    Ladder,
+    Rung,
+    choose_rung,
+    ladder_table,
+    ladder_tasks,
+    load_ladder_file,
+    parse_rung,
+)
+from thesis_lib.paths import project_root
+
+
+def test_the_committed_ladder_file_gives_one_task_per_cell_and_seed():
+    ladder = load_ladder_file(project_root() / "params" / "ladder.yml")
+    assert ladder.rungs == (Rung(32, 1), Rung(64, 2), Rung(128, 3))
+    assert ladder.checkpoints == (10_000, 30_000) and ladder.eval_every == 10_000
+    tasks = ladder_tasks(ladder)
+    assert len(tasks) == 2 * 3 * 4 * 3 and len({t.key for t in tasks}) == len(tasks)
+    first = tasks[0].config
+    assert first["train"]["iterations"] == 30_000 and first["train"]["eval_every"] == 10_000
+    assert first["dataset_size"] == "full" and first["arch"]["init"] == "normal"
+    # seed by seed: every cell's first seed comes before any second seed
+    seeds = [t.config["train"]["seed"] for t in tasks]
+    assert seeds == sorted(seeds)
+    small = ladder_tasks(ladder, [parse_rung("d32 L1")])
+    assert len(small) == 24 and {t.key for t in small} <= {t.key for t in tasks}
+    with pytest.raises(ValueError, match=r"Unknown rung\(s\) \['d16 L1'\]"):
+        ladder_tasks(ladder, [Rung(16, 1)])
+
+
+def _write(tmp_path, text):
+    f = tmp_path / "ladder.yml"
+    f.write_text(text)
+    return f
+
+
+BASE = """datasets: [hopper/medium]
+methods: [BC, DT]
+seeds: [0]
+rungs: ["d8 L1"]
+checkpoints: [4, 8]
+"""
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        ("colour: red\n", r"Unknown key\(s\) \['colour'\]"),
+        ("arch: {d_model: 64}\n", r"\['d_model'\] are the ladder's to set"),
+        ("train: {iterations: 5}\n", r"\['iterations'\] are the ladder's to set"),
+        ("relative_to: HDT\n", "relative_to 'HDT' is not one of the methods"),
+        (
+            "targets: [{dataset: hopper/medium, x: DT, y: HDT, min_difference: 0}]\n",
+            "names a data set or method not in the ladder",
+        ),
+        ("dataset_size: huge\n", "Unknown dataset_size 'huge'"),
+    ],
+)
+def test_a_bad_ladder_file_says_what_is_wrong(tmp_path, extra, message):
+    with pytest.raises(ValueError, match=message):
+        load_ladder_file(_write(tmp_path, BASE + extra))
+
+
+def test_bad_rungs_checkpoints_and_methods_are_named(tmp_path):
+    with pytest.raises(ValueError, match="ascending"):
+        load_ladder_file(_write(tmp_path, BASE.replace("[4, 8]", "[8, 4]")))
+    with pytest.raises(ValueError, match="Expect a rung as"):
+        load_ladder_file(_write(tmp_path, BASE.replace('"d8 L1"', '"8/1"')))
+    with pytest.raises(ValueError, match="Unknown method 'DTT'"):
+        load_ladder_file(_write(tmp_path, BASE.replace("[BC, DT]", "[BC, DTT]")))
+    with pytest.raises(ValueError, match="to be a list"):
+        load_ladder_file(_write(tmp_path, BASE.replace("seeds: [0]", "seeds: '0'")))
+    with pytest.raises(FileNotFoundError):
+        load_ladder_file(tmp_path / "none.yml")
+
+
+# ----------------------------------------------------------------------------------------------
+# The verdicts, on made-up rows
+
+LADDER = Ladder(
+    datasets=("hopper/medium", "hopper/medium-replay"),
+    methods=("BC", "DT", "HDT"),
+    seeds=(0, 1, 2),
+    rungs=(Rung(32, 1), Rung(64, 2), Rung(128, 3)),
+    checkpoints=(10, 30),
+    dataset_size="smoke",
+    targets=(
+        {"dataset": "hopper/medium", "x": "DT", "y": "BC", "min_difference": 0.0},
+        {"dataset": "hopper/medium-replay", "x": "DT", "y": "BC", "min_difference": 10.0},
+    ),
+)
+
+
+def _rows(means):
+    """Rows of three seeds at ``mean - 1, mean, mean + 1`` for ``{(dataset, rung, updates,
+    method): mean}``."""
+    return [
+        {
+            "dataset": d,
+            "rung": r,
+            "updates": n,
+            "method": m,
+            "seed": s,
+            "score": mean + s - 1,
+            "data_mean": 40.0,
+        }  # fmt: skip
+        for (d, r, n, m), mean in means.items()
+        for s in range(3)
+    ]
+
+
+def _means(rung, n, m_scores, mr_scores):
+    return {
+        **{("hopper/medium", rung, n, k): v for k, v in zip(("BC", "DT", "HDT"), m_scores)},
+        **{("hopper/medium-replay", rung, n, k): v for k, v in zip(("BC", "DT", "HDT"), mr_scores)},
+    }
+
+
+def test_the_table_reads_levels_targets_and_stability_and_the_cheapest_passing_size_wins():
+    means = {}
+    for n in (10, 30):
+        # d32: the HDT below BC by 10 on medium (level fails)
+        means |= _means("d32 L1", n, (40, 42, 30), (20, 35, 30))
+        # d64 at 10 updates: DT only 5 above BC on medium-replay (targets fail); at 30: all pass
+        means |= _means("d64 L2", n, (40, 44, 41), (20, 25 if n == 10 else 36, 31))
+        means |= _means("d128 L3", n, (41, 45, 43), (21, 38, 32))
+    table = ladder_table(LADDER, _rows(means))
+    assert list(table.columns) == LADDER_COLUMNS and len(table) == 3 * 2 * 2 * 3
+    cell = table[(table["rung"] == "d32 L1") & (table["updates"] == 10) & (table["method"] == "HDT")
+                 & (table["dataset"] == "hopper/medium")].iloc[0]  # fmt: skip
+    assert cell["mean"] == 30 and cell["seeds"] == 3 and cell["scores"] == "29.0 30.0 31.0"
+    assert math.isclose(cell["ci_high"] - cell["mean"], 4.303 / math.sqrt(3), rel_tol=1e-3)
+    v = table.drop_duplicates(["rung", "updates"]).set_index(["rung", "updates"])
+    assert not v.loc[("d32 L1", 10), "level"] and v.loc[("d32 L1", 10), "passes"] is False
+    assert v.loc[("d64 L2", 10), "level"] and not v.loc[("d64 L2", 10), "targets"]
+    assert v.loc[("d64 L2", 30), "passes"] is True
+    assert v.loc[("d128 L3", 30), "stable"] is None  # the largest rung has nothing to compare to
+    chosen, why = choose_rung(LADDER, table)
+    assert chosen == ("d64 L2", 30) and "within 5 of BC" in why
+
+
+def test_a_swap_against_the_largest_rung_fails_stability_and_missing_seeds_decide_nothing():
+    means = _means("d32 L1", 30, (40, 50, 42), (20, 40, 30)) | _means(
+        "d128 L3", 30, (40, 44, 52), (20, 40, 30)
+    )  # d32: DT 8 above the HDT on medium; d128: the HDT 8 above the DT
+    table = ladder_table(LADDER, _rows(means))
+    v = table.drop_duplicates(["rung", "updates"]).set_index(["rung", "updates"])
+    assert v.loc[("d32 L1", 30), "level"] and v.loc[("d32 L1", 30), "stable"] is False
+    chosen, why = choose_rung(LADDER, table)
+    assert chosen is None and "d32 L1 @ 30: fails stable" in why and "d64 L2 @ 10: not run" in why
+    rows = [r for r in _rows(means) if not (r["rung"] == "d32 L1" and r["seed"] == 2)]
+    v = (
+        ladder_table(LADDER, rows)
+        .drop_duplicates(["rung", "updates"])
+        .set_index(["rung", "updates"])
+    )
+    assert v.loc[("d32 L1", 30), "level"] is None and v.loc[("d32 L1", 30), "passes"] is None
+    assert choose_rung(LADDER, pd.DataFrame()) == (None, "no runs yet")
+
+
+# ----------------------------------------------------------------------------------------------
+# One tiny ladder end to end
+
+
+def test_a_tiny_ladder_runs_through_the_cli_and_writes_its_table(tmp_path, capsys):
+    from thesis_lib.cli import main
+
+    f = _write(tmp_path, BASE + "dataset_size: smoke\nepisodes: 1\ntrain: {warmup_steps: 2}\n")
+    store = tmp_path / "ladder" / "tasks"
+    assert main(["ladder", "-f", str(f), "--store", str(store)]) == 0
+    out = capsys.readouterr().out
+    assert "none yet" in out and "written:" in out
+    table = pd.read_csv(tmp_path / "ladder" / "ladder.csv")
+    assert set(table["updates"]) == {4, 8} and set(table["method"]) == {"BC", "DT"}
+    assert (table["rung"] == "d8 L1").all() and table["mean"].notna().all()
+    assert table["data_mean"].between(20, 60).all()  # hopper medium's normalised mean
+    assert len(list(store.glob("*.json"))) == 2
+    assert main(["ladder", "-f", str(f), "--store", str(store), "--rungs", "d9 L1"]) == 1
+    assert "Unknown rung" in capsys.readouterr().err
