@@ -3,6 +3,7 @@ and one tiny ladder run end to end through ``thesis ladder``."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import pandas as pd
@@ -30,6 +31,7 @@ def test_the_committed_ladder_file_gives_one_task_per_cell_and_seed():
     first = tasks[0].config
     assert first["train"]["iterations"] == 30_000 and first["train"]["eval_every"] == 10_000
     assert first["dataset_size"] == "full" and first["arch"]["init"] == "normal"
+    assert "device" not in first["train"]  # the same task on a CPU or a GPU
     # seed by seed: every cell's first seed comes before any second seed
     seeds = [t.config["train"]["seed"] for t in tasks]
     assert seeds == sorted(seeds)
@@ -185,6 +187,8 @@ def test_a_tiny_ladder_runs_through_the_cli_and_writes_its_table(tmp_path, capsy
     assert set(table["updates"]) == {4, 8} and set(table["method"]) == {"BC", "DT"}
     assert (table["rung"] == "d8 L1").all() and table["mean"].notna().all()
     assert table["data_mean"].between(20, 60).all()  # hopper medium's normalised mean
-    assert len(list(store.glob("*.json"))) == 2
+    stored = sorted(store.glob("*.json"))
+    assert len(stored) == 2
+    assert json.loads(stored[0].read_text())["rows"][0]["device"] in ("cpu", "cuda")
     assert main(["ladder", "-f", str(f), "--store", str(store), "--rungs", "d9 L1"]) == 1
     assert "Unknown rung" in capsys.readouterr().err

@@ -207,7 +207,9 @@ def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Ta
             "dataset_size": ladder.dataset_size,
             "data_recipe": GENERATOR_VERSION,
             "arch": arch.task_dict(),
-            "train": train.task_dict(),
+            # no device or progress bar in the key: a run is the same task on a CPU or a GPU
+            # (ladder_run takes the GPU where there is one, and its rows say which)
+            "train": {k: v for k, v in train.task_dict().items() if k not in _NOT_KEYED},
             "eval": asdict(ev),
             "checkpoints": list(ladder.checkpoints),
         }
@@ -215,13 +217,19 @@ def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Ta
     return tasks
 
 
+#: TrainSpec fields a ladder task leaves out of its key.
+_NOT_KEYED = ("device", "progress")
+
+
 @task_id("thesis_lib.ladder:ladder_run")
 def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One ladder run (a sweep task): train to the last checkpoint, one row per checkpoint
-    (the evaluation at that many updates, at the data set's best return for RTG methods)."""
+    (the evaluation at that many updates, at the data set's best return for RTG methods).
+    It trains on the GPU where there is one (``device`` in its rows), else on one CPU core."""
     import torch  # lazy: a worker process sets its threads before the first model
 
     torch.set_num_threads(1)
+    device = "cuda" if torch.cuda.is_available() else "cpu"
     if config.get("data_recipe", GENERATOR_VERSION) != GENERATOR_VERSION:
         raise ValueError(
             f"This run's data is of recipe {config['data_recipe']}, this checkout makes "
@@ -236,7 +244,7 @@ def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         config["method"],
         ds,
         arch,
-        TrainSpec.from_task(config["train"]),
+        TrainSpec.from_task({**config["train"], "device": device}),
         EvalSpec(**ev),
         task=dataset_key(config["dataset"])[0],
     )
@@ -261,6 +269,7 @@ def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
             "length_mean": float(by_iteration[c]["length_mean"]),
             "data_mean": None if data_mean is None else float(data_mean),
             "train_s": train_s,
+            "device": device,
         }
         for c in config["checkpoints"]
     ]
