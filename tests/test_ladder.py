@@ -104,7 +104,10 @@ LADDER = Ladder(
 )
 
 
-def _rows(means):
+DATA_MEANS = {"hopper/medium": 40.0, "hopper/medium-replay": 18.0}
+
+
+def _rows(means, data_means=DATA_MEANS):
     """Rows of three seeds at ``mean - 1, mean, mean + 1`` for ``{(dataset, rung, updates,
     method): mean}``."""
     return [
@@ -115,8 +118,8 @@ def _rows(means):
             "method": m,
             "seed": s,
             "score": mean + s - 1,
-            "data_mean": 40.0,
-        }  # fmt: skip
+            "data_mean": data_means[d],
+        }
         for (d, r, n, m), mean in means.items()
         for s in range(3)
     ]
@@ -149,7 +152,10 @@ def test_the_table_reads_levels_targets_and_stability_and_the_cheapest_passing_s
     assert v.loc[("d64 L2", 30), "passes"] is True
     assert v.loc[("d128 L3", 30), "stable"] is None  # the largest rung has nothing to compare to
     chosen, why = choose_rung(LADDER, table)
-    assert chosen == ("d64 L2", 30) and "within 5 of BC" in why
+    assert chosen == ("d64 L2", 30) and "BC within 5 of its data's mean" in why
+    # BC 11 points below its data (medium at 51): no rung passes the level gate
+    low = ladder_table(LADDER, _rows(means, {**DATA_MEANS, "hopper/medium": 51.0}))
+    assert not low["level"].any() and choose_rung(LADDER, low)[0] is None
 
 
 def test_a_swap_against_the_largest_rung_fails_stability_and_missing_seeds_decide_nothing():
