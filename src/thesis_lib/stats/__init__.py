@@ -189,6 +189,36 @@ def welch_interval(x: np.ndarray, y: np.ndarray, alpha: float = 0.05) -> tuple[f
     return effect, effect - half, effect + half
 
 
+def seeds_needed(
+    sd: float, half_width: float, settings: int = 1, alpha: float = 0.05, max_seeds: int = 10_000
+) -> int:
+    """The fewest seeds per method and setting at which :func:`welch_interval` of a difference
+    of stratified means over ``settings`` settings is expected to be at most ``half_width``
+    wide on each side, when every run of either method scatters by ``sd`` around its setting's
+    mean: a pre-registration's seed count (CLAIMS.md: 5, "more where the interval method
+    needs them").
+
+    The interval's half-width is ``t(1 - alpha/2, df) * sd * sqrt(2 / (settings * n))`` with
+    Welch's ``df = 2 * settings * (n - 1)`` for equal spreads.
+
+    >>> seeds_needed(8.2, 5.0), seeds_needed(8.2, 5.0, settings=11), seeds_needed(1.0, 5.0)
+    (22, 3, 2)
+
+    Raises:
+        ValueError: If ``sd`` is negative, ``half_width`` or ``settings`` not positive, or no
+            count up to ``max_seeds`` suffices.
+    """
+    if sd < 0 or half_width <= 0 or settings < 1:
+        raise ValueError(
+            f"Expect sd >= 0, half_width > 0 and settings >= 1, got {sd}, {half_width}, {settings}."
+        )
+    for n in range(2, max_seeds + 1):
+        df = 2 * settings * (n - 1)
+        if float(_st.t.ppf(1 - alpha / 2, df)) * sd * np.sqrt(2 / (settings * n)) <= half_width:
+            return n
+    raise ValueError(f"More than {max_seeds} seeds would be needed for sd {sd} at {half_width}.")
+
+
 #: How :func:`compare` makes the effect's interval: ``welch`` (the default for the mean
 #: aggregate: a t interval that keeps its coverage at the studies' 3-5 seeds) or ``bootstrap``
 #: (rliable's stratified percentile bootstrap; the only one for IQM, and the v1 studies' rule).
@@ -503,6 +533,7 @@ __all__ = [
     "performance_profile",
     "probability_of_improvement",
     "score_matrix",
+    "seeds_needed",
     "shared_settings",
     "verdict",
 ]
