@@ -169,21 +169,21 @@ def test_seeds_needed_matches_the_welch_interval_it_plans_for():
     from thesis_lib.stats import seeds_needed, welch_interval
 
     rng = np.random.default_rng(0)
+
+    def half(k, sd, settings):
+        widths = []
+        for _ in range(400):
+            x = rng.normal(0.0, sd, size=(k, settings))
+            y = rng.normal(0.0, sd, size=(k, settings))
+            _, lo, hi = welch_interval(x, y)
+            widths.append((hi - lo) / 2)
+        return float(np.mean(widths))
+
     for sd, target, settings in ((8.2, 5.0, 1), (8.2, 5.0, 11), (3.0, 2.0, 2)):
         n = seeds_needed(sd, target, settings=settings)
-
-        def half(k):
-            widths = []
-            for _ in range(400):
-                x = rng.normal(0.0, sd, size=(k, settings))
-                y = rng.normal(0.0, sd, size=(k, settings))
-                _, lo, hi = welch_interval(x, y)
-                widths.append((hi - lo) / 2)
-            return float(np.mean(widths))
-
-        assert half(n) <= target * 1.05, (sd, target, settings, n)
+        assert half(n, sd, settings) <= target * 1.05, (sd, target, settings, n)
         if n > 2:
-            assert half(n - 1) > half(n)
+            assert half(n - 1, sd, settings) > half(n, sd, settings)
     assert seeds_needed(0.0, 1.0) == 2
     with pytest.raises(ValueError, match="settings >= 1"):
         seeds_needed(1.0, 1.0, settings=0)
