@@ -44,7 +44,10 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
     table.to_csv(out, index=False, float_format="%.3f")
     show = table[["dataset", "rung", "updates", "method", "seeds", "mean", "ci_low", "ci_high",
                   "data_mean", "passes"]]  # fmt: skip
-    print(show.to_string(index=False, float_format=lambda v: f"{v:.1f}"))
+    if show.empty:
+        print(f"no ladder runs stored in {store} yet")
+    else:
+        print(show.to_string(index=False, float_format=lambda v: f"{v:.1f}"))
     chosen, why = choose_rung(ladder, table)
     print(f"chosen: {chosen[0]} at {chosen[1]:,} updates: {why}" if chosen else f"none yet: {why}")
     print(f"written: {out}")
