@@ -166,6 +166,15 @@ def test_a_later_study_runs_beside_the_first_and_takes_over_its_claims_once_comp
     ours = ledger_table(claims.reset_index()).set_index("claim").ours
     assert ours["C3"].endswith("(studies: fake-v1: holds; fake-v2: fails)")
     assert "studies:" not in ours["C2"]
+    # the Claims page's v1-beside-v2 table
+    from thesis_lib.chapters.claims import studies_table
+
+    side = studies_table(claims.reset_index()).set_index("claim")
+    assert side.loc["C3", ["v1 study", "v1", "v2 study", "v2"]].tolist() == [
+        "fake-v1", "holds", "fake-v2", "fails",
+    ]  # fmt: skip
+    assert side.loc["C2", ["v1", "v2 study"]].tolist() == ["fails", "none registered yet"]
+    assert side.loc["C14", "v1 study"] == "no study yet"  # no study file registers it here
     # evidence of either study, by tag
     from thesis_lib.book import evidence as evi
 

@@ -23,6 +23,7 @@ from thesis_lib.chapters.claims.tables import (
     load_parity,
     no_peer_table,
     parity_view,
+    studies_table,
     verdict_counts,
 )
 from thesis_lib.stats.claims import VERDICT_COLOURS
@@ -39,5 +40,6 @@ __all__ = [
     "no_peer_table",
     "parity_view",
     "plot_claims",
+    "studies_table",
     "verdict_counts",
 ]

@@ -26,6 +26,7 @@ __all__ = [
     "load_parity",
     "no_peer_table",
     "parity_view",
+    "studies_table",
     "verdict_counts",
 ]
 
@@ -85,6 +86,44 @@ def ledger_table(claims: pd.DataFrame) -> pd.DataFrame:
                 "ours": ours,
                 "verdict": verdict,
                 "chapter": chapter,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def studies_table(claims: pd.DataFrame) -> pd.DataFrame:
+    """Per claim, its first study and its latest side by side (the v1 study and the second
+    study that supersedes it, issue #36), each with its verdict, or its progress while it runs;
+    read from ``history`` of ``claims.csv``. The verdict the ledger shows is the latest
+    *complete* study's.
+
+    >>> t = studies_table(pd.DataFrame({"claim": ["C14"], "verdict": ["untestable"],
+    ...     "history": ["ur3-c14-v1: untestable; ur3-c14-v2: pending, 0/52 tasks"]}))
+    >>> t.loc[t.claim == "C14", ["v1 study", "v1", "v2 study", "v2"]].values.tolist()
+    [['ur3-c14-v1', 'untestable', 'ur3-c14-v2', 'pending, 0/52 tasks']]
+    """
+    by = claims.set_index("claim")
+    rows = []
+    for cid in CLAIMS:
+        r = by.loc[cid] if cid in by.index else pd.Series(dtype=object)
+        history = r.get("history", "")
+        entries = []
+        if isinstance(history, str) and history.strip():
+            for part in history.split("; "):
+                study, _, status = part.partition(": ")
+                entries.append((study.strip(), status.strip()))
+        elif isinstance(r.get("study", None), str):
+            entries.append((r["study"], str(r.get("verdict", "pending"))))
+        first = entries[0] if entries else ("no study yet", "pending")
+        later = entries[-1] if len(entries) > 1 else ("none registered yet", "")
+        rows.append(
+            {
+                "claim": cid,
+                "v1 study": first[0],
+                "v1": first[1],
+                "v2 study": later[0],
+                "v2": later[1],
+                "verdict shown": str(r.get("verdict", "pending")),
             }
         )
     return pd.DataFrame(rows)
