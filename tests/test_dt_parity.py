@@ -349,16 +349,29 @@ def test_parity_table_says_parity_only_inside_the_band():
             {"score": s, "data_score_mean": 32.0, "data_sha": "x", "peer": "d3rlpy"} for s in scores
         ]
 
-    comps = [Comparison("same", "DT"), Comparison("gap", "DT"), Comparison("half", "BC")]
+    comps = [Comparison(n, "DT") for n in ("same", "gap", "two")] + [Comparison("half", "BC")]
     got = {
         "same": {"ours": rows([31, 32, 33]), "peer": rows([32, 31, 33])},
         "gap": {"ours": rows([16, 17, 18]), "peer": rows([32, 31, 33])},
+        "two": {"ours": rows([31, 33]), "peer": rows([32, 32])},
         "half": {"ours": rows([30]), "peer": []},
     }
     t = parity_table(comps, got).set_index("comparison")
     assert bool(t.loc["same", "parity"]) and t.loc["same", "difference"] == pytest.approx(0.0)
     assert not bool(t.loc["gap", "parity"]) and t.loc["gap", "ci_high"] < 0
+    # two seeds a side: an interval, but no verdict (issue #33 asks for >= 3 each)
+    assert t.loc["two", "ci_low"] < 0 < t.loc["two", "ci_high"] and t.loc["two", "parity"] is None
     assert pd.isna(t.loc["half", "difference"]) and t.loc["half", "parity"] is None
+    # the Claims page's reading of each line
+    from thesis_lib.chapters.claims import parity_view
+
+    view = parity_view(t.reset_index()).set_index("comparison")["result"]
+    assert view.to_dict() == {
+        "same": "at parity",
+        "gap": "gap",
+        "two": "fewer than 3 seeds a side",
+        "half": "no peer",
+    }
 
 
 def test_thesis_parity_skips_runs_it_cannot_redo(tmp_path, capsys):

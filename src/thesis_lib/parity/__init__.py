@@ -54,6 +54,7 @@ from thesis_lib.sweep import Task
 __all__ = [
     "can_redo",
     "KNOWN_DIFFERENCES",
+    "MIN_PARITY_SEEDS",
     "NO_PEER",
     "PEER_METHODS",
     "PEER_REQUIREMENTS",
@@ -487,16 +488,23 @@ def welch_interval(x: Any, y: Any, level: float = 0.95) -> tuple[float, float, f
     return d, d - half, d + half
 
 
+#: The seeds a side before a comparison gets a parity verdict (issue #33: "over >= 3 seeds
+#: each"); with 2 it gets its interval only.
+MIN_PARITY_SEEDS = 3
+
+
 def parity_table(
     comparisons: list[Comparison], rows: dict[str, dict[str, list[dict[str, Any]]]]
 ) -> pd.DataFrame:
     """One line per comparison: ours and the peer's mean score, the difference [95% CI] and
-    whether it is within the parity band (the interval holds 0 and ``|difference| <= 3``).
+    whether it is within the parity band (the interval holds 0 and ``|difference| <= 3``, over
+    at least :data:`MIN_PARITY_SEEDS` seeds a side: issue #33's rule).
 
     Args:
         comparisons: The parity file's comparisons.
         rows: ``{name: {"ours": rows, "peer": rows}}``: the stored rows of each comparison's
-            finished runs (a comparison with fewer than 2 a side gets no interval).
+            finished runs (a comparison with fewer than 2 a side gets no interval; with fewer
+            than :data:`MIN_PARITY_SEEDS`, an interval but no parity verdict).
     """
     out = []
     for c in comparisons:
@@ -526,7 +534,8 @@ def parity_table(
         if len(ours) >= 2 and len(peer) >= 2:
             d, lo, hi = welch_interval(ours, peer)
             line |= {"difference": d, "ci_low": lo, "ci_high": hi}
-            line["parity"] = bool(lo <= 0 <= hi and abs(d) <= 3.0)
+            enough = min(len(ours), len(peer)) >= MIN_PARITY_SEEDS
+            line["parity"] = bool(lo <= 0 <= hi and abs(d) <= 3.0) if enough else None
         else:
             line |= {"difference": np.nan, "ci_low": np.nan, "ci_high": np.nan, "parity": None}
         out.append(line)

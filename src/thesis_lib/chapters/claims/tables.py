@@ -188,8 +188,9 @@ def load_parity(path: str | Path | None = None) -> pd.DataFrame:
 def parity_view(table: pd.DataFrame) -> pd.DataFrame:
     """The parity table for reading: per comparison, both sides' mean score (and each seed's),
     the data set's own mean, the difference ours - peer with its 95% interval, and the verdict
-    (``at parity``: the interval holds 0 and the difference is at most 3 points; ``gap``: the
-    interval excludes 0; ``not shown``: neither)."""
+    (``at parity``: the interval holds 0 and the difference is at most 3 points, over 3 seeds a
+    side or more; ``gap``: the interval excludes 0; ``not shown``: neither; ``fewer than 3
+    seeds a side``: an interval, no verdict yet)."""
     if table.empty:
         return pd.DataFrame({"comparison": [], "result": []})
 
@@ -203,6 +204,8 @@ def parity_view(table: pd.DataFrame) -> pd.DataFrame:
             return "no peer" if r["seeds"] else "not run"
         if str(r["parity"]) == "True":
             return "at parity"
+        if str(r["parity"]) != "False" and not pd.isna(r["difference"]):
+            return "fewer than 3 seeds a side"  # an interval, no verdict yet (issue #33's rule)
         # a gap only where the interval excludes 0; otherwise neither parity nor a gap is shown
         return "gap" if r["ci_high"] < 0 or r["ci_low"] > 0 else "not shown"
 
