@@ -38,7 +38,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from thesis_lib.data.card import data_card
 from thesis_lib.data.minari_sets import dataset_key, open_dataset
 from thesis_lib.data.recipe import DATASET_SIZES, GENERATOR_VERSION
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
@@ -250,7 +249,8 @@ def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         task=dataset_key(config["dataset"])[0],
     )
     train_s = round(time.process_time() - t0, 1)
-    data_mean = data_card(ds).get("normalized_mean")
+    scores = ds.normalized_scores()
+    data_mean = None if scores is None or not len(scores) else float(np.mean(scores))
     want = "max" if config["method"] in RTG_METHODS else "none"
     by_iteration = {int(r["iteration"]): r for r in rows if r["target"] == want}
     missing = [c for c in config["checkpoints"] if c not in by_iteration]
@@ -354,9 +354,13 @@ def ladder_table(ladder: Ladder, rows: Sequence[Mapping[str, Any]]) -> pd.DataFr
     ran = [lab for lab in labels if lab in set(table["rung"])]
     top = ran[-1] if ran else None
     verdicts: dict[tuple[Any, Any], tuple[bool | None, ...]] = {}
+
+    def complete_at(rung: Any, n: Any) -> bool:
+        """Every data set x method of the ladder has all its seeds at (rung, n)."""
+        return all((d, rung, n, m) in complete for d in ladder.datasets for m in ladder.methods)
+
     for rung, n in {(r.rung, r.updates) for r in table.itertuples()}:
-        full = all((d, rung, n, m) in complete for d in ladder.datasets for m in ladder.methods)
-        if not full:
+        if not complete_at(rung, n):
             verdicts[(rung, n)] = (None, None, None, None)
             continue
         bc_at_data = all(
@@ -375,10 +379,7 @@ def ladder_table(ladder: Ladder, rows: Sequence[Mapping[str, Any]]) -> pd.DataFr
             for t in ladder.targets
         )
         stable: bool | None = None
-        top_full = top is not None and all(
-            (d, top, n, m) in complete for d in ladder.datasets for m in ladder.methods
-        )
-        if top_full and rung != top:
+        if top is not None and rung != top and complete_at(top, n):
             stable = not any(
                 _swapped(means[(d, rung, n)], means[(d, top, n)], ladder.tolerance)
                 for d in ladder.datasets

@@ -25,8 +25,9 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
 
     root = project_root()
     ladder = load_ladder_file(args.file or root / "params" / "ladder.yml")
-    rungs = [parse_rung(r) for r in args.rungs] if args.rungs else None
-    todo = ladder_tasks(ladder, rungs)  # unknown rungs fail here, before any run
+    every = ladder_tasks(ladder)
+    # only some rungs: unknown ones fail here, before any run
+    todo = ladder_tasks(ladder, [parse_rung(r) for r in args.rungs]) if args.rungs else every
     store = Path(args.store or root / "studies" / "ladder" / "tasks")
     st = TaskStore(store)
     if not args.table:
@@ -37,7 +38,7 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
             desc="ladder",
             keep_going=True,
         )
-    rows = [r for t in ladder_tasks(ladder) if st.has(t.key) for r in st.read(t.key)["rows"]]
+    rows = [r for t in every if st.has(t.key) for r in st.read(t.key)["rows"]]
     table = ladder_table(ladder, rows)
     out = store.parent / "ladder.csv"
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -26,6 +26,7 @@ Methods without a package to compare against, and what stands in for them, are l
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
@@ -453,11 +454,10 @@ def unique_tasks(tasks: dict[str, dict[str, list[Any]]]) -> list[Any]:
     """
     seen: dict[str, Any] = {}
     for sides in tasks.values():
-        n = max(len(sides["ours"]), len(sides["peer"]))
-        for i in range(n):
-            for side in ("ours", "peer"):
-                if i < len(sides[side]):
-                    seen.setdefault(sides[side][i].key, sides[side][i])
+        for pair in itertools.zip_longest(sides["ours"], sides["peer"]):
+            for t in pair:
+                if t is not None:
+                    seen.setdefault(t.key, t)
     return list(seen.values())
 
 
