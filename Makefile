@@ -17,7 +17,7 @@ help:
 	@echo "make study CHAPTER=04_hdt [JOBS=2]   run or resume a pre-registered study"
 	@echo "make claims    studies/claims.csv from the committed studies"
 	@echo "make parity [ONLY='dt-study bc-study']   our DT/BC against d3rlpy's (params/parity.yml)"
-	@echo "make ladder [RUNGS=d32L1]               the sequence models' scale ladder (params/ladder.yml)"
+	@echo "make ladder [RUNGS=d32L1]               the sequence models' scale ladder (params/ladder.v2.yml)"
 	@echo "make test-fast unit tests only (no notebook runs, no book build)"
 	@echo "make lint      ruff (lint + format check) and the type checker"
 	@echo "make format    ruff format + safe fixes"
@@ -56,8 +56,8 @@ parity: $(STAMP)
 	$(VENV)/bin/thesis parity --setup
 	nice $(VENV)/bin/thesis parity -j $(JOBS) $(if $(ONLY),--only $(ONLY))
 
-# The sequence models' scale ladder (issue #36): runs what is missing of params/ladder.yml
-# (or only RUNGS', e.g. RUNGS=d32L1), writes studies/ladder/ladder.csv and the chosen size.
+# The sequence models' scale ladder (issue #36): runs what is missing of params/ladder.v2.yml
+# (or only RUNGS', e.g. RUNGS=d32L1), writes studies/ladder.v2/ladder.csv and the chosen size.
 ladder: $(STAMP)
 	nice $(VENV)/bin/thesis ladder -j $(JOBS) $(if $(RUNGS),--rungs $(RUNGS))
 

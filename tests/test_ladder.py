@@ -3,6 +3,7 @@ and one tiny ladder run end to end through ``thesis ladder``."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -10,6 +11,7 @@ import pandas as pd
 import pytest
 
 from thesis_lib.ladder import (
+    CURRENT_LADDER,
     LADDER_COLUMNS,
     Ladder,
     Rung,
@@ -17,7 +19,9 @@ from thesis_lib.ladder import (
     ladder_table,
     ladder_tasks,
     load_ladder_file,
+    mean_action_level,
     parse_rung,
+    reference_level,
 )
 from thesis_lib.paths import project_root
 
@@ -39,6 +43,39 @@ def test_the_committed_ladder_file_gives_one_task_per_cell_and_seed():
     assert len(small) == 24 and {t.key for t in small} <= {t.key for t in tasks}
     with pytest.raises(ValueError, match=r"Unknown rung\(s\) \['d16 L1'\]"):
         ladder_tasks(ladder, [Rung(16, 1)])
+
+
+def test_the_second_ladder_file_reads_the_first_files_runs_with_its_own_level_gate():
+    """``ladder.v2`` changes only the level gate: the same tasks, so the first file's runs are
+    its runs (copied into its store), and nothing else of the design moved."""
+    root = project_root()
+    v1 = load_ladder_file(root / "params" / "ladder.yml")
+    v2 = load_ladder_file(root / "params" / f"{CURRENT_LADDER}.yml")
+    assert (v1.level_reference, v2.level_reference) == ("data", "mean-action")
+    assert dataclasses.replace(v2, level_reference="data") == v1
+    assert [t.key for t in ladder_tasks(v1)] == [t.key for t in ladder_tasks(v2)]
+    first = {f.name for f in (root / "studies" / "ladder" / "tasks").glob("*.json")}
+    assert first and first <= {
+        f.name for f in (root / "studies" / CURRENT_LADDER / "tasks").glob("*.json")
+    }
+
+
+def test_the_mean_action_reference_is_the_lower_of_the_datas_mean_and_its_policys_mean_action():
+    # hopper's medium snapshot falls at about 345 steps by its mean action (31.5), its sampled
+    # episodes score 44.5; walker2d's does better by its mean (68.8 against 64.8 sampled)
+    hopper = mean_action_level("hopper/medium")
+    assert hopper is not None and 30.0 < hopper < 33.0
+    walker = mean_action_level("walker2d/medium")
+    assert walker is not None and walker > 65.0
+    for name in ("hopper/medium-replay", "hopper/expert", "D4RL/door/human-v2"):
+        assert mean_action_level(name) is None  # a mixture, another tier, a Minari set
+    v2 = dataclasses.replace(LADDER, level_reference="mean-action")
+    assert reference_level(v2, "hopper/medium", 43.8) == pytest.approx(hopper)
+    assert reference_level(v2, "hopper/medium", 20.0) == 20.0  # the data's mean where lower
+    assert reference_level(v2, "walker2d/medium", 64.8) == 64.8
+    assert reference_level(v2, "hopper/medium-replay", 13.6) == 13.6
+    assert reference_level(LADDER, "hopper/medium", 43.8) == 43.8
+    assert reference_level(v2, "hopper/medium", None) is None
 
 
 def _write(tmp_path, text):
@@ -67,6 +104,7 @@ checkpoints: [4, 8]
             "names a data set or method not in the ladder",
         ),
         ("dataset_size: huge\n", "Unknown dataset_size 'huge'"),
+        ("level_reference: policy\n", "Unknown level_reference 'policy'. Valid: data, mean-action"),
     ],
 )
 def test_a_bad_ladder_file_says_what_is_wrong(tmp_path, extra, message):
@@ -152,10 +190,19 @@ def test_the_table_reads_levels_targets_and_stability_and_the_cheapest_passing_s
     assert v.loc[("d64 L2", 30), "passes"] is True
     assert v.loc[("d128 L3", 30), "stable"] is None  # the largest rung has nothing to compare to
     chosen, why = choose_rung(LADDER, table)
-    assert chosen == ("d64 L2", 30) and "BC within 5 of its data's mean" in why
+    assert chosen == ("d64 L2", 30) and "BC within 5 of its reference level (data)" in why
+    assert (table["bc_reference"] == table["dataset"].map(DATA_MEANS)).all()
     # BC 11 points below its data (medium at 51): no rung passes the level gate
     low = ladder_table(LADDER, _rows(means, {**DATA_MEANS, "hopper/medium": 51.0}))
     assert not low["level"].any() and choose_rung(LADDER, low)[0] is None
+    # ... unless the set's policy scores less by its mean action (hopper's: 31.5): BC at 40 has
+    # reached what a cloner can, and the same rows pass where they passed before
+    v2 = dataclasses.replace(LADDER, level_reference="mean-action")
+    low = ladder_table(v2, _rows(means, {**DATA_MEANS, "hopper/medium": 51.0}))
+    assert choose_rung(v2, low)[0] == ("d64 L2", 30)
+    ref = low.drop_duplicates("dataset").set_index("dataset")["bc_reference"]
+    assert ref["hopper/medium"] == pytest.approx(mean_action_level("hopper/medium"))
+    assert ref["hopper/medium-replay"] == 18.0
 
 
 def test_a_swap_against_the_largest_rung_fails_stability_and_missing_seeds_decide_nothing():
@@ -198,3 +245,17 @@ def test_a_tiny_ladder_runs_through_the_cli_and_writes_its_table(tmp_path, capsy
     assert json.loads(stored[0].read_text())["rows"][0]["device"] in ("cpu", "cuda")
     assert main(["ladder", "-f", str(f), "--store", str(store), "--rungs", "d9 L1"]) == 1
     assert "Unknown rung" in capsys.readouterr().err
+
+
+def test_a_ladder_file_keeps_its_runs_under_its_own_name(tmp_path, monkeypatch, capsys):
+    """Without ``--store``, ``params/<name>.yml`` reads and writes ``studies/<name>/``."""
+    from thesis_lib.cli import main
+
+    (tmp_path / "_toc.yml").write_text("root: intro\n")
+    (tmp_path / "params").mkdir()
+    f = tmp_path / "params" / "mine.yml"
+    f.write_text(BASE)
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    assert main(["ladder", "-f", str(f), "--table"]) == 0
+    assert "no ladder runs stored" in capsys.readouterr().out
+    assert (tmp_path / "studies" / "mine" / "ladder.csv").is_file()

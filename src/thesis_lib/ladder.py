@@ -1,21 +1,26 @@
 """The scale ladder (issue #36): the cheapest model size at which the sequence-model studies
 can show their effects, chosen before their second studies are pre-registered.
 
-``thesis ladder`` reads ``params/ladder.yml``: data sets (D4RL's size), methods, seeds,
+``thesis ladder`` reads the current ladder file (:data:`CURRENT_LADDER`,
+``params/ladder.v2.yml``): data sets (D4RL's size), methods, seeds,
 *rungs* (model sizes, cheapest first), *checkpoints* (updates) and the training and evaluation
 every run shares. Each (data set, rung, method, seed) is one run, a
 :class:`~thesis_lib.sweep.Task` trained once to the last checkpoint and evaluated at every
 checkpoint (so the 10k and the 30k rungs of one size cost one 30k run), stored at once under
-``studies/ladder/tasks/`` (resumable, committed); :func:`ladder_table` is written to
-``studies/ladder/ladder.csv``.
+``studies/<file name>/tasks/`` (resumable, committed); :func:`ladder_table` is written to
+``ladder.csv`` beside them.
 
 The table holds, per data set x rung x checkpoint, each method's mean D4RL-normalised score of
 the final evaluation over seeds with a 95% t interval, and the rung's verdicts:
 
-* **level**: the file's ``relative_to`` method (BC) scores at least its data set's mean minus
-  ``slack`` points, and every method at least BC minus ``slack``, on every data set: below
-  that, a comparison describes a model that has not learned its data (CLAIMS.md's level gate:
-  "BC at its data's mean and the DT at or above BC");
+* **level**: the file's ``relative_to`` method (BC) scores at least its *reference level*
+  minus ``slack`` points, and every method at least BC minus ``slack``, on every data set:
+  below that, a comparison describes a model that has not learned its data (CLAIMS.md's level
+  gate: "BC at its data's mean and the DT at or above BC"). The reference level is the data
+  set's mean (``level_reference: data``), or (``mean-action``, :func:`reference_level`) the
+  lower of that mean and the mean-action score of the one policy a ``medium`` set was sampled
+  from: what a cloner of ``E[a | s]`` can reach where the sampling noise itself lifts the
+  returns (hopper's medium policy: 31.5 acting by its mean, 44.5 sampled);
 * **targets**: D4RL's published relations hold (the DT at or above BC on hopper-medium and
   well above it on medium-replay), each ``x - y >= min_difference`` on the means;
 * **stable**: no pair of methods swaps order by more than ``tolerance`` points against the
@@ -38,14 +43,17 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from thesis_lib.data.minari_sets import dataset_key, open_dataset
+from thesis_lib.data.experts import has_medium_run, load_policy_record
+from thesis_lib.data.minari_sets import dataset_key, is_minari_id, open_dataset
 from thesis_lib.data.recipe import DATASET_SIZES, GENERATOR_VERSION
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.registry import RTG_METHODS, check_methods
 from thesis_lib.sweep import Task, task_id
 
 __all__ = [
+    "CURRENT_LADDER",
     "LADDER_COLUMNS",
+    "LEVEL_REFERENCES",
     "Ladder",
     "Rung",
     "choose_rung",
@@ -53,14 +61,24 @@ __all__ = [
     "ladder_table",
     "ladder_tasks",
     "load_ladder_file",
+    "mean_action_level",
     "parse_rung",
+    "reference_level",
 ]
 
 #: The columns of :func:`ladder_table`.
 LADDER_COLUMNS = [
     "dataset", "rung", "updates", "method", "seeds", "mean", "ci_low", "ci_high", "scores",
-    "data_mean", "level", "targets", "stable", "passes",
+    "data_mean", "bc_reference", "level", "targets", "stable", "passes",
 ]  # fmt: skip
+
+#: The current ladder file, ``params/<name>.yml``; its runs go to ``studies/<name>/tasks``.
+#: ``ladder`` (v1) held BC to its data's mean, which hopper's medium set cannot give a cloner
+#: (:func:`mean_action_level`); ``ladder.v2`` reads the same runs with ``mean-action``.
+CURRENT_LADDER = "ladder.v2"
+
+#: What a ladder's level gate holds BC to (:func:`reference_level`).
+LEVEL_REFERENCES = ("data", "mean-action")
 
 
 @dataclass(frozen=True)
@@ -112,6 +130,9 @@ class Ladder:
     episodes: int = 10
     relative_to: str = "BC"
     slack: float = 5.0
+    level_reference: str = "data"
+    """``data``: BC is held to its data set's mean; ``mean-action``: to
+    :func:`reference_level`'s lower bar where the set's policy acts worse by its mean."""
     targets: tuple[Mapping[str, Any], ...] = ()
     tolerance: float = 3.0
 
@@ -129,6 +150,11 @@ class Ladder:
         cps = list(self.checkpoints)
         if cps != sorted(set(cps)) or cps[0] < 1:
             raise ValueError(f"Expect `checkpoints` positive and ascending, got {cps}.")
+        if self.level_reference not in LEVEL_REFERENCES:
+            raise ValueError(
+                f"Unknown level_reference {self.level_reference!r}. "
+                f"Valid: {', '.join(LEVEL_REFERENCES)}."
+            )
         if self.relative_to not in self.methods:
             raise ValueError(f"relative_to {self.relative_to!r} is not one of the methods.")
         for t in self.targets:
@@ -280,6 +306,45 @@ def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
 # The table and the choice
 
 
+def mean_action_level(dataset: str) -> float | None:
+    """The D4RL-normalised score of the policy a ``medium`` set was sampled from, acting by its
+    mean action (the shipped medium run's ``medium_normalized``, 100 episodes), where the set
+    was sampled from one such policy (its record has a sampled score); else ``None``
+    (Minari sets, other tiers, mixtures such as medium-replay).
+
+    A behaviour cloner fits ``E[a | s]``: where the sampling noise *lifts* a policy's returns,
+    as it does for hopper's SAC medium snapshot (31.5 by its mean action, 44.5 sampled: the
+    noise carries some episodes past the fall its mean action makes at about 345 steps), BC
+    reaches the mean action's score, not the data's mean.
+
+    >>> round(mean_action_level("hopper/medium"), 1), mean_action_level("hopper/medium-replay")
+    (31.5, None)
+    """
+    if is_minari_id(dataset):
+        return None
+    task, tier = dataset_key(dataset)
+    if tier != "medium" or not has_medium_run(task):
+        return None
+    rec = load_policy_record(task, role="medium")
+    if rec.medium_sampled_normalized is None or rec.medium_normalized is None:
+        return None
+    return float(rec.medium_normalized)
+
+
+def reference_level(ladder: Ladder, dataset: str, data_mean: float | None) -> float | None:
+    """The score the level gate holds the ladder's ``relative_to`` method (BC) to, before its
+    slack: the data set's mean, or with ``level_reference: mean-action`` the lower of that mean
+    and :func:`mean_action_level` (where the set's policy does better by its mean, as D4RL's
+    medium policies and ours for walker2d and halfcheetah do, the data's mean stays the bar)."""
+    if data_mean is None:
+        return None
+    if ladder.level_reference == "mean-action":
+        level = mean_action_level(dataset)
+        if level is not None:
+            return min(float(data_mean), level)
+    return float(data_mean)
+
+
 def _interval(x: np.ndarray) -> tuple[float, float]:
     """The 95% t interval of the mean of ``x`` (NaN for fewer than 2 values)."""
     from scipy import stats
@@ -350,6 +415,8 @@ def ladder_table(ladder: Ladder, rows: Sequence[Mapping[str, Any]]) -> pd.DataFr
             complete.add((r.dataset, r.rung, r.updates, r.method))
     known = table.dropna(subset=["data_mean"])
     data_means = {d: float(g["data_mean"].mean()) for d, g in known.groupby("dataset")}
+    bars = {d: reference_level(ladder, d, data_means.get(d)) for d in set(table["dataset"])}
+    table["bc_reference"] = table["dataset"].map(bars)
     labels = [r.label for r in ladder.rungs]
     ran = [lab for lab in labels if lab in set(table["rung"])]
     top = ran[-1] if ran else None
@@ -364,8 +431,8 @@ def ladder_table(ladder: Ladder, rows: Sequence[Mapping[str, Any]]) -> pd.DataFr
             verdicts[(rung, n)] = (None, None, None, None)
             continue
         bc_at_data = all(
-            data_means.get(d) is not None
-            and means[(d, rung, n)][ladder.relative_to] >= data_means[d] - ladder.slack
+            (bar := bars.get(d)) is not None
+            and means[(d, rung, n)][ladder.relative_to] >= bar - ladder.slack
             for d in ladder.datasets
         )
         level = bc_at_data and all(
@@ -419,7 +486,8 @@ def choose_rung(ladder: Ladder, table: pd.DataFrame) -> tuple[tuple[str, int] | 
             if v["passes"]:
                 return (rung.label, n), (
                     f"{rung.label} @ {n:,} updates: {ladder.relative_to} within "
-                    f"{ladder.slack:g} of its data's mean and every method within "
+                    f"{ladder.slack:g} of its reference level ({ladder.level_reference}) and "
+                    f"every method within "
                     f"{ladder.slack:g} of it, the targets hold, and no pair of methods swaps "
                     f"by more than {ladder.tolerance:g} points against the largest rung"
                 )

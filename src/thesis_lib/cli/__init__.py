@@ -301,7 +301,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "thesis_lib.cli.parity",
         "our DT and BC against d3rlpy's at equal config (params/parity.yml)",
     ),
-    "ladder": ("thesis_lib.cli.ladder", "the sequence models' scale ladder (params/ladder.yml)"),
+    "ladder": ("thesis_lib.cli.ladder", "the sequence models' scale ladder (params/ladder.v2.yml)"),
 }
 
 
