@@ -61,11 +61,14 @@ parity: $(STAMP)
 ladder: $(STAMP)
 	nice $(VENV)/bin/thesis ladder -j $(JOBS) $(if $(RUNGS),--rungs $(RUNGS))
 
+# The tests run in $(JOBS) pytest-xdist workers, a test file to a worker (--dist loadfile: a
+# file's module fixtures are made once, and the chapter runs of test_chapters.py stay on one
+# worker, which runs them 2 at a time). `pytest` alone runs them in one process.
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(JOBS) --dist loadfile
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -m "not slow"
+	$(PY) -m pytest -n $(JOBS) --dist loadfile -m "not slow"
 
 LINT_PATHS := src tests benchmarks notebooks book/_ext
 
