@@ -204,11 +204,20 @@ def test_the_v1_review_withholds_c12_c13_c14_and_the_maze_rows():
     comparisons untestable, with reasons (recomputed from the committed rows)."""
     from thesis_lib.book.study import evaluate_study
 
-    claims = pd.read_csv(stats_claims_csv())
-    v = dict(zip(claims.claim, claims.verdict))
-    assert {v["C12"], v["C13"], v["C14"]} == {"untestable"}
+    claims = pd.read_csv(stats_claims_csv()).set_index("claim")
+    # each claim's first study (its history's first entry; a complete second study, such as
+    # C14's ur3-c14-v2, gives the claim's verdict since)
+    first = {c: claims.loc[c, "history"].split("; ")[0] for c in ("C12", "C13", "C14")}
+    assert first == {
+        "C12": "clfd-c10c12-v1: untestable",
+        "C13": "mdlt-c13-v1: untestable",
+        "C14": "ur3-c14-v1: untestable",
+    }
     for c in ("C12", "C13", "C14"):
-        assert "FAILED" in claims.set_index("claim").loc[c, "validity"]
+        if claims.loc[c, "study"].endswith("-v1"):
+            assert "FAILED" in claims.loc[c, "validity"]
+    ur3 = evaluate_study("07_ur3_deployment", reps=200)
+    assert all("FAILED level" in g for g in ur3[ur3.counts].gates)
     comp = evaluate_study("04_hdt", reps=200)
     maze = comp[comp.label.str.contains("Maze2D")]
     assert len(maze) == 2 and set(maze.verdict) == {"untestable"}
