@@ -202,16 +202,16 @@ def test_a_bad_gate_is_refused_with_what_is_wrong(gate, message):
 def test_the_v1_review_withholds_c12_c13_c14_and_the_maze_rows():
     """Issue #35's done-when: on today's v1 rows the page marks C12, C13, C14 and the Maze2D
     comparisons untestable, with reasons (recomputed from the committed rows)."""
-    from thesis_lib.book.study import evaluate_study
+    from thesis_lib.book.study import evaluate_study, history_entries
 
     claims = pd.read_csv(stats_claims_csv()).set_index("claim")
     # each claim's first study (its history's first entry; a complete second study, such as
     # C14's ur3-c14-v2, gives the claim's verdict since)
-    first = {c: claims.loc[c, "history"].split("; ")[0] for c in ("C12", "C13", "C14")}
+    first = {c: history_entries(claims.loc[c, "history"])[0] for c in ("C12", "C13", "C14")}
     assert first == {
-        "C12": "clfd-c10c12-v1: untestable",
-        "C13": "mdlt-c13-v1: untestable",
-        "C14": "ur3-c14-v1: untestable",
+        "C12": ("clfd-c10c12-v1", "untestable"),
+        "C13": ("mdlt-c13-v1", "untestable"),
+        "C14": ("ur3-c14-v1", "untestable"),
     }
     for c in ("C12", "C13", "C14"):
         if claims.loc[c, "study"].endswith("-v1"):

@@ -787,6 +787,23 @@ CLAIMS_COLUMNS = [
 ]
 
 
+def history_entries(history: Any) -> list[tuple[str, str]]:
+    """``(study, status)`` of each study in a ``history`` cell of ``claims.csv`` (what
+    :func:`write_claims` writes), first to last; the status is a verdict or the progress of a
+    study still running. An empty cell (no study) gives ``[]``.
+
+    >>> history_entries("ur3-c14-v1: untestable; ur3-c14-v2: pending, 0/52 tasks")
+    [('ur3-c14-v1', 'untestable'), ('ur3-c14-v2', 'pending, 0/52 tasks')]
+    """
+    if not isinstance(history, str) or not history.strip():
+        return []
+    entries = []
+    for part in history.split("; "):
+        study, _, status = part.partition(": ")
+        entries.append((study.strip(), status.strip()))
+    return entries
+
+
 def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.DataFrame:
     """``studies/claims.csv``: one row per claim of CLAIMS.md, ``pending`` where no study
     (or no complete one) answers it yet. ``chapters``: the registry
@@ -843,6 +860,7 @@ __all__ = [
     "Study",
     "chapter_studies",
     "evaluate_study",
+    "history_entries",
     "is_complete",
     "read_run_info",
     "split_ref",

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from thesis_lib.book.study import history_entries
 from thesis_lib.chapters.claims.config import Config
 from thesis_lib.paths import project_root
 from thesis_lib.stats.claims import CLAIMS, EVIDENCE, VERDICT_COLOURS
@@ -106,13 +107,8 @@ def studies_table(claims: pd.DataFrame) -> pd.DataFrame:
     rows = []
     for cid in CLAIMS:
         r = by.loc[cid] if cid in by.index else pd.Series(dtype=object)
-        history = r.get("history", "")
-        entries = []
-        if isinstance(history, str) and history.strip():
-            for part in history.split("; "):
-                study, _, status = part.partition(": ")
-                entries.append((study.strip(), status.strip()))
-        elif isinstance(r.get("study", None), str):
+        entries = history_entries(r.get("history", ""))
+        if not entries and isinstance(r.get("study", None), str):
             entries.append((r["study"], str(r.get("verdict", "pending"))))
         first = entries[0] if entries else ("no study yet", "pending")
         later = entries[-1] if len(entries) > 1 else ("none registered yet", "")
