@@ -24,6 +24,7 @@ from thesis_lib.ladder import (
     reference_level,
 )
 from thesis_lib.paths import project_root
+from thesis_lib.seq import ArchSpec
 
 
 def test_the_committed_ladder_file_gives_one_task_per_cell_and_seed():
@@ -31,7 +32,8 @@ def test_the_committed_ladder_file_gives_one_task_per_cell_and_seed():
     assert ladder.rungs == (Rung(32, 1), Rung(64, 2), Rung(128, 3))
     assert ladder.checkpoints == (10_000, 30_000) and ladder.eval_every == 10_000
     tasks = ladder_tasks(ladder)
-    assert len(tasks) == 2 * 3 * 4 * 3 and len({t.key for t in tasks}) == len(tasks)
+    # BC (rung-free) once per data set and seed, the three others at every rung
+    assert len(tasks) == 2 * 3 * (1 + 3 * 3) and len({t.key for t in tasks}) == len(tasks)
     first = tasks[0].config
     assert first["train"]["iterations"] == 30_000 and first["train"]["eval_every"] == 10_000
     assert first["dataset_size"] == "full" and first["arch"]["init"] == "normal"
@@ -41,6 +43,11 @@ def test_the_committed_ladder_file_gives_one_task_per_cell_and_seed():
     assert seeds == sorted(seeds)
     small = ladder_tasks(ladder, [parse_rung("d32 L1")])
     assert len(small) == 24 and {t.key for t in small} <= {t.key for t in tasks}
+    # a larger rung alone still asks for BC's runs, at the first rung, where they are stored
+    d64 = ladder_tasks(ladder, [parse_rung("d64 L2")])
+    bc = [t for t in d64 if t.config["method"] == "BC"]
+    assert len(d64) == 24 and {t.key for t in bc} <= {t.key for t in small}
+    assert {t.config["arch"]["d_model"] for t in d64 if t.config["method"] != "BC"} == {64}
     with pytest.raises(ValueError, match=r"Unknown rung\(s\) \['d16 L1'\]"):
         ladder_tasks(ladder, [Rung(16, 1)])
 
@@ -222,6 +229,40 @@ def test_a_swap_against_the_largest_rung_fails_stability_and_missing_seeds_decid
     )
     assert v.loc[("d32 L1", 30), "level"] is None and v.loc[("d32 L1", 30), "passes"] is None
     assert choose_rung(LADDER, pd.DataFrame()) == (None, "no runs yet")
+
+
+def test_bc_runs_once_at_the_first_rung_and_stands_at_every_rung():
+    """BC's model is an MLP no rung sizes, so its runs at d32 are its runs at d128: the same
+    parameters, and the table reads them at each rung with runs."""
+    import types
+
+    import torch
+
+    from thesis_lib.seq.registry import build_model
+
+    seq = types.SimpleNamespace(states=torch.zeros(2, 11), actions=torch.zeros(2, 3))
+    shapes = [
+        {k: tuple(v.shape) for k, v in build_model("BC", seq, ArchSpec(d_model=d, n_layers=n))
+         .state_dict().items()}
+        for d, n in ((32, 1), (128, 3))
+    ]  # fmt: skip
+    assert shapes[0] == shapes[1]
+    dt = [sum(p.numel() for p in build_model("DT", seq, ArchSpec(d_model=d, n_layers=n))
+              .parameters()) for d, n in ((32, 1), (128, 3))]  # fmt: skip
+    assert dt[0] < dt[1]  # a rung does size the others
+    means = _means("d32 L1", 30, (40, 42, 41), (20, 35, 30)) | _means(
+        "d64 L2", 30, (40, 44, 41), (20, 36, 31)
+    )
+    rows = [r for r in _rows(means) if not (r["method"] == "BC" and r["rung"] == "d64 L2")]
+    table = ladder_table(LADDER, rows)
+    bc = table[table["method"] == "BC"]
+    assert list(bc["rung"]) == ["d32 L1", "d32 L1", "d64 L2", "d64 L2"]
+    assert (bc["seeds"] == 3).all() and set(bc["mean"]) == {40.0, 20.0}
+    v = table.drop_duplicates(["rung", "updates"]).set_index(["rung", "updates"])
+    assert v.loc[("d64 L2", 30), "level"] and v.loc[("d64 L2", 30), "targets"]
+    # with BC at d32 only, the table has no d64 rows for it to stand at
+    only_bc = [r for r in rows if r["method"] == "BC"]
+    assert set(ladder_table(LADDER, only_bc)["rung"]) == {"d32 L1"}
 
 
 # ----------------------------------------------------------------------------------------------

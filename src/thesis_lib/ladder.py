@@ -55,6 +55,7 @@ __all__ = [
     "LADDER_COLUMNS",
     "LEVEL_REFERENCES",
     "Ladder",
+    "RUNG_FREE_METHODS",
     "Rung",
     "choose_rung",
     "ladder_run",
@@ -76,6 +77,11 @@ LADDER_COLUMNS = [
 #: ``ladder`` (v1) held BC to its data's mean, which hopper's medium set cannot give a cloner
 #: (:func:`mean_action_level`); ``ladder.v2`` reads the same runs with ``mean-action``.
 CURRENT_LADDER = "ladder.v2"
+
+#: Methods whose model no rung sizes (BC: an MLP of ``bc_hidden_dim``): one run per data set
+#: and seed, keyed and stored at the file's first rung and read at every rung by
+#: :func:`ladder_table` (the same run at d64 or d128 would train the same model again).
+RUNG_FREE_METHODS = ("BC",)
 
 #: What a ladder's level gate holds BC to (:func:`reference_level`).
 LEVEL_REFERENCES = ("data", "mean-action")
@@ -210,18 +216,22 @@ def load_ladder_file(path: str | Path) -> Ladder:
 
 def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Task]:
     """One task per data set x rung x method x seed (``rungs``: a subset; default all), in the
-    order that gives every cell its first seeds early: seed by seed, cheapest rung first."""
+    order that gives every cell its first seeds early: seed by seed, cheapest rung first.
+
+    A method of :data:`RUNG_FREE_METHODS` has one task per data set and seed, at the file's
+    first rung, whichever rungs are asked for (:func:`ladder_table` reads it at each)."""
     chosen = list(ladder.rungs if rungs is None else rungs)
     unknown = [r.label for r in chosen if r not in ladder.rungs]
     if unknown:
         valid = ", ".join(r.label for r in ladder.rungs)
         raise ValueError(f"Unknown rung(s) {unknown}; the ladder's: {valid}.")
     ev = EvalSpec(episodes=ladder.episodes, targets=("max",))
-    tasks = []
+    tasks: dict[str, Task] = {}
     for seed, rung, d, m in itertools.product(
         ladder.seeds, chosen, ladder.datasets, ladder.methods
     ):
-        arch = ArchSpec(**{**ladder.arch, "d_model": rung.d_model, "n_layers": rung.n_layers})
+        size = ladder.rungs[0] if m in RUNG_FREE_METHODS else rung
+        arch = ArchSpec(**{**ladder.arch, "d_model": size.d_model, "n_layers": size.n_layers})
         train = TrainSpec(
             **{**ladder.train, "seed": int(seed)},
             iterations=ladder.checkpoints[-1],
@@ -239,8 +249,9 @@ def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Ta
             "eval": asdict(ev),
             "checkpoints": list(ladder.checkpoints),
         }
-        tasks.append(Task(ladder_run, config))
-    return tasks
+        task = Task(ladder_run, config)
+        tasks.setdefault(task.key, task)
+    return list(tasks.values())
 
 
 #: TrainSpec fields a ladder task leaves out of its key.
@@ -379,11 +390,17 @@ def ladder_table(ladder: Ladder, rows: Sequence[Mapping[str, Any]]) -> pd.DataFr
 
     ``level``, ``targets``, ``stable`` and ``passes`` are the rung's verdicts at that
     checkpoint (the same on each of its rows): ``True``, ``False``, or ``None`` where a method
-    or a seed is missing (``stable``: also at the largest rung itself, or without it).
+    or a seed is missing (``stable``: also at the largest rung itself, or without it). The runs
+    of :data:`RUNG_FREE_METHODS` (stored at the first rung) stand at every rung that has runs.
     """
     df = pd.DataFrame(list(rows))
     if df.empty:
         return pd.DataFrame(columns=LADDER_COLUMNS)
+    free = df["method"].isin(RUNG_FREE_METHODS)
+    df = pd.concat(
+        [df[~free]] + [df[free].assign(rung=lab) for lab in df["rung"].drop_duplicates()],
+        ignore_index=True,
+    ).drop_duplicates(["dataset", "rung", "updates", "method", "seed"])
     cells = []
     for (d, rung, n, m), g in df.groupby(["dataset", "rung", "updates", "method"], sort=False):
         x = g.sort_values("seed")["score"].to_numpy(dtype=float)
