@@ -300,3 +300,37 @@ def test_a_ladder_file_keeps_its_runs_under_its_own_name(tmp_path, monkeypatch, 
     assert main(["ladder", "-f", str(f), "--table"]) == 0
     assert "no ladder runs stored" in capsys.readouterr().out
     assert (tmp_path / "studies" / "mine" / "ladder.csv").is_file()
+
+
+def test_the_claims_page_shows_the_ladder_its_verdicts_and_its_choice():
+    from thesis_lib.chapters.claims import ladder_choice, ladder_view, load_ladder
+
+    committed = load_ladder()
+    view = ladder_view(committed)
+    assert len(view) == committed.groupby(["rung", "updates", "dataset"]).ngroups > 0
+    assert list(view.columns[:7]) == ["rung", "updates", "data set", "BC", "DT", "HDT", "DM-noRTG"]
+    # made-up rows of the current file: at d32 the level and the targets hold on both sets
+    # (hopper medium's BC at 32 is held to its mean-action 31.5, not the data's 43.8), and a
+    # d64 rung in the same order makes d32 stable: the cheapest passing size
+    v2 = load_ladder_file(project_root() / "params" / f"{CURRENT_LADDER}.yml")
+    score = {"hopper/medium": (32, 35, 34, 36), "hopper/medium-replay": (12, 40, 30, 35)}
+    data = {"hopper/medium": 43.8, "hopper/medium-replay": 13.6}
+    rows = [
+        {"dataset": d, "rung": r, "updates": n, "method": m, "seed": s,
+         "score": score[d][v2.methods.index(m)] + s - 1, "data_mean": data[d]}
+        for d in v2.datasets for r in ("d32 L1", "d64 L2") for n in v2.checkpoints
+        for m in v2.methods for s in v2.seeds
+        if not (m == "BC" and r == "d64 L2")  # BC runs once, at the first rung
+    ]  # fmt: skip
+    table = ladder_table(v2, rows)
+    view = ladder_view(table).set_index(["rung", "updates", "data set"])
+    cell = view.loc[("d32 L1", 10_000, "hopper/medium")]
+    assert cell["BC"] == "32.0 (3)" and cell["BC held to"] == pytest.approx(31.5, abs=0.1)
+    assert (cell["level"], cell["targets"], cell["stable"], cell["passes"]) == ("yes",) * 4
+    assert view.loc[("d64 L2", 30_000, "hopper/medium-replay"), "stable"] == ""  # the largest
+    assert ladder_choice(table).startswith("Chosen: d32 L1 at 10,000 updates. d32 L1 @ 10,000")
+    low = ladder_table(v2, [{**r, "score": r["score"] - 10} if r["method"] == "HDT" else r
+                            for r in rows])  # fmt: skip
+    assert set(ladder_view(low)["level"]) == {"no"}
+    assert ladder_choice(low).startswith("No size chosen yet: d32 L1 @ 10,000: fails level")
+    assert ladder_view(pd.DataFrame()).empty

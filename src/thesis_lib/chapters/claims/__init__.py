@@ -6,7 +6,8 @@ It renders ``studies/claims.csv``, which ``thesis claims`` writes from the commi
 * :mod:`~thesis_lib.chapters.claims.config`: :class:`Config`, the page's parameters.
 * :mod:`~thesis_lib.chapters.claims.tables`: the ledger (:func:`load_claims`,
   :func:`ledger_table`, :func:`gates_table`, :func:`verdict_counts`) and the peer parity
-  (:func:`load_parity`, :func:`parity_view`, :func:`no_peer_table`).
+  (:func:`load_parity`, :func:`parity_view`, :func:`no_peer_table`) and the scale ladder
+  (:func:`load_ladder`, :func:`ladder_view`, :func:`ladder_choice`).
 * :mod:`~thesis_lib.chapters.claims.figures`: :func:`plot_claims`.
 """
 
@@ -17,9 +18,12 @@ from thesis_lib.chapters.claims.figures import plot_claims
 from thesis_lib.chapters.claims.tables import (
     gates_table,
     headline,
+    ladder_choice,
+    ladder_view,
     ledger_table,
     link_chapters,
     load_claims,
+    load_ladder,
     load_parity,
     no_peer_table,
     parity_view,
@@ -33,9 +37,12 @@ __all__ = [
     "Config",
     "gates_table",
     "headline",
+    "ladder_choice",
+    "ladder_view",
     "ledger_table",
     "link_chapters",
     "load_claims",
+    "load_ladder",
     "load_parity",
     "no_peer_table",
     "parity_view",

@@ -1,6 +1,7 @@
 """The Claims page's tables: the claims ledger (:func:`load_claims`, :func:`ledger_table`,
-:func:`gates_table`, :func:`verdict_counts`) and the peer-parity table (:func:`load_parity`,
-:func:`parity_view`, :func:`no_peer_table`).
+:func:`gates_table`, :func:`verdict_counts`), the peer-parity table (:func:`load_parity`,
+:func:`parity_view`, :func:`no_peer_table`) and the scale ladder (:func:`load_ladder`,
+:func:`ladder_view`, :func:`ladder_choice`).
 
 Used in: the Claims page of the book.
 """
@@ -21,9 +22,12 @@ from thesis_lib.stats.claims import CLAIMS, EVIDENCE, VERDICT_COLOURS
 __all__ = [
     "gates_table",
     "headline",
+    "ladder_choice",
+    "ladder_view",
     "ledger_table",
     "link_chapters",
     "load_claims",
+    "load_ladder",
     "load_parity",
     "no_peer_table",
     "parity_view",
@@ -230,3 +234,67 @@ def no_peer_table() -> pd.DataFrame:
     return pd.DataFrame(
         {"method": list(NO_PEER), "no peer package; instead": list(NO_PEER.values())}
     )
+
+
+def _ladder_name(name: str | None) -> str:
+    from thesis_lib.ladder import CURRENT_LADDER  # lazy: torch
+
+    return name or CURRENT_LADDER
+
+
+def load_ladder(name: str | None = None) -> pd.DataFrame:
+    """The scale ladder's table, ``studies/<name>/ladder.csv`` (``thesis ladder`` writes it;
+    ``name`` defaults to the current ladder file, ``ladder.v2``); empty where none is
+    committed."""
+    p = project_root() / "studies" / _ladder_name(name) / "ladder.csv"
+    return pd.read_csv(p) if p.exists() else pd.DataFrame()
+
+
+def ladder_view(table: pd.DataFrame) -> pd.DataFrame:
+    """The ladder for reading: per rung, checkpoint and data set, each method's mean score over
+    the seeds run (their number in brackets), the data set's mean, the level BC is held to,
+    and the rung's verdicts at that checkpoint (``yes``, ``no``, or blank while a method or a
+    seed is missing).
+
+    >>> t = pd.DataFrame({"dataset": ["hopper/medium"] * 2, "rung": ["d32 L1"] * 2,
+    ...     "updates": [30000] * 2, "method": ["BC", "DT"], "seeds": [3, 1],
+    ...     "mean": [31.9, 33.2], "data_mean": [43.8] * 2, "bc_reference": [31.5] * 2,
+    ...     "level": [None] * 2, "targets": [None] * 2, "stable": [None] * 2,
+    ...     "passes": [None] * 2})
+    >>> ladder_view(t).iloc[0].to_dict()["DT"]
+    '33.2 (1)'
+    """
+    if table.empty:
+        return pd.DataFrame({"rung": [], "updates": [], "data set": []})
+    methods = list(dict.fromkeys(table["method"]))
+    keys = ["rung", "updates", "dataset"]
+
+    def verdict(x: Any) -> str:
+        if x is None or (isinstance(x, float) and np.isnan(x)) or str(x) in ("", "nan", "None"):
+            return ""
+        return "yes" if str(x) in ("True", "1", "1.0") else "no"
+
+    out = []
+    for (rung, n, d), g in table.groupby(keys, sort=False):
+        by = g.set_index("method")
+        row: dict[str, Any] = {"rung": rung, "updates": int(n), "data set": d}
+        for m in methods:
+            row[m] = f"{by.at[m, 'mean']:.1f} ({int(by.at[m, 'seeds'])})" if m in by.index else ""
+        row["data mean"] = round(float(g["data_mean"].iloc[0]), 1)
+        row["BC held to"] = round(float(g["bc_reference"].iloc[0]), 1)
+        for k in ("level", "targets", "stable", "passes"):
+            row[k] = verdict(g[k].iloc[0])
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def ladder_choice(table: pd.DataFrame, name: str | None = None) -> str:
+    """The size the ladder chose and why, or why none is chosen yet
+    (:func:`thesis_lib.ladder.choose_rung` on the ladder file ``params/<name>.yml``)."""
+    from thesis_lib.ladder import choose_rung, load_ladder_file  # lazy: torch
+
+    ladder = load_ladder_file(project_root() / "params" / f"{_ladder_name(name)}.yml")
+    chosen, why = choose_rung(ladder, table)
+    if chosen:
+        return f"Chosen: {chosen[0]} at {chosen[1]:,} updates. {why}."
+    return f"No size chosen yet: {why}."
