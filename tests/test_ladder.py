@@ -334,3 +334,46 @@ def test_the_claims_page_shows_the_ladder_its_verdicts_and_its_choice():
     assert set(ladder_view(low)["level"]) == {"no"}
     assert ladder_choice(low).startswith("No size chosen yet: d32 L1 @ 10,000: fails level")
     assert ladder_view(pd.DataFrame()).empty
+
+
+def test_thesis_ladder_commit_every_commits_the_ladders_folder_and_nothing_else(
+    tmp_path, monkeypatch, capsys
+):
+    """--commit-every: the runs and the table are committed as they land and at the end, as
+    commits of ``studies/<name>/`` only; a user's own staged change stays staged."""
+    import subprocess
+
+    from thesis_lib.cli import main
+    from thesis_lib.cli.ladder import commit_ladder
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=tmp_path, check=True, capture_output=True, text=True
+        ).stdout
+
+    (tmp_path / "_toc.yml").write_text("root: intro\n")
+    (tmp_path / "params").mkdir()
+    f = tmp_path / "params" / "mine.yml"
+    f.write_text(BASE + "dataset_size: smoke\nepisodes: 1\ntrain: {warmup_steps: 2}\n")
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path))
+    with pytest.raises(SystemExit, match="not a git checkout"):  # said before any run
+        main(["ladder", "-f", str(f), "--commit-every", "600"])
+    assert not (tmp_path / "studies").exists()
+    git("init", "-q")
+    git("config", "user.name", "t")
+    git("config", "user.email", "t@t")
+    git("commit", "-q", "--allow-empty", "-m", "0")
+    (tmp_path / "mine.txt").write_text("work in progress")
+    git("add", "mine.txt")
+    assert main(["ladder", "-f", str(f), "--commit-every", "3600"]) == 0
+    assert git("log", "-1", "--format=%s").strip() == "mine: 2 finished run(s) landed (2/2)"
+    committed = set(git("show", "--name-only", "--format=", "HEAD").split())
+    assert "studies/mine/ladder.csv" in committed
+    assert len([c for c in committed if c.startswith("studies/mine/tasks/")]) == 2
+    assert not any(c.endswith(".lock") or ".tmp" in c for c in committed)
+    assert git("diff", "--cached", "--name-only").split() == ["mine.txt"]  # still only staged
+    assert commit_ladder(f, tmp_path / "studies" / "mine" / "tasks") is None  # nothing new
+    with pytest.raises(SystemExit, match="positive"):
+        main(["ladder", "-f", str(f), "--commit-every", "0"])
+    with pytest.raises(SystemExit, match="not inside the project"):
+        main(["ladder", "-f", str(f), "--store", "/tmp/elsewhere", "--commit-every", "60"])

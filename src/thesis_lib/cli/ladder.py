@@ -3,6 +3,7 @@ current ladder file ``params/ladder.v2.yml``; its runs and table go to ``studies
 (a file ``params/<name>.yml`` keeps its runs in ``studies/<name>/tasks``).
 
 thesis ladder --rungs "d32 L1" -j 2     # run what is missing of one rung; run again to resume
+thesis ladder --rungs "d64 L2" -j 2 --commit-every 900   # and commit the runs as they land
 thesis ladder -j 2                      # every rung (d128 L3: GPU-sized, about 2 h a run on CPU)
 thesis ladder --table                   # the table and the chosen size from the stored runs only
 thesis ladder -f params/ladder.yml --table   # the first ladder file, read from its own runs
@@ -15,11 +16,60 @@ from pathlib import Path
 from typing import Any
 
 
+def write_ladder_table(path: Path, store: Path) -> Any:
+    """The table of the ladder file ``path`` from the runs stored in ``store``, written to
+    ``ladder.csv`` beside the store; returns it."""
+    from thesis_lib.ladder import ladder_table, ladder_tasks, load_ladder_file
+    from thesis_lib.sweep import TaskStore
+
+    ladder = load_ladder_file(path)
+    st = TaskStore(store)
+    rows = [r for t in ladder_tasks(ladder) if st.has(t.key) for r in st.read(t.key)["rows"]]
+    table = ladder_table(ladder, rows)
+    out = store.parent / "ladder.csv"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out, index=False, float_format="%.3f")
+    return table
+
+
+def commit_ladder(path: Path, store: Path, root: Path | None = None) -> str | None:
+    """Commit the runs the ladder file ``path`` stored in ``store`` and its table (rewritten
+    first), and nothing else: one commit of that folder only (never a lock, a temporary file or
+    a failed run's traceback; other changes in the checkout, staged or not, stay as they are).
+    Returns the commit message, or None when nothing changed.
+
+    Raises:
+        RuntimeError: ``root`` (default: the project) is not a git checkout, or git refused.
+    """
+    from thesis_lib.cli.study import NOT_COMMITTED, _checkout, _git
+    from thesis_lib.ladder import ladder_tasks, load_ladder_file
+    from thesis_lib.sweep import TaskStore
+
+    root = _checkout(root)
+    write_ladder_table(path, store)
+    folder = store.parent.resolve().relative_to(root.resolve()).as_posix()
+    excluded = [f":(exclude,glob){g}" for g in NOT_COMMITTED]
+    r = _git(root, "add", "--", folder, *excluded)
+    if r.returncode != 0:
+        raise RuntimeError(f"git add failed: {r.stderr.strip()}")
+    if _git(root, "diff", "--cached", "--quiet", "--", folder).returncode == 0:
+        return None
+    added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", folder).stdout
+    n = sum("/tasks/" in line and line.endswith(".json") for line in added.splitlines())
+    keys = [t.key for t in ladder_tasks(load_ladder_file(path))]
+    done = sum(TaskStore(store).has(k) for k in keys)
+    msg = f"{path.stem}: {n} finished run(s) landed ({done}/{len(keys)})"
+    r = _git(root, "commit", "-q", "-m", msg, "--", folder)
+    if r.returncode != 0:
+        raise RuntimeError(f"git commit failed: {r.stderr.strip() or r.stdout.strip()}")
+    return msg
+
+
 def _cmd_ladder(args: argparse.Namespace) -> int:
+    from thesis_lib.cli.study import _Committer
     from thesis_lib.ladder import (
         CURRENT_LADDER,
         choose_rung,
-        ladder_table,
         ladder_tasks,
         load_ladder_file,
         parse_rung,
@@ -35,19 +85,28 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
     todo = ladder_tasks(ladder, [parse_rung(r) for r in args.rungs]) if args.rungs else every
     store = Path(args.store or root / "studies" / path.stem / "tasks")
     st = TaskStore(store)
+    committer = None
+    if args.commit_every is not None and not args.table:
+        if args.commit_every <= 0:
+            raise SystemExit(f"--commit-every must be positive seconds, not {args.commit_every}.")
+        try:
+            _checkout_of(store)  # not a git checkout: say so before hours of work
+        except RuntimeError as e:
+            raise SystemExit(str(e)) from e
+        committer = _Committer(lambda: commit_ladder(path, store), args.commit_every).start()
     if not args.table:
-        run_tasks(
-            [t for t in todo if not st.has(t.key)],
-            store=store,
-            n_jobs=args.jobs,
-            desc="ladder",
-            keep_going=True,
-        )
-    rows = [r for t in every if st.has(t.key) for r in st.read(t.key)["rows"]]
-    table = ladder_table(ladder, rows)
-    out = store.parent / "ladder.csv"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(out, index=False, float_format="%.3f")
+        try:
+            run_tasks(
+                [t for t in todo if not st.has(t.key)],
+                store=store,
+                n_jobs=args.jobs,
+                desc="ladder",
+                keep_going=True,
+            )
+        finally:
+            if committer is not None:
+                committer.stop()  # a last commit, with the table of every run stored
+    table = write_ladder_table(path, store)
     show = table[["dataset", "rung", "updates", "method", "seeds", "mean", "ci_low", "ci_high",
                   "data_mean", "bc_reference", "passes"]]  # fmt: skip
     if show.empty:
@@ -56,8 +115,23 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
         print(show.to_string(index=False, float_format=lambda v: f"{v:.1f}"))
     chosen, why = choose_rung(ladder, table)
     print(f"chosen: {chosen[0]} at {chosen[1]:,} updates: {why}" if chosen else f"none yet: {why}")
-    print(f"written: {out}")
+    print(f"written: {store.parent / 'ladder.csv'}")
     return 0
+
+
+def _checkout_of(store: Path) -> Path:
+    """The git checkout that holds ``store`` (the project's, unless ``--store`` is elsewhere)."""
+    from thesis_lib.cli.study import _checkout
+    from thesis_lib.paths import project_root
+
+    root = project_root()
+    try:
+        store.resolve().relative_to(root.resolve())
+    except ValueError:
+        raise RuntimeError(
+            f"{store} is not inside the project {root}: nothing to commit it to."
+        ) from None
+    return _checkout(root)
 
 
 def register(sub: Any) -> None:
@@ -79,4 +153,11 @@ def register(sub: Any) -> None:
     cmd.add_argument("--rungs", nargs="+", metavar="RUNG", help='only these rungs, e.g. "d32 L1"')
     cmd.add_argument("-j", "--jobs", type=int, default=1, help="runs in parallel processes")
     cmd.add_argument("--table", action="store_true", help="no runs: the table from stored runs")
+    cmd.add_argument(
+        "--commit-every",
+        type=float,
+        metavar="SECONDS",
+        help="commit the ladder's folder (runs and table) every SECONDS and at the end, as "
+        "commits of that folder only, so that a run cut off loses at most SECONDS of runs",
+    )
     cmd.set_defaults(func=_cmd_ladder)

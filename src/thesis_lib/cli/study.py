@@ -20,6 +20,7 @@ import os
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -141,11 +142,18 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
 
 
 class _Committer:
-    """Calls :func:`commit_studies` every ``every`` seconds in a thread, and once at
-    :meth:`stop`; a refused commit is reported and retried next time."""
+    """Calls :func:`commit_studies` of ``what`` (the studies' chapters), or ``what`` itself (a
+    function that commits and returns its message or None; ``thesis ladder``'s), every
+    ``every`` seconds in a thread, and once at :meth:`stop`; a refused commit is reported and
+    retried next time."""
 
-    def __init__(self, chapters: list[str], every: float) -> None:
-        self.chapters, self.every = list(chapters), float(every)
+    def __init__(self, what: list[str] | Callable[[], str | None], every: float) -> None:
+        if callable(what):
+            self._commit = what
+        else:
+            chapters = list(what)
+            self._commit = lambda: commit_studies(chapters)
+        self.every = float(every)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
 
@@ -159,7 +167,7 @@ class _Committer:
 
     def commit(self) -> None:
         try:
-            msg = commit_studies(self.chapters)
+            msg = self._commit()
         except Exception as e:  # a commit refused now is retried at the next interval
             print(f"commit skipped: {e}", file=sys.stderr)
         else:
