@@ -4,7 +4,8 @@ can show their effects, chosen before their second studies are pre-registered.
 ``thesis ladder`` reads the current ladder file (:data:`CURRENT_LADDER`,
 ``params/ladder.v2.yml``): data sets (D4RL's size), methods, seeds,
 *rungs* (model sizes, cheapest first), *checkpoints* (updates) and the training and evaluation
-every run shares. Each (data set, rung, method, seed) is one run, a
+every run shares. Each (data set, rung, method, seed) is one run (BC's, whose model no rung
+sizes, one per data set and seed: :data:`RUNG_FREE_METHODS`), a
 :class:`~thesis_lib.sweep.Task` trained once to the last checkpoint and evaluated at every
 checkpoint (so the 10k and the 30k rungs of one size cost one 30k run), stored at once under
 ``studies/<file name>/tasks/`` (resumable, committed); :func:`ladder_table` is written to
