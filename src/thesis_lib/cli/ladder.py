@@ -16,15 +16,14 @@ from pathlib import Path
 from typing import Any
 
 
-def write_ladder_table(path: Path, store: Path) -> Any:
-    """The table of the ladder file ``path`` from the runs stored in ``store``, written to
-    ``ladder.csv`` beside the store; returns it."""
-    from thesis_lib.ladder import ladder_table, ladder_tasks, load_ladder_file
+def write_ladder_table(ladder: Any, tasks: list[Any], store: Path) -> Any:
+    """The table of ``ladder`` (a :class:`~thesis_lib.ladder.Ladder`) from the runs of its
+    ``tasks`` stored in ``store``, written to ``ladder.csv`` beside the store; returns it."""
+    from thesis_lib.ladder import ladder_table
     from thesis_lib.sweep import TaskStore
 
-    ladder = load_ladder_file(path)
     st = TaskStore(store)
-    rows = [r for t in ladder_tasks(ladder) if st.has(t.key) for r in st.read(t.key)["rows"]]
+    rows = [r for t in tasks if st.has(t.key) for r in st.read(t.key)["rows"]]
     table = ladder_table(ladder, rows)
     out = store.parent / "ladder.csv"
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -34,39 +33,33 @@ def write_ladder_table(path: Path, store: Path) -> Any:
 
 def commit_ladder(path: Path, store: Path, root: Path | None = None) -> str | None:
     """Commit the runs the ladder file ``path`` stored in ``store`` and its table (rewritten
-    first), and nothing else: one commit of that folder only (never a lock, a temporary file or
-    a failed run's traceback; other changes in the checkout, staged or not, stay as they are).
-    Returns the commit message, or None when nothing changed.
+    first), and nothing else: one commit of that folder only
+    (:func:`~thesis_lib.cli.study.commit_paths`). Returns the commit message, or None when
+    nothing changed.
 
     Raises:
         RuntimeError: ``root`` (default: the project) is not a git checkout, or git refused.
     """
-    from thesis_lib.cli.study import NOT_COMMITTED, _checkout, _git
+    from thesis_lib.cli.study import _checkout, commit_paths
     from thesis_lib.ladder import ladder_tasks, load_ladder_file
     from thesis_lib.sweep import TaskStore
 
     root = _checkout(root)
-    write_ladder_table(path, store)
+    ladder = load_ladder_file(path)
+    every = ladder_tasks(ladder)
+    write_ladder_table(ladder, every, store)
     folder = store.parent.resolve().relative_to(root.resolve()).as_posix()
-    excluded = [f":(exclude,glob){g}" for g in NOT_COMMITTED]
-    r = _git(root, "add", "--", folder, *excluded)
-    if r.returncode != 0:
-        raise RuntimeError(f"git add failed: {r.stderr.strip()}")
-    if _git(root, "diff", "--cached", "--quiet", "--", folder).returncode == 0:
-        return None
-    added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", folder).stdout
-    n = sum("/tasks/" in line and line.endswith(".json") for line in added.splitlines())
-    keys = [t.key for t in ladder_tasks(load_ladder_file(path))]
-    done = sum(TaskStore(store).has(k) for k in keys)
-    msg = f"{path.stem}: {n} finished run(s) landed ({done}/{len(keys)})"
-    r = _git(root, "commit", "-q", "-m", msg, "--", folder)
-    if r.returncode != 0:
-        raise RuntimeError(f"git commit failed: {r.stderr.strip() or r.stdout.strip()}")
-    return msg
+    done = sum(TaskStore(store).has(t.key) for t in every)
+    return commit_paths(
+        root,
+        [folder],
+        [],
+        lambda n: f"{path.stem}: {n} finished run(s) landed ({done}/{len(every)})",
+    )
 
 
 def _cmd_ladder(args: argparse.Namespace) -> int:
-    from thesis_lib.cli.study import _Committer
+    from thesis_lib.cli.study import start_committer
     from thesis_lib.ladder import (
         CURRENT_LADDER,
         choose_rung,
@@ -87,13 +80,9 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
     st = TaskStore(store)
     committer = None
     if args.commit_every is not None and not args.table:
-        if args.commit_every <= 0:
-            raise SystemExit(f"--commit-every must be positive seconds, not {args.commit_every}.")
-        try:
-            _checkout_of(store)  # not a git checkout: say so before hours of work
-        except RuntimeError as e:
-            raise SystemExit(str(e)) from e
-        committer = _Committer(lambda: commit_ladder(path, store), args.commit_every).start()
+        if not store.resolve().is_relative_to(root.resolve()):
+            raise SystemExit(f"{store} is not inside the project {root}: nothing to commit it to.")
+        committer = start_committer(lambda: commit_ladder(path, store), args.commit_every)
     if not args.table:
         try:
             run_tasks(
@@ -106,7 +95,7 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
         finally:
             if committer is not None:
                 committer.stop()  # a last commit, with the table of every run stored
-    table = write_ladder_table(path, store)
+    table = write_ladder_table(ladder, every, store)
     show = table[["dataset", "rung", "updates", "method", "seeds", "mean", "ci_low", "ci_high",
                   "data_mean", "bc_reference", "passes"]]  # fmt: skip
     if show.empty:
@@ -117,21 +106,6 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
     print(f"chosen: {chosen[0]} at {chosen[1]:,} updates: {why}" if chosen else f"none yet: {why}")
     print(f"written: {store.parent / 'ladder.csv'}")
     return 0
-
-
-def _checkout_of(store: Path) -> Path:
-    """The git checkout that holds ``store`` (the project's, unless ``--store`` is elsewhere)."""
-    from thesis_lib.cli.study import _checkout
-    from thesis_lib.paths import project_root
-
-    root = project_root()
-    try:
-        store.resolve().relative_to(root.resolve())
-    except ValueError:
-        raise RuntimeError(
-            f"{store} is not inside the project {root}: nothing to commit it to."
-        ) from None
-    return _checkout(root)
 
 
 def register(sub: Any) -> None:

@@ -121,7 +121,23 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
     paths = [p for p in paths if (root / p).exists()]
     if not paths:
         return None
-    # never a failed task's traceback or a temporary file, whatever .gitignore says
+    summary_text = "; ".join(summary)
+    return commit_paths(
+        root, paths, others, lambda n: f"studies: {n} finished task(s) landed ({summary_text})"
+    )
+
+
+def commit_paths(
+    root: Path, paths: list[str], others: set[str] | list[str], message: Callable[[int], str]
+) -> str | None:
+    """Stage ``paths`` (less ``others`` and :data:`NOT_COMMITTED`, whatever .gitignore says)
+    and commit them alone, with ``message(n)`` (``n``: the task files ``*/tasks/*.json`` the
+    commit adds); other changes in the checkout, staged or not, stay as they are. Returns the
+    message, or None when nothing changed.
+
+    Raises:
+        RuntimeError: git refused (the message has git's words).
+    """
     excluded = [
         *(f":(exclude,glob){g}" for g in NOT_COMMITTED),
         *(f":(exclude){o}" for o in others),
@@ -134,11 +150,26 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
         return None
     added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", *only).stdout
     n = sum("/tasks/" in line and line.endswith(".json") for line in added.splitlines())
-    msg = f"studies: {n} finished task(s) landed ({'; '.join(summary)})"
+    msg = message(n)
     r = _git(root, "commit", "-q", "-m", msg, "--", *only)
     if r.returncode != 0:
         raise RuntimeError(f"git commit failed: {r.stderr.strip() or r.stdout.strip()}")
     return msg
+
+
+def start_committer(
+    what: list[str] | Callable[[], str | None], every: float, root: Path | None = None
+) -> _Committer:
+    """``--commit-every``: a started :class:`_Committer`, after the checks that fail before
+    hours of work (``SystemExit``): ``every`` positive, ``root`` (default: the project) a git
+    checkout."""
+    if every <= 0:
+        raise SystemExit(f"--commit-every must be positive seconds, not {every}.")
+    try:
+        _checkout(root)
+    except RuntimeError as e:
+        raise SystemExit(str(e)) from e
+    return _Committer(what, every).start()
 
 
 class _Committer:
@@ -209,13 +240,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
         return 0
     committer = None
     if args.commit_every is not None:
-        if args.commit_every <= 0:
-            raise SystemExit(f"--commit-every must be positive seconds, not {args.commit_every}.")
-        try:
-            _checkout(None)  # not a git checkout: say so before hours of work
-        except RuntimeError as e:
-            raise SystemExit(str(e)) from e
-        committer = _Committer(args.chapter, args.commit_every).start()
+        committer = start_committer(args.chapter, args.commit_every)
     try:
         failed = _run_studies(args)
     finally:
