@@ -349,3 +349,27 @@ def test_every_claim_lists_its_gates():
     claims = pd.read_csv(stats_claims_csv())
     for r in claims.itertuples():
         assert isinstance(r.validity, str) and r.validity != "no gate", r.claim
+
+
+def test_a_level_gate_with_require_either_fails_only_where_both_sit_at_a_bound():
+    # C12's shape: one method learns, the other does not. `each` withholds that verdict (the
+    # claim's own predicted outcome); `either` withholds only a pair at the floor or the ceiling.
+    learns = _rows({("HDT", "s"): 0.6, ("DT", "s"): 0.0}, sd=0.05)
+    each = {"claim": "C3", "kind": "level", "low": 0.1, "high": 0.9, "why": "floor"}
+    either = {**each, "require": "either"}
+    res = _evaluate(learns, [each]).iloc[0]
+    assert res.verdict == "untestable" and "DT score" in res.gates and "< 0.1" in res.gates
+    res = _evaluate(learns, [either]).iloc[0]
+    assert res.validity == "valid" and res.verdict == res.stat_verdict == "holds"
+    assert res.gates.startswith("passed level (either): HDT score 0.6")
+    floor = _rows({("HDT", "s"): 0.02, ("DT", "s"): 0.0}, sd=0.01)
+    res = _evaluate(floor, [either]).iloc[0]
+    assert res.verdict == "untestable" and "FAILED level (both)" in res.gates
+    assert "HDT score 0.02" in res.gates and "; DT score 0.00" in res.gates
+    ceiling = _rows({("HDT", "s"): 0.99, ("DT", "s"): 0.95}, sd=0.01)
+    res = _evaluate(ceiling, [either]).iloc[0]
+    assert res.verdict == "untestable" and "> 0.9" in res.gates
+    apart = _rows({("HDT", "s"): 0.97, ("DT", "s"): 0.03}, sd=0.01)  # one at each bound
+    assert _evaluate(apart, [either]).iloc[0].validity == "valid"
+    with pytest.raises(ValueError, match="`require` to be one of"):
+        check_gate({**either, "require": "all"})

@@ -14,7 +14,11 @@ Gate kinds (every gate has ``kind``, ``claim`` and ``why``; ``x``, ``y``, ``labe
   (mean over seeds). ``low``/``high`` may be a number or a ``{setting: number}`` mapping (a floor
   per setting). With ``relative_to: <method>`` and ``slack``, the bound is that method's mean
   minus ``slack`` (e.g. DT >= BC - 5). A floor or a ceiling is a ``level`` gate with both bounds
-  (a rate between 10% and 90% of its range).
+  (a rate between 10% and 90% of its range). ``require: either`` (default ``each``) fails a
+  bound only where *every* method is past it: the pair sits at the floor together (no method
+  reaches ``low``) or at the ceiling together (every method above ``high``). That is the gate
+  of a claim that one method learns and the other does not: with ``each`` the claim's own
+  predicted outcome (the other method at the floor) would withhold its verdict.
 - ``control``: ``method`` must beat ``control`` on ``metric`` (its interval above 0; e.g. an
   untrained encoder, a shuffled-audio control).
 - ``fidelity``: ``method``'s row ``parity`` in ``studies/parity/parity.csv`` is at parity with a
@@ -41,9 +45,11 @@ import numpy as np
 import pandas as pd
 
 GATE_KINDS = ("level", "control", "fidelity", "untestable", "none")
+#: a level gate's ``require``: every method within the bounds, or not all past the same bound.
+LEVEL_REQUIRE = ("each", "either")
 _SELECT = ("claim", "x", "y", "label", "setting", "comparison_metric")
 _KEYS = {
-    "level": {"method", "metric", "low", "high", "relative_to", "slack"},
+    "level": {"method", "metric", "low", "high", "relative_to", "slack", "require"},
     "control": {"method", "control", "metric", "control_setting"},
     "fidelity": {"method", "parity"},
     "untestable": set(),
@@ -68,6 +74,11 @@ def check_gate(gate: Mapping[str, Any]) -> None:
     if kind == "level":
         if not any(k in gate for k in ("low", "high", "relative_to")):
             raise ValueError("a level gate needs `low`, `high` or `relative_to`")
+        if gate.get("require", "each") not in LEVEL_REQUIRE:
+            raise ValueError(
+                f"Expect a level gate's `require` to be one of {LEVEL_REQUIRE}, "
+                f"actually: {gate.get('require')!r}"
+            )
         for k in ("low", "high"):
             v = gate.get(k)
             ok = (
@@ -146,12 +157,16 @@ def evaluate_gate(
     metric = str(gate.get("metric", comparison.get("metric") or metric))
     if kind == "level":
         methods = [gate["method"]] if gate.get("method") else [comparison["x"], comparison["y"]]
-        failed, shown = [], []
+        either = gate.get("require", "each") == "either"
+        failed: list[str] = []
+        shown: list[str] = []
         ref = (
             _setting_means(rows, gate["relative_to"], metric, settings, cols)
             if gate.get("relative_to")
             else None
         )
+        # per setting, per method: the bounds it is past ({"low" | "high": figure})
+        by_setting: dict[str, list[dict[str, str]]] = {}
         for m in methods:
             means = _setting_means(rows, m, metric, settings, cols)
             for s, v in means.items():
@@ -161,13 +176,21 @@ def evaluate_gate(
                     low = rel if low is None else max(low, rel)
                 high = _bound(gate.get("high"), s)
                 shown.append(f"{m} {metric} {v:.3g} in {s!r}")
+                past: dict[str, str] = {}
                 if low is not None and v < low:
-                    failed.append(f"{m} {metric} {v:.3g} < {low:.3g} in {s!r}")
+                    past["low"] = f"{m} {metric} {v:.3g} < {low:.3g} in {s!r}"
                 if high is not None and v > high:
-                    failed.append(f"{m} {metric} {v:.3g} > {high:.3g} in {s!r}")
+                    past["high"] = f"{m} {metric} {v:.3g} > {high:.3g} in {s!r}"
+                if not either:
+                    failed += past.values()
+                by_setting.setdefault(s, []).append(past)
+        for entries in by_setting.values() if either else ():
+            for side in ("low", "high"):  # only where every method is past the same bound
+                if all(side in e for e in entries):
+                    failed += [e[side] for e in entries]
         if failed:
-            return False, "level: " + "; ".join(failed)
-        return True, "level: " + "; ".join(shown)
+            return False, "level" + (" (both)" if either else "") + ": " + "; ".join(failed)
+        return True, "level" + (" (either)" if either else "") + ": " + "; ".join(shown)
     if kind == "control":
         if compare is None:
             raise ValueError("a control gate needs the comparison function")
