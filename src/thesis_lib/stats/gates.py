@@ -165,7 +165,7 @@ def evaluate_gate(
             if gate.get("relative_to")
             else None
         )
-        # per setting, per method: the bounds it is past ({"low" | "high": figure})
+        # with `either`: per setting, per method, the bounds it is past ({"low" | "high": figure})
         by_setting: dict[str, list[dict[str, str]]] = {}
         for m in methods:
             means = _setting_means(rows, m, metric, settings, cols)
@@ -181,10 +181,11 @@ def evaluate_gate(
                     past["low"] = f"{m} {metric} {v:.3g} < {low:.3g} in {s!r}"
                 if high is not None and v > high:
                     past["high"] = f"{m} {metric} {v:.3g} > {high:.3g} in {s!r}"
-                if not either:
+                if either:
+                    by_setting.setdefault(s, []).append(past)
+                else:
                     failed += past.values()
-                by_setting.setdefault(s, []).append(past)
-        for entries in by_setting.values() if either else ():
+        for entries in by_setting.values():
             for side in ("low", "high"):  # only where every method is past the same bound
                 if all(side in e for e in entries):
                     failed += [e[side] for e in entries]
