@@ -242,6 +242,35 @@ def test_committing_a_first_study_leaves_its_later_studies_rows_alone(project):
     assert all(f.startswith("studies/04_hdt/v2/") or f == "studies/claims.csv" for f in files)
 
 
+def test_a_commit_lands_the_tasks_when_another_study_file_cannot_be_read(project, capsys):
+    """A long run commits with the code it started with; a study file written since, with a
+    key that code does not know, stops claims.csv's rebuild but not the tasks' commit."""
+    import subprocess
+
+    from thesis_lib.cli import study as study_cli
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=project, check=True, capture_output=True, text=True
+        ).stdout
+
+    git("init", "-q")
+    git("config", "user.name", "t")
+    git("config", "user.email", "t@t")
+    git("commit", "-q", "--allow-empty", "-m", "0")
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    (project / "params" / "04_hdt.v2.study.yml").write_text(
+        yaml.safe_dump({**V2, "a_key_from_the_future": 1})
+    )
+    msg = study_cli.commit_studies(["04_hdt"])
+    assert msg.startswith("studies: 20 finished task(s)")
+    assert "claims.csv not rebuilt" in msg and "a_key_from_the_future" in msg
+    files = git("show", "--name-only", "--format=", "HEAD").split()
+    assert len([f for f in files if f.startswith("studies/04_hdt/tasks/")]) == 20
+    assert "studies/claims.csv" not in files
+    assert "claims.csv not rebuilt" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     ("patch", "match"),
     [
