@@ -678,6 +678,16 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project, m
     since = evi.code_changes_since(ev)  # the task function is not library code: all of it counts
     assert list(since.subject) == ["change the model"]
     assert "Since then, 1 commit(s) changed the code its tasks run" in evi.status_line(ev)
+    assert "Its study file" not in evi.status_line(ev)
+    study_file = project / "params" / "04_hdt.study.yml"
+    study_file.write_text(study_file.read_text() + "# a note\n")
+    git("commit", "-qam", "the study file")
+    since = evi.code_changes_since(ev)
+    assert list(since.subject) == ["the study file", "change the model"]
+    assert list(since.changed) == ["study file", "code"]
+    line = evi.status_line(ev)  # the file's commit is not counted as a change of the code
+    assert "Since then, 1 commit(s) changed the code its tasks run (newest" in line
+    assert "Its study file (params/04_hdt.study.yml) was written or changed since, at 1" in line
 
     # a task function in the library: only the modules it runs count
     def write(rel: str, text: str) -> None:

@@ -126,12 +126,20 @@ def status_line(ev: Evidence) -> str:
     )
     since = code_changes_since(ev) if ev.complete else None
     if since is not None:
+        code = since[since.changed.str.contains("code")]
+        file = since[since.changed.str.contains("study file")]
         line += (
             " The code its tasks run has not changed since."
-            if since.empty
-            else f" Since then, {len(since)} commit(s) changed the code its tasks run (newest "
-            f"{since.commit.iloc[0]}, {since.date.iloc[0]}); they took no part in these rows."
+            if code.empty
+            else f" Since then, {len(code)} commit(s) changed the code its tasks run (newest "
+            f"{code.commit.iloc[0]}, {code.date.iloc[0]}); they took no part in these rows."
         )
+        if not file.empty:  # a later study that reads earlier runs (``reuse``) is one of these
+            line += (
+                f" Its study file ({ev.study.file}) was written or changed since, at "
+                f"{len(file)} commit(s) (newest {file.commit.iloc[0]}, {file.date.iloc[0]}): "
+                "the verdicts read the file as it is now."
+            )
     return line
 
 
@@ -208,13 +216,13 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     """The commits after the study's last commit that changed what its rows depend on: the
     library code its task functions run (:func:`study_code_paths`; the whole library, less
     ``book/``, where they cannot be traced) and its study file. Columns ``commit, date,
-    subject``, newest first; ``None`` where it cannot be known: before the study ran, or where
+    subject, changed`` (``code``, ``study file`` or ``code, study file``), newest first; ``None`` where it cannot be known: before the study ran, or where
     git or the study's commits cannot be read (a copy without history).
 
     CLAIMS.md asks each page to say at which commit a study was computed and what changed
     since: a change listed here did not take part in the verdicts.
     """
-    cols = ["commit", "date", "subject"]
+    cols = ["commit", "date", "subject", "changed"]
     commits = [c.removesuffix("-dirty") for c in ev.info.get("commits", [])]
     stamps = {}
     for c in commits:
@@ -226,11 +234,22 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     last = max(stamps, key=lambda c: stamps[c])
     fns = st.study_task_functions(ev.study)
     traced = study_code_paths({f.partition(":")[0] for f in fns}) if fns else None
-    paths = [*(traced or STUDY_CODE_PATHS), ev.study.file]
-    log = git_output(["log", "--format=%h%x09%cs%x09%s", f"{last}..HEAD", "--", *paths])
-    if log is None:
+    fmt = "--format=%h%x09%cs%x09%s"
+    logs = {
+        "code": git_output(["log", fmt, f"{last}..HEAD", "--", *(traced or STUDY_CODE_PATHS)]),
+        "study file": git_output(["log", fmt, f"{last}..HEAD", "--", ev.study.file]),
+    }
+    if any(log is None for log in logs.values()):
         return None
-    rows = [line.split("\t", 2) for line in log.splitlines() if line.count("\t") >= 2]
+    found: dict[str, list[str]] = {}  # newest first, as git log lists them
+    for what in ("code", "study file"):
+        for line in (logs[what] or "").splitlines():
+            if line.count("\t") >= 2:
+                found.setdefault(line, []).append(what)
+    order = git_output(["log", "--format=%h", f"{last}..HEAD"]) or ""
+    rank = {h: i for i, h in enumerate(order.split())}
+    rows = [[*line.split("\t", 2), ", ".join(w)] for line, w in found.items()]
+    rows.sort(key=lambda r: rank.get(r[0], len(rank)))
     return pd.DataFrame(rows, columns=cols)
 
 
