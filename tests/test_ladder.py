@@ -288,6 +288,44 @@ def test_a_tiny_ladder_runs_through_the_cli_and_writes_its_table(tmp_path, capsy
     assert "Unknown rung" in capsys.readouterr().err
 
 
+def test_a_learning_curve_reruns_a_ladder_run_with_denser_evaluations(tmp_path, capsys):
+    """``--curve``: the ladder run's own config, trained further and evaluated more often; the
+    same evaluation at a checkpoint as the ladder run (deterministic training), stored apart."""
+    from thesis_lib.cli import main
+    from thesis_lib.ladder import CURVE_COLUMNS, curve_task, ladder_curve_run, ladder_run
+
+    text = BASE + "dataset_size: smoke\nepisodes: 1\ntrain: {warmup_steps: 2}\n"
+    f = _write(tmp_path, text)
+    store = tmp_path / "ladder" / "tasks"
+    args = ["ladder", "-f", str(f), "--store", str(store)]
+    assert (
+        main([*args, "--curve", "hopper/medium", "d8 L1", "DT", "0", "--every", "2", "--to", "10"])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "DT on hopper/medium at d8 L1" in out and "written:" in out
+    curves = pd.read_csv(tmp_path / "ladder" / "curves.csv")
+    assert list(curves.columns) == CURVE_COLUMNS
+    assert list(curves["updates"]) == [2, 4, 6, 8, 10] and curves["loss"].notna().all()
+    assert not list(store.glob("*.json"))  # the ladder's own runs are not touched
+    assert len(list((tmp_path / "ladder" / "curves").glob("*.json"))) == 1
+    # the ladder run itself gives the same score at its checkpoints
+    ladder = load_ladder_file(f)
+    run = next(t for t in ladder_tasks(ladder) if t.config["method"] == "DT")
+    at = {r["updates"]: r["score"] for r in ladder_run(dict(run.config))}
+    curve_at = {u: s for u, s in zip(curves["updates"], curves["score"]) if u in at}
+    assert at == pytest.approx(curve_at, abs=1e-3) and len(at) == 2  # curves.csv: 3 decimals
+    task = curve_task(ladder, "hopper/medium", "d8 L1", "DT", 0, 2, 10)
+    assert task.config["curve"] == {"every": 2, "iterations": 10}
+    assert task.fn is ladder_curve_run and task.key != run.key
+    with pytest.raises(ValueError, match="No ladder run HDT on hopper/medium at d8 L1, seed 0"):
+        curve_task(ladder, "hopper/medium", "d8 L1", "HDT", 0, 2, 10)
+    with pytest.raises(ValueError, match="every <= iterations"):
+        curve_task(ladder, "hopper/medium", "d8 L1", "DT", 0, 20, 10)
+    with pytest.raises(SystemExit, match="SEEDS as integers"):
+        main([*args, "--curve", "hopper/medium", "d8 L1", "DT", "zero"])
+
+
 def test_a_ladder_file_keeps_its_runs_under_its_own_name(tmp_path, monkeypatch, capsys):
     """Without ``--store``, ``params/<name>.yml`` reads and writes ``studies/<name>/``."""
     from thesis_lib.cli import main

@@ -53,12 +53,15 @@ from thesis_lib.sweep import Task, task_id
 
 __all__ = [
     "CURRENT_LADDER",
+    "CURVE_COLUMNS",
     "LADDER_COLUMNS",
     "LEVEL_REFERENCES",
     "Ladder",
     "RUNG_FREE_METHODS",
     "Rung",
     "choose_rung",
+    "curve_task",
+    "ladder_curve_run",
     "ladder_run",
     "ladder_table",
     "ladder_tasks",
@@ -259,11 +262,12 @@ def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Ta
 _NOT_KEYED = ("device", "progress")
 
 
-@task_id("thesis_lib.ladder:ladder_run")
-def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
-    """One ladder run (a sweep task): train to the last checkpoint, one row per checkpoint
-    (the evaluation at that many updates, at the data set's best return for RTG methods).
-    It trains on the GPU where there is one (``device`` in its rows), else on one CPU core."""
+def _train(
+    config: Mapping[str, Any], iterations: int | None = None, eval_every: int | None = None
+) -> tuple[dict[int, dict[str, Any]], float, float | None, str]:
+    """Train a ladder run's ``config`` (``iterations`` and ``eval_every`` in place of its own
+    where given) and evaluate it: the evaluations by update (at the data set's best return for
+    RTG methods), the CPU seconds, the data set's mean normalised score and the device."""
     import torch  # lazy: a worker process sets its threads before the first model
 
     torch.set_num_threads(1)
@@ -277,12 +281,17 @@ def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     ev = dict(config["eval"])
     ev["targets"] = tuple(ev["targets"])
     arch = ArchSpec.from_task(config["arch"])
+    train = {**config["train"], "device": device}
+    if iterations is not None:
+        train["iterations"] = iterations
+    if eval_every is not None:
+        train["eval_every"] = eval_every
     t0 = time.process_time()
     rows = run_offline(
         config["method"],
         ds,
         arch,
-        TrainSpec.from_task({**config["train"], "device": device}),
+        TrainSpec.from_task(train),
         EvalSpec(**ev),
         task=dataset_key(config["dataset"])[0],
     )
@@ -291,31 +300,91 @@ def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     data_mean = None if scores is None or not len(scores) else float(np.mean(scores))
     want = "max" if config["method"] in RTG_METHODS else "none"
     by_iteration = {int(r["iteration"]): r for r in rows if r["target"] == want}
+    return by_iteration, train_s, data_mean, device
+
+
+def _row(config: Mapping[str, Any], updates: int, ev: Mapping[str, Any]) -> dict[str, Any]:
+    arch = ArchSpec.from_task(config["arch"])
+    return {
+        "dataset": config["dataset"],
+        "rung": Rung(arch.d_model, arch.n_layers).label,
+        "updates": updates,
+        "method": config["method"],
+        "seed": int(config["train"]["seed"]),
+        "score": float(ev["score_mean"]),
+        "return_mean": float(ev["return_mean"]),
+        "length_mean": float(ev["length_mean"]),
+    }
+
+
+@task_id("thesis_lib.ladder:ladder_run")
+def ladder_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """One ladder run (a sweep task): train to the last checkpoint, one row per checkpoint
+    (the evaluation at that many updates, at the data set's best return for RTG methods).
+    It trains on the GPU where there is one (``device`` in its rows), else on one CPU core."""
+    by_iteration, train_s, data_mean, device = _train(config)
     missing = [c for c in config["checkpoints"] if c not in by_iteration]
     if missing:
         raise RuntimeError(
             f"No evaluation at checkpoint(s) {missing} (got {sorted(by_iteration)})."
         )
     return [
-        {
-            "dataset": config["dataset"],
-            "rung": Rung(arch.d_model, arch.n_layers).label,
-            "updates": c,
-            "method": config["method"],
-            "seed": int(config["train"]["seed"]),
-            "score": float(by_iteration[c]["score_mean"]),
-            "return_mean": float(by_iteration[c]["return_mean"]),
-            "length_mean": float(by_iteration[c]["length_mean"]),
-            "data_mean": None if data_mean is None else float(data_mean),
-            "train_s": train_s,
-            "device": device,
-        }
+        _row(config, c, by_iteration[c])
+        | {"data_mean": data_mean, "train_s": train_s, "device": device}
         for c in config["checkpoints"]
     ]
 
 
-# ----------------------------------------------------------------------------------------------
-# The table and the choice
+#: The columns of :func:`ladder_curve_run`'s rows.
+CURVE_COLUMNS = [
+    "dataset", "rung", "updates", "method", "seed", "score", "return_mean", "length_mean",
+    "loss", "train_s", "device",
+]  # fmt: skip
+
+
+def curve_task(
+    ladder: Ladder, dataset: str, rung: str, method: str, seed: int, every: int, iterations: int
+) -> Task:
+    """A learning curve of one ladder run: the run's own config (data, model, training,
+    evaluation), trained to ``iterations`` updates and evaluated every ``every`` (a
+    :func:`ladder_curve_run` task). It shows whether a score at a checkpoint is a point or a
+    trend: the ladder evaluates only at its checkpoints, 10 episodes each.
+
+    Raises:
+        ValueError: no such run in the ladder, or ``every`` / ``iterations`` not positive.
+    """
+    if every < 1 or iterations < every:
+        raise ValueError(
+            f"Expect 1 <= every <= iterations, got every={every}, iterations={iterations}."
+        )
+    size = parse_rung(rung)
+    found = [
+        t
+        for t in ladder_tasks(ladder, [size])
+        if t.config["dataset"] == dataset
+        and t.config["method"] == method
+        and t.config["train"]["seed"] == seed
+    ]
+    if not found:
+        raise ValueError(
+            f"No ladder run {method} on {dataset} at {size.label}, seed {seed}; the ladder's: "
+            f"data sets {list(ladder.datasets)}, methods {list(ladder.methods)}, "
+            f"seeds {list(ladder.seeds)}."
+        )
+    config = {**found[0].config, "curve": {"every": int(every), "iterations": int(iterations)}}
+    return Task(ladder_curve_run, config)
+
+
+@task_id("thesis_lib.ladder:ladder_curve_run")
+def ladder_curve_run(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """A learning curve (a sweep task, :func:`curve_task`): one row per evaluation, with the
+    training loss of the last update before it."""
+    curve = config["curve"]
+    by_iteration, train_s, _, device = _train(config, curve["iterations"], curve["every"])
+    return [
+        _row(config, it, ev) | {"loss": float(ev["loss"]), "train_s": train_s, "device": device}
+        for it, ev in sorted(by_iteration.items())
+    ]
 
 
 def mean_action_level(dataset: str) -> float | None:

@@ -7,6 +7,10 @@ thesis ladder --rungs "d64 L2" -j 2 --commit-every 900   # and commit the runs a
 thesis ladder -j 2                      # every rung (d128 L3: GPU-sized, about 2 h a run on CPU)
 thesis ladder --table                   # the table and the chosen size from the stored runs only
 thesis ladder -f params/ladder.yml --table   # the first ladder file, read from its own runs
+thesis ladder --curve hopper/medium-replay "d32 L1" DM-noRTG 0,1,2 --every 1000 --to 36000 -j 2
+    # learning curves of ladder runs (their own config, evaluated every 1,000 updates): is a
+    # score at a checkpoint a point or a trend? Stored in studies/<name>/curves/, resumable;
+    # all stored curves are written to studies/<name>/curves.csv
 """
 
 from __future__ import annotations
@@ -58,6 +62,64 @@ def commit_ladder(path: Path, store: Path, root: Path | None = None) -> str | No
     )
 
 
+def write_curves(store: Path) -> Any:
+    """Every learning curve stored in ``store`` (``studies/<name>/curves``), as one table
+    written to ``curves.csv`` beside it; returns it."""
+    import pandas as pd
+
+    from thesis_lib.ladder import CURVE_COLUMNS
+    from thesis_lib.sweep import TaskStore
+
+    st = TaskStore(store)
+    rows = [r for k in st.keys() for r in st.read(k)["rows"]]
+    table = pd.DataFrame(rows, columns=CURVE_COLUMNS)
+    table = table.sort_values(["dataset", "rung", "method", "seed", "updates"])
+    out = store.parent / "curves.csv"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out, index=False, float_format="%.3f")
+    return table
+
+
+def _cmd_curve(args: argparse.Namespace, ladder: Any, store: Path, committer: Any) -> int:
+    from thesis_lib.ladder import curve_task
+    from thesis_lib.sweep import TaskStore, run_tasks
+
+    dataset, rung, method, seeds = args.curve
+    try:
+        wanted = [int(x) for x in seeds.split(",")]
+    except ValueError:
+        raise SystemExit(
+            f"Expect SEEDS as integers separated by commas (0,1,2), got {seeds!r}."
+        ) from None
+    to = args.to or ladder.checkpoints[-1]
+    tasks = [curve_task(ladder, dataset, rung, method, k, args.every, to) for k in wanted]
+    curves = store.parent / "curves"
+    st = TaskStore(curves)
+    try:
+        run_tasks(
+            [] if args.table else [t for t in tasks if not st.has(t.key)],
+            store=curves,
+            n_jobs=args.jobs,
+            desc="curves",
+            keep_going=True,
+        )
+    finally:
+        if committer is not None:
+            committer.stop()
+    table = write_curves(curves)
+    mine = table[
+        (table["dataset"] == dataset)
+        & (table["rung"] == rung)
+        & (table["method"] == method)
+        & table["seed"].isin(wanted)
+    ]
+    wide = mine.pivot_table(index="updates", columns="seed", values="score")
+    print(f"{method} on {dataset} at {rung}: D4RL-normalised score by updates and seed")
+    print(wide.to_string(float_format=lambda v: f"{v:.1f}"))
+    print(f"written: {curves.parent / 'curves.csv'}")
+    return 0
+
+
 def _cmd_ladder(args: argparse.Namespace) -> int:
     from thesis_lib.cli.study import start_committer
     from thesis_lib.ladder import (
@@ -83,6 +145,8 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
         if not store.resolve().is_relative_to(root.resolve()):
             raise SystemExit(f"{store} is not inside the project {root}: nothing to commit it to.")
         committer = start_committer(lambda: commit_ladder(path, store), args.commit_every)
+    if args.curve:
+        return _cmd_curve(args, ladder, store, committer)
     if not args.table:
         try:
             run_tasks(
@@ -133,5 +197,18 @@ def register(sub: Any) -> None:
         metavar="SECONDS",
         help="commit the ladder's folder (runs and table) every SECONDS and at the end, as "
         "commits of that folder only, so that a run cut off loses at most SECONDS of runs",
+    )
+    cmd.add_argument(
+        "--curve",
+        nargs=4,
+        metavar=("DATASET", "RUNG", "METHOD", "SEEDS"),
+        help="learning curves of ladder runs instead (SEEDS: 0,1,2): each run's own config, "
+        "evaluated every --every updates to --to; stored in studies/<name>/curves/",
+    )
+    cmd.add_argument(
+        "--every", type=int, default=1000, help="--curve: updates between evaluations (1000)"
+    )
+    cmd.add_argument(
+        "--to", type=int, help="--curve: updates to train to (default: the last checkpoint)"
     )
     cmd.set_defaults(func=_cmd_ladder)
