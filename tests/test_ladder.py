@@ -374,6 +374,36 @@ def test_the_claims_page_shows_the_ladder_its_verdicts_and_its_choice():
     assert ladder_view(pd.DataFrame()).empty
 
 
+def test_the_claims_page_plots_learning_curves_per_run_with_the_checkpoints_marked():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from thesis_lib.chapters.claims import load_ladder_curves, plot_ladder_curves
+
+    curves = pd.DataFrame(
+        [
+            {"dataset": "hopper/medium-replay", "rung": "d32 L1", "method": m, "seed": k,
+             "updates": u, "score": 10.0 - u / 1000 * (m == "DM-noRTG")}
+            for m in ("DM-noRTG", "DT") for k in (0, 1) for u in (1000, 2000, 3000)
+        ]
+    )  # fmt: skip
+    fig = plot_ladder_curves(curves, checkpoints=(2000,))
+    axes = fig.axes
+    assert [a.get_title() for a in axes] == [
+        "DM-noRTG, hopper/medium-replay, d32 L1",
+        "DT, hopper/medium-replay, d32 L1",
+    ]
+    seed_lines = [ln for ln in axes[0].get_lines() if ln.get_label().startswith("seed")]
+    assert len(seed_lines) == 2 and list(seed_lines[0].get_ydata()) == [9.0, 8.0, 7.0]
+    assert any(list(ln.get_xdata()) == [2000, 2000] for ln in axes[0].get_lines())
+    with pytest.raises(ValueError, match=r"lacks column\(s\) \['score'\]"):
+        plot_ladder_curves(curves.drop(columns="score"))
+    empty = plot_ladder_curves(curves.iloc[:0])
+    assert empty.axes[0].texts[0].get_text() == "no learning curve stored yet"
+    committed = load_ladder_curves()  # what the page reads (empty before any curve)
+    assert committed.empty or {"updates", "score", "loss"} <= set(committed.columns)
+
+
 def test_thesis_ladder_commit_every_commits_the_ladders_folder_and_nothing_else(
     tmp_path, monkeypatch, capsys
 ):

@@ -7,14 +7,15 @@ It renders ``studies/claims.csv``, which ``thesis claims`` writes from the commi
 * :mod:`~thesis_lib.chapters.claims.tables`: the ledger (:func:`load_claims`,
   :func:`ledger_table`, :func:`gates_table`, :func:`verdict_counts`) and the peer parity
   (:func:`load_parity`, :func:`parity_view`, :func:`no_peer_table`) and the scale ladder
-  (:func:`load_ladder`, :func:`ladder_view`, :func:`ladder_choice`).
-* :mod:`~thesis_lib.chapters.claims.figures`: :func:`plot_claims`.
+  (:func:`load_ladder`, :func:`ladder_view`, :func:`ladder_choice`,
+  :func:`load_ladder_curves`).
+* :mod:`~thesis_lib.chapters.claims.figures`: :func:`plot_claims`, :func:`plot_ladder_curves`.
 """
 
 from __future__ import annotations
 
 from thesis_lib.chapters.claims.config import Config
-from thesis_lib.chapters.claims.figures import plot_claims
+from thesis_lib.chapters.claims.figures import plot_claims, plot_ladder_curves
 from thesis_lib.chapters.claims.tables import (
     gates_table,
     headline,
@@ -24,6 +25,7 @@ from thesis_lib.chapters.claims.tables import (
     link_chapters,
     load_claims,
     load_ladder,
+    load_ladder_curves,
     load_parity,
     no_peer_table,
     parity_view,
@@ -43,10 +45,12 @@ __all__ = [
     "link_chapters",
     "load_claims",
     "load_ladder",
+    "load_ladder_curves",
     "load_parity",
     "no_peer_table",
     "parity_view",
     "plot_claims",
+    "plot_ladder_curves",
     "studies_table",
     "verdict_counts",
 ]

@@ -1,4 +1,5 @@
-"""The Claims page's figure: :func:`plot_claims`, each judged claim's effect with its interval.
+"""The Claims page's figures: :func:`plot_claims`, each judged claim's effect with its interval,
+and :func:`plot_ladder_curves`, the learning curves of ladder runs.
 
 Used in: the Claims page of the book.
 """
@@ -14,7 +15,7 @@ import pandas as pd
 from thesis_lib.chapters.claims.tables import headline
 from thesis_lib.stats.claims import VERDICT_COLOURS
 
-__all__ = ["plot_claims"]
+__all__ = ["plot_claims", "plot_ladder_curves"]
 
 
 def plot_claims(claims: pd.DataFrame) -> Any:
@@ -60,5 +61,41 @@ def plot_claims(claims: pd.DataFrame) -> Any:
             title += f"; the verdict: {decided}"
         ax.set_title(textwrap.fill(title, 100), fontsize=7, loc="left")
     axes[-1, 0].set_xlabel("effect (x - y) with its 95% interval, in each comparison's unit")
+    fig.tight_layout()
+    return fig
+
+
+def plot_ladder_curves(curves: pd.DataFrame, checkpoints: tuple[int, ...] = ()) -> Any:
+    """Score against updates, one panel per (data set, size, method), one line per seed
+    (``thesis ladder --curve``'s ``curves.csv``), with the ladder's ``checkpoints`` marked:
+    whether a score at a checkpoint is a point or a trend.
+
+    Raises:
+        ValueError: ``curves`` lacks a column the plot needs.
+    """
+    import matplotlib.pyplot as plt
+
+    need = {"dataset", "rung", "method", "seed", "updates", "score"}
+    missing = sorted(need - set(curves.columns))
+    if missing:
+        raise ValueError(f"The curves table lacks column(s) {missing}.")
+    panels = list(curves.groupby(["dataset", "rung", "method"], sort=False))
+    if not panels:
+        fig, ax = plt.subplots(figsize=(6.5, 1.5))
+        ax.text(0.5, 0.5, "no learning curve stored yet", ha="center", va="center")
+        ax.set_axis_off()
+        return fig
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.0), squeeze=False)
+    for ax, ((d, rung, m), g) in zip(axes[0], panels):
+        for seed, c in g.groupby("seed"):
+            c = c.sort_values("updates")
+            ax.plot(c["updates"], c["score"], lw=1.2, marker=".", ms=3, label=f"seed {seed}")
+        for x in checkpoints:
+            ax.axvline(x, color="0.6", lw=0.8, ls="--")
+        ax.set_title(f"{m}, {d}, {rung}", fontsize=9)
+        ax.set_xlabel("updates")
+        ax.tick_params(labelsize=8)
+    axes[0, 0].set_ylabel("D4RL-normalised score (10 episodes)")
+    axes[0, -1].legend(fontsize=7)
     fig.tight_layout()
     return fig

@@ -250,6 +250,13 @@ def load_ladder(name: str | None = None) -> pd.DataFrame:
     return pd.read_csv(p) if p.exists() else pd.DataFrame()
 
 
+def load_ladder_curves(name: str | None = None) -> pd.DataFrame:
+    """The learning curves of ladder runs, ``studies/<name>/curves.csv`` (``thesis ladder
+    --curve`` writes it); empty where none is committed."""
+    p = project_root() / "studies" / _ladder_name(name) / "curves.csv"
+    return pd.read_csv(p) if p.exists() else pd.DataFrame()
+
+
 def ladder_view(table: pd.DataFrame) -> pd.DataFrame:
     """The ladder for reading: per rung, checkpoint and data set, each method's mean score over
     the seeds run (their number in brackets), the data set's mean, the level BC is held to,
