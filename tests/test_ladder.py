@@ -324,6 +324,8 @@ def test_a_learning_curve_reruns_a_ladder_run_with_denser_evaluations(tmp_path, 
         curve_task(ladder, "hopper/medium", "d8 L1", "DT", 0, 20, 10)
     with pytest.raises(SystemExit, match="SEEDS as integers"):
         main([*args, "--curve", "hopper/medium", "d8 L1", "DT", "zero"])
+    with pytest.raises(SystemExit, match="use them with --curve"):
+        main([*args, "--every", "2"])
 
 
 def test_a_ladder_file_keeps_its_runs_under_its_own_name(tmp_path, monkeypatch, capsys):

@@ -29,6 +29,10 @@ the final evaluation over seeds with a 95% t interval, and the rung's verdicts:
 
 :func:`choose_rung` names the cheapest (rung, checkpoint) where all three hold, with the
 reason; ``None`` with the reasons where none does.
+
+:func:`curve_task` reruns one ladder run with its own config, evaluated more often
+(:func:`ladder_curve_run`, ``thesis ladder --curve``): a learning curve, stored apart from the
+ladder's runs, that tells a score at a checkpoint from a trend.
 """
 
 from __future__ import annotations
@@ -351,7 +355,7 @@ def curve_task(
     trend: the ladder evaluates only at its checkpoints, 10 episodes each.
 
     Raises:
-        ValueError: no such run in the ladder, or ``every`` / ``iterations`` not positive.
+        ValueError: no such run in the ladder, or not ``1 <= every <= iterations``.
     """
     if every < 1 or iterations < every:
         raise ValueError(
@@ -385,6 +389,10 @@ def ladder_curve_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         _row(config, it, ev) | {"loss": float(ev["loss"]), "train_s": train_s, "device": device}
         for it, ev in sorted(by_iteration.items())
     ]
+
+
+# ----------------------------------------------------------------------------------------------
+# The table and the choice
 
 
 def mean_action_level(dataset: str) -> float | None:

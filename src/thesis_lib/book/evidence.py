@@ -216,8 +216,9 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     """The commits after the study's last commit that changed what its rows depend on: the
     library code its task functions run (:func:`study_code_paths`; the whole library, less
     ``book/``, where they cannot be traced) and its study file. Columns ``commit, date,
-    subject, changed`` (``code``, ``study file`` or ``code, study file``), newest first; ``None`` where it cannot be known: before the study ran, or where
-    git or the study's commits cannot be read (a copy without history).
+    subject, changed`` (``code``, ``study file`` or ``code, study file``), newest first;
+    ``None`` where it cannot be known: before the study ran, or where git or the study's
+    commits cannot be read (a copy without history).
 
     CLAIMS.md asks each page to say at which commit a study was computed and what changed
     since: a change listed here did not take part in the verdicts.

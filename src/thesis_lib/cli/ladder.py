@@ -92,7 +92,8 @@ def _cmd_curve(args: argparse.Namespace, ladder: Any, store: Path, committer: An
             f"Expect SEEDS as integers separated by commas (0,1,2), got {seeds!r}."
         ) from None
     to = args.to or ladder.checkpoints[-1]
-    tasks = [curve_task(ladder, dataset, rung, method, k, args.every, to) for k in wanted]
+    every = 1000 if args.every is None else args.every
+    tasks = [curve_task(ladder, dataset, rung, method, k, every, to) for k in wanted]
     curves = store.parent / "curves"
     st = TaskStore(curves)
     try:
@@ -132,6 +133,8 @@ def _cmd_ladder(args: argparse.Namespace) -> int:
     from thesis_lib.paths import project_root
     from thesis_lib.sweep import TaskStore, run_tasks
 
+    if not args.curve and (args.every is not None or args.to is not None):
+        raise SystemExit("--every and --to set a learning curve: use them with --curve.")
     root = project_root()
     path = Path(args.file or root / "params" / f"{CURRENT_LADDER}.yml")
     ladder = load_ladder_file(path)
@@ -206,7 +209,7 @@ def register(sub: Any) -> None:
         "evaluated every --every updates to --to; stored in studies/<name>/curves/",
     )
     cmd.add_argument(
-        "--every", type=int, default=1000, help="--curve: updates between evaluations (1000)"
+        "--every", type=int, help="--curve: updates between evaluations (default 1000)"
     )
     cmd.add_argument(
         "--to", type=int, help="--curve: updates to train to (default: the last checkpoint)"
