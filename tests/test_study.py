@@ -217,10 +217,9 @@ def test_a_later_study_file_names_an_earlier_study_and_its_own_chapter(project, 
         st.load_study("04_hdt:v2")
 
 
-def test_committing_a_first_study_leaves_its_later_studies_rows_alone(project):
+def _git_checkout(project):
+    """Make ``project`` a git checkout with one empty commit; returns ``git(*args) -> stdout``."""
     import subprocess
-
-    from thesis_lib.cli import study as study_cli
 
     def git(*args: str) -> str:
         return subprocess.run(
@@ -231,6 +230,13 @@ def test_committing_a_first_study_leaves_its_later_studies_rows_alone(project):
     git("config", "user.name", "t")
     git("config", "user.email", "t@t")
     git("commit", "-q", "--allow-empty", "-m", "0")
+    return git
+
+
+def test_committing_a_first_study_leaves_its_later_studies_rows_alone(project):
+    from thesis_lib.cli import study as study_cli
+
+    git = _git_checkout(project)
     (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump(V2))
     st.run_study(CHAPTERS["04_hdt"], progress=False)
     st.run_study(CHAPTERS["04_hdt"], study="v2", progress=False)
@@ -245,19 +251,9 @@ def test_committing_a_first_study_leaves_its_later_studies_rows_alone(project):
 def test_a_commit_lands_the_tasks_when_another_study_file_cannot_be_read(project, capsys):
     """A long run commits with the code it started with; a study file written since, with a
     key that code does not know, stops claims.csv's rebuild but not the tasks' commit."""
-    import subprocess
-
     from thesis_lib.cli import study as study_cli
 
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", *args], cwd=project, check=True, capture_output=True, text=True
-        ).stdout
-
-    git("init", "-q")
-    git("config", "user.name", "t")
-    git("config", "user.email", "t@t")
-    git("commit", "-q", "--allow-empty", "-m", "0")
+    git = _git_checkout(project)
     st.run_study(CHAPTERS["04_hdt"], progress=False)
     (project / "params" / "04_hdt.v2.study.yml").write_text(
         yaml.safe_dump({**V2, "a_key_from_the_future": 1})
