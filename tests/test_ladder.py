@@ -328,6 +328,36 @@ def test_a_learning_curve_reruns_a_ladder_run_with_denser_evaluations(tmp_path, 
         main([*args, "--every", "2"])
 
 
+def test_a_rung_free_methods_curve_at_a_later_rung_prints_its_run(tmp_path, capsys):
+    """BC runs once, at the first rung: its curve asked for at a later rung is that run, and
+    the printed table holds it (it was empty when the rows were filtered by the asked rung)."""
+    from thesis_lib.cli import main
+    from thesis_lib.ladder import curve_task, run_rung
+
+    text = BASE.replace('["d8 L1"]', '["d8 L1", "d16 L2"]') + (
+        "dataset_size: smoke\nepisodes: 1\ntrain: {warmup_steps: 2}\n"
+    )
+    f = _write(tmp_path, text)
+    ladder = load_ladder_file(f)
+    bc = curve_task(ladder, "hopper/medium", "d16 L2", "BC", 0, 2, 4)
+    assert bc.key == curve_task(ladder, "hopper/medium", "d8 L1", "BC", 0, 2, 4).key
+    assert run_rung(bc.config) == "d8 L1"
+    assert run_rung(curve_task(ladder, "hopper/medium", "d16 L2", "DT", 0, 2, 4).config) == (
+        "d16 L2"
+    )
+    args = ["ladder", "-f", str(f), "--store", str(tmp_path / "ladder" / "tasks")]
+    assert (
+        main([*args, "--curve", "hopper/medium", "d16 L2", "BC", "0", "--every", "2", "--to", "4"])
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "BC on hopper/medium at d8 L1 (rung-free: the same run at d16 L2)" in out
+    lines = out.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("BC on"))
+    rows = [line.split() for line in lines[head + 1 :] if line.split()[:1] in (["2"], ["4"])]
+    assert [r[0] for r in rows] == ["2", "4"] and all(len(r) == 2 for r in rows)
+
+
 def test_a_ladder_file_keeps_its_runs_under_its_own_name(tmp_path, monkeypatch, capsys):
     """Without ``--store``, ``params/<name>.yml`` reads and writes ``studies/<name>/``."""
     from thesis_lib.cli import main
@@ -443,6 +473,9 @@ def test_thesis_ladder_commit_every_commits_the_ladders_folder_and_nothing_else(
     assert not any(c.endswith(".lock") or ".tmp" in c for c in committed)
     assert git("diff", "--cached", "--name-only").split() == ["mine.txt"]  # still only staged
     assert commit_ladder(f, tmp_path / "studies" / "mine" / "tasks") is None  # nothing new
+    curve = ["--curve", "hopper/medium", "d8 L1", "DT", "0", "--every", "4", "--to", "8"]
+    assert main(["ladder", "-f", str(f), "--commit-every", "3600", *curve]) == 0
+    assert git("log", "-1", "--format=%s").strip() == "mine: 1 learning curve(s) landed (2/2)"
     with pytest.raises(SystemExit, match="positive"):
         main(["ladder", "-f", str(f), "--commit-every", "0"])
     with pytest.raises(SystemExit, match="not inside the project"):

@@ -73,6 +73,7 @@ __all__ = [
     "mean_action_level",
     "parse_rung",
     "reference_level",
+    "run_rung",
 ]
 
 #: The columns of :func:`ladder_table`.
@@ -307,11 +308,17 @@ def _train(
     return by_iteration, train_s, data_mean, device
 
 
-def _row(config: Mapping[str, Any], updates: int, ev: Mapping[str, Any]) -> dict[str, Any]:
+def run_rung(config: Mapping[str, Any]) -> str:
+    """The rung a ladder run's rows carry: its model's size. A rung-free method's run
+    (:data:`RUNG_FREE_METHODS`) carries the first rung at whichever rung it was asked for."""
     arch = ArchSpec.from_task(config["arch"])
+    return Rung(arch.d_model, arch.n_layers).label
+
+
+def _row(config: Mapping[str, Any], updates: int, ev: Mapping[str, Any]) -> dict[str, Any]:
     return {
         "dataset": config["dataset"],
-        "rung": Rung(arch.d_model, arch.n_layers).label,
+        "rung": run_rung(config),
         "updates": updates,
         "method": config["method"],
         "seed": int(config["train"]["seed"]),

@@ -44,7 +44,7 @@ def commit_ladder(path: Path, store: Path, root: Path | None = None) -> str | No
     Raises:
         RuntimeError: ``root`` (default: the project) is not a git checkout, or git refused.
     """
-    from thesis_lib.cli.study import _checkout, commit_paths
+    from thesis_lib.cli.study import _checkout, commit_paths, count_added
     from thesis_lib.ladder import ladder_tasks, load_ladder_file
     from thesis_lib.sweep import TaskStore
 
@@ -58,8 +58,19 @@ def commit_ladder(path: Path, store: Path, root: Path | None = None) -> str | No
         root,
         [folder],
         [],
-        lambda n: f"{path.stem}: {n} finished run(s) landed ({done}/{len(every)})",
+        lambda added: (
+            _landed(path.stem, count_added(added), count_added(added, "curves"))
+            + f" ({done}/{len(every)})"
+        ),
     )
+
+
+def _landed(name: str, runs: int, curves: int) -> str:
+    """A ladder commit's message: what it adds (runs, learning curves or both)."""
+    parts = [f"{runs} finished run(s)"] if runs or not curves else []
+    if curves:
+        parts.append(f"{curves} learning curve(s)")
+    return f"{name}: {' and '.join(parts)} landed"
 
 
 def write_curves(store: Path) -> Any:
@@ -81,7 +92,7 @@ def write_curves(store: Path) -> Any:
 
 
 def _cmd_curve(args: argparse.Namespace, ladder: Any, store: Path, committer: Any) -> int:
-    from thesis_lib.ladder import curve_task
+    from thesis_lib.ladder import curve_task, parse_rung, run_rung
     from thesis_lib.sweep import TaskStore, run_tasks
 
     dataset, rung, method, seeds = args.curve
@@ -108,14 +119,16 @@ def _cmd_curve(args: argparse.Namespace, ladder: Any, store: Path, committer: An
         if committer is not None:
             committer.stop()
     table = write_curves(curves)
+    at = run_rung(tasks[0].config)  # a rung-free method (BC) runs at the first rung
     mine = table[
         (table["dataset"] == dataset)
-        & (table["rung"] == rung)
+        & (table["rung"] == at)
         & (table["method"] == method)
         & table["seed"].isin(wanted)
     ]
     wide = mine.pivot_table(index="updates", columns="seed", values="score")
-    print(f"{method} on {dataset} at {rung}: D4RL-normalised score by updates and seed")
+    where = at if at == parse_rung(rung).label else f"{at} (rung-free: the same run at {rung})"
+    print(f"{method} on {dataset} at {where}: D4RL-normalised score by updates and seed")
     print(wide.to_string(float_format=lambda v: f"{v:.1f}"))
     print(f"written: {curves.parent / 'curves.csv'}")
     return 0

@@ -134,17 +134,28 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
         return None
     summary_text = "; ".join(summary) + stale
     return commit_paths(
-        root, paths, others, lambda n: f"studies: {n} finished task(s) landed ({summary_text})"
+        root,
+        paths,
+        others,
+        lambda added: f"studies: {count_added(added)} finished task(s) landed ({summary_text})",
     )
 
 
+def count_added(added: list[str], folder: str = "tasks") -> int:
+    """How many of the ``added`` paths are stored runs in a ``<folder>/`` (``*/<folder>/*.json``)."""
+    return sum(f"/{folder}/" in p and p.endswith(".json") for p in added)
+
+
 def commit_paths(
-    root: Path, paths: list[str], others: set[str] | list[str], message: Callable[[int], str]
+    root: Path,
+    paths: list[str],
+    others: set[str] | list[str],
+    message: Callable[[list[str]], str],
 ) -> str | None:
     """Stage ``paths`` (less ``others`` and :data:`NOT_COMMITTED`, whatever .gitignore says)
-    and commit them alone, with ``message(n)`` (``n``: the task files ``*/tasks/*.json`` the
-    commit adds); other changes in the checkout, staged or not, stay as they are. Returns the
-    message, or None when nothing changed.
+    and commit them alone, with ``message(added)`` (``added``: the paths of the files the
+    commit adds; :func:`count_added` counts the kinds); other changes in the checkout, staged
+    or not, stay as they are. Returns the message, or None when nothing changed.
 
     Raises:
         RuntimeError: git refused (the message has git's words).
@@ -160,8 +171,7 @@ def commit_paths(
     if _git(root, "diff", "--cached", "--quiet", "--", *only).returncode == 0:
         return None
     added = _git(root, "diff", "--cached", "--name-only", "--diff-filter=A", "--", *only).stdout
-    n = sum("/tasks/" in line and line.endswith(".json") for line in added.splitlines())
-    msg = message(n)
+    msg = message(added.splitlines())
     r = _git(root, "commit", "-q", "-m", msg, "--", *only)
     if r.returncode != 0:
         raise RuntimeError(f"git commit failed: {r.stderr.strip() or r.stdout.strip()}")
