@@ -288,6 +288,41 @@ def test_a_tiny_ladder_runs_through_the_cli_and_writes_its_table(tmp_path, capsy
     assert "Unknown rung" in capsys.readouterr().err
 
 
+def test_a_ladder_run_cut_off_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """A run cut off after a checkpoint resumes from it when the ladder runs again (its
+    rows those of an uninterrupted run; its CPU seconds both parts'), and the checkpoint goes
+    once the run is stored."""
+    import thesis_lib.ladder as ladder_mod
+    from thesis_lib.seq.trainer import Trainer
+    from thesis_lib.sweep import GridFailed, run_tasks, scratch_of
+
+    f = _write(tmp_path, BASE + "dataset_size: smoke\nepisodes: 1\ntrain: {warmup_steps: 2}\n")
+    dt = [t for t in ladder_tasks(load_ladder_file(f)) if t.config["method"] == "DT"]
+    straight = run_tasks(dt, progress=False)  # no store: no checkpoint
+    monkeypatch.setattr(ladder_mod, "CHECKPOINT_EVERY", 2)
+    step, store = Trainer.step, tmp_path / "tasks"
+
+    def cut_off(self):
+        if self.iteration == 6:
+            raise RuntimeError("cut off")
+        return step(self)
+
+    monkeypatch.setattr(Trainer, "step", cut_off)
+    with pytest.raises((GridFailed, RuntimeError)):
+        run_tasks(dt, store=store, progress=False, executor="inprocess")
+    ckpt = scratch_of(store, dt[0].key) / "train.pt"
+    import torch
+
+    before = torch.load(ckpt, weights_only=True)
+    assert before["iteration"] == 6
+    monkeypatch.setattr(Trainer, "step", step)
+    resumed = run_tasks(dt, store=store, progress=False, executor="inprocess")
+    cols = ["updates", "score", "return_mean", "length_mean"]
+    pd.testing.assert_frame_equal(resumed[cols], straight[cols])
+    assert not ckpt.parent.exists()
+    assert resumed["train_s"].iloc[0] >= round(before["cpu_s"], 1) > 0  # both parts
+
+
 def test_a_learning_curve_reruns_a_ladder_run_with_denser_evaluations(tmp_path, capsys):
     """``--curve``: the ladder run's own config, trained further and evaluated more often; the
     same evaluation at a checkpoint as the ladder run (deterministic training), stored apart."""

@@ -20,6 +20,8 @@ from thesis_lib.sweep import (
     config_hash,
     execute,
     run_tasks,
+    scratch_of,
+    task_scratch,
 )
 
 HERE = Path(__file__).resolve().parent
@@ -45,6 +47,20 @@ def die(config: dict) -> list[dict]:
 
         os.kill(os.getpid(), signal.SIGKILL)
     return square(config)
+
+
+def resumable(config: dict) -> list[dict]:
+    """A task that keeps a count of its attempts in its scratch folder and fails until the
+    count reaches ``config['succeed_at']``, as a training run that is cut off and resumes."""
+    scratch = task_scratch()
+    if scratch is None:
+        return [{"x": config["x"], "attempts": 0, "scratch": ""}]
+    counter = scratch / "attempts.txt"
+    n = (int(counter.read_text()) if counter.exists() else 0) + 1
+    counter.write_text(str(n))
+    if n < config["succeed_at"]:
+        raise RuntimeError(f"cut off at attempt {n}")
+    return [{"x": config["x"], "attempts": n, "scratch": str(scratch)}]
 
 
 def frame_task(config: dict) -> pd.DataFrame:
@@ -180,6 +196,28 @@ def test_ctrl_c_then_rerun_finishes_only_the_missing_tasks(tmp_path, executor):
     assert rerun.returncode == 0, rerun.stderr
     assert len(calls(log)) == 8 - len(stored)  # only the missing tasks ran
     assert len(TaskStore(store).keys()) == 8
+
+
+@pytest.mark.parametrize("executor", ["inprocess", "local"])
+def test_a_task_finds_its_scratch_folder_again_after_it_was_cut_off(tmp_path, executor):
+    """task_scratch(): <store>/partial/<key>, kept when the task fails (so the rerun resumes
+    from what it left there), removed once its record is stored; None without a store."""
+    store = tmp_path / "tasks"
+    tasks = [Task(resumable, {"x": x, "succeed_at": 2}) for x in range(2)]
+    kw = dict(store=store, executor=executor, n_jobs=2, progress=False, keep_going=True)
+    with pytest.raises(GridFailed):
+        run_tasks(tasks, **kw)
+    for t in tasks:
+        assert (scratch_of(store, t.key) / "attempts.txt").read_text() == "1"
+    assert not TaskStore(store).keys()
+    rows = run_tasks(tasks, **kw)
+    assert list(rows["attempts"]) == [2, 2]  # each saw its own first attempt's state
+    assert [Path(p).name for p in rows["scratch"]] == [t.key for t in tasks]
+    assert not any(scratch_of(store, t.key).exists() for t in tasks)  # stored: removed
+    assert TaskStore(store).keys() == sorted(t.key for t in tasks)
+    free = run_tasks([Task(resumable, {"x": 9, "succeed_at": 2})], progress=False)
+    assert free["attempts"].tolist() == [0]  # no store: no scratch
+    assert task_scratch() is None
 
 
 def test_force_recomputes(tmp_path, monkeypatch):

@@ -672,3 +672,68 @@ def test_chapter_pipeline_at_tiny_scale(tmp_path, monkeypatch):
     assert (
         set(table.method) == {"HDT"} and (table.n_seeds == 2).all() and len(table) == 2
     )  # two metrics
+
+
+@pytest.mark.parametrize("method", ["DT", "DM-noRTG"])
+def test_a_run_cut_off_resumes_from_its_checkpoint_with_the_same_rows(
+    tmp_path, monkeypatch, method
+):
+    """run_offline(checkpoint=...): cut off after its checkpoint at 4 updates and called again,
+    a run gives the rows of an uninterrupted one (evaluations before the cut included); a
+    checkpoint of another run's evaluation is refused; the total may grow."""
+    from thesis_lib.seq.registry import ArchSpec
+    from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
+
+    rng = np.random.default_rng(0)
+    data = [
+        Episode(
+            i,
+            rng.normal(size=(16, 11)),
+            rng.uniform(-1, 1, (15, 3)).astype(np.float32),
+            rng.normal(size=15) + 3 * i,
+            np.zeros(15, bool),
+            np.zeros(15, bool),
+        )
+        for i in range(3)
+    ]
+    arch = ArchSpec(K=4, d_model=16, n_layers=1)
+    train = TrainSpec(seed=1, iterations=6, batch_size=4, warmup_steps=2, eval_every=2)
+    ev = EvalSpec(episodes=2, max_steps=3)
+
+    def run(**kw):
+        spec = TrainSpec(**{**train.task_dict(), **kw.pop("train", {})})
+        return pd.DataFrame(run_offline(method, data, arch, spec, ev, task="hopper", **kw))
+
+    straight = run()
+    ckpt = tmp_path / "run.pt"
+    step = Trainer.step
+
+    def cut_off(self):
+        if self.iteration == 4:
+            raise RuntimeError("cut off")
+        return step(self)
+
+    monkeypatch.setattr(Trainer, "step", cut_off)
+    with pytest.raises(RuntimeError, match="cut off"):
+        run(checkpoint=ckpt, checkpoint_every=2)
+    monkeypatch.setattr(Trainer, "step", step)
+    saved = torch.load(ckpt, weights_only=True)
+    assert saved["iteration"] == 4 and saved["cpu_s"] > 0
+    resumed = run(checkpoint=ckpt, checkpoint_every=2)
+    assert sorted(set(resumed["iteration"])) == [2, 4, 6]
+    pd.testing.assert_frame_equal(resumed, straight)
+    with pytest.raises(ValueError, match=r"made by another run \(eval: .*'episodes': 2"):
+        pd.DataFrame(
+            run_offline(
+                method,
+                data,
+                arch,
+                train,
+                EvalSpec(episodes=1, max_steps=3),
+                task="hopper",
+                checkpoint=ckpt,
+            )
+        )
+    longer = run(checkpoint=ckpt, train={"iterations": 8})
+    assert sorted(set(longer["iteration"])) == [2, 4, 6, 8]
+    pd.testing.assert_frame_equal(longer[longer["iteration"] <= 6], straight)

@@ -53,7 +53,7 @@ from thesis_lib.data.minari_sets import dataset_key, is_minari_id, open_dataset
 from thesis_lib.data.recipe import DATASET_SIZES, GENERATOR_VERSION
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.registry import RTG_METHODS, check_methods
-from thesis_lib.sweep import Task, task_id
+from thesis_lib.sweep import Task, task_id, task_scratch
 
 __all__ = [
     "CURRENT_LADDER",
@@ -263,6 +263,10 @@ def ladder_tasks(ladder: Ladder, rungs: Sequence[Rung] | None = None) -> list[Ta
     return list(tasks.values())
 
 
+#: Updates between a ladder run's checkpoints (kept in its task's scratch folder, so a run cut
+#: off resumes from there: :func:`thesis_lib.sweep.task_scratch`).
+CHECKPOINT_EVERY = 1000
+
 #: TrainSpec fields a ladder task leaves out of its key.
 _NOT_KEYED = ("device", "progress")
 
@@ -291,6 +295,11 @@ def _train(
         train["iterations"] = iterations
     if eval_every is not None:
         train["eval_every"] = eval_every
+    # a run cut off (the session's end) resumes from its last checkpoint (CHECKPOINT_EVERY),
+    # kept in the task's scratch folder until its rows are stored
+    scratch = task_scratch()
+    checkpoint = None if scratch is None else scratch / "train.pt"
+    before = _checkpoint_cpu_s(checkpoint)
     t0 = time.process_time()
     rows = run_offline(
         config["method"],
@@ -299,8 +308,10 @@ def _train(
         TrainSpec.from_task(train),
         EvalSpec(**ev),
         task=dataset_key(config["dataset"])[0],
+        checkpoint=checkpoint,
+        checkpoint_every=CHECKPOINT_EVERY,
     )
-    train_s = round(time.process_time() - t0, 1)
+    train_s = round(before + time.process_time() - t0, 1)
     scores = ds.normalized_scores()
     data_mean = None if scores is None or not len(scores) else float(np.mean(scores))
     want = "max" if config["method"] in RTG_METHODS else "none"
@@ -313,6 +324,15 @@ def run_rung(config: Mapping[str, Any]) -> str:
     (:data:`RUNG_FREE_METHODS`) carries the first rung at whichever rung it was asked for."""
     arch = ArchSpec.from_task(config["arch"])
     return Rung(arch.d_model, arch.n_layers).label
+
+
+def _checkpoint_cpu_s(path: Path | None) -> float:
+    """The CPU seconds a checkpoint records of the runs it holds (0 where there is none)."""
+    if path is None or not path.exists():
+        return 0.0
+    import torch
+
+    return float(torch.load(path, map_location="cpu", weights_only=True).get("cpu_s", 0.0))
 
 
 def _row(config: Mapping[str, Any], updates: int, ev: Mapping[str, Any]) -> dict[str, Any]:

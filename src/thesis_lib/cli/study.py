@@ -53,6 +53,7 @@ def _status(ref: str) -> dict:
 #: temporary files and the locks of running tasks (:func:`~thesis_lib.book.study.task_locks`).
 NOT_COMMITTED = (
     "studies/**/tasks/failed/**",
+    "studies/**/tasks/partial/**",
     "**/.*.tmp",
     "**/.*.tmp.*",
     "studies/**/tasks/*.lock",

@@ -20,6 +20,8 @@ Used in: HDT chapter, Decision Mamba chapter, UR3 deployment chapter.
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any, cast
@@ -182,6 +184,8 @@ def run_offline(
     task: str | None = None,
     envs: Callable[[int], Any] | None = None,
     episode_info: Callable[[Any], dict[str, Any]] | None = None,
+    checkpoint: str | os.PathLike | None = None,
+    checkpoint_every: int = 1000,
 ) -> list[dict[str, Any]]:
     """Train ``method`` on ``dataset`` and evaluate it; one row per evaluation and target.
 
@@ -203,11 +207,20 @@ def run_offline(
         episode_info: ``fn(env) -> dict`` read from each environment of the vector env after the
             final evaluation; given, the final evaluation gives one row per episode (the dict's
             keys added) instead of one per target.
+        checkpoint: a file to save the run to every ``checkpoint_every`` updates (training
+            state and the evaluation rows so far) and to resume from where it exists: a run
+            cut off and called again gives the rows of an uninterrupted one. A checkpoint of
+            another run (method, architecture, training, evaluation, task or data) is refused
+            with what differs. ``None``: no checkpoint.
+        checkpoint_every: updates between saves of ``checkpoint``.
 
     Returns:
         Rows with ``method, seed, arch, n_layers, d_model, K, paper_compat, eval_mode, target,
         target_return, iteration, return_mean, return_std, score_mean, length_mean, loss``
         (``episode`` and the ``episode_info`` keys with ``episode_info``).
+
+    Raises:
+        ValueError: ``checkpoint`` holds another run's state.
     """
     check_methods([method])
     if envs is None and task is None:
@@ -292,8 +305,12 @@ def run_offline(
             seed=seed,
             device=train.device,
             progress=train.progress,
+            checkpoint_path=None if checkpoint is None else os.fspath(checkpoint),
+            checkpoint_every=checkpoint_every,
         )
         trainer = Trainer(model, seq, train_cfg, eval_fn=eval_fn)
+        if checkpoint is not None:
+            _resume_rows(trainer, rows, checkpoint, method, arch, train, eval, task)
         trainer.train()
         if episode_info is not None:
             model.eval()
@@ -312,3 +329,48 @@ def run_offline(
         if own_envs:
             pool.close()
     return rows
+
+
+def _resume_rows(
+    trainer: Trainer,
+    rows: list[dict[str, Any]],
+    checkpoint: str | os.PathLike,
+    method: str,
+    arch: ArchSpec,
+    train: TrainSpec,
+    eval: EvalSpec,
+    task: str | None,
+) -> None:
+    """Put the rows of a resumed run's evaluations before its own, and keep ``rows`` in the
+    trainer's checkpoint from now on. The trainer checks the training (:meth:`Trainer.load`);
+    this checks what it does not see: the method, architecture, evaluation and task."""
+    run = json.loads(
+        json.dumps(
+            {
+                "method": method,
+                "arch": arch.task_dict(),
+                # the total may grow (the trainer goes on to it), and a run may move device
+                "train": {
+                    k: v
+                    for k, v in train.task_dict().items()
+                    if k not in ("progress", "iterations", "device")
+                },
+                "eval": asdict(eval),
+                "task": task,
+            },
+            default=str,
+        )
+    )
+    before = trainer.extra.get("run")
+    if before is not None and before != run:
+        differ = [
+            f"{k}: {before.get(k)!r} -> {run.get(k)!r}"
+            for k in sorted({*run, *before})
+            if before.get(k) != run.get(k)
+        ]
+        raise ValueError(
+            f"Checkpoint '{os.fspath(checkpoint)}' was made by another run "
+            f"({'; '.join(differ)}): delete it to start fresh."
+        )
+    rows.extend(trainer.extra.get("rows", []))
+    trainer.extra.update(run=run, rows=rows)  # the same list: each save holds the rows so far

@@ -13,8 +13,8 @@ dropout from the trainer's own torch generator state (``TrainConfig.seed``); the
 torch RNG is left as it was. The model's initial weights are the caller's: the Trainer does
 not re-initialise a model, so seed torch before building it (``torch.manual_seed(0)``) for a
 run that gives the same numbers twice. A checkpoint holds the model, optimiser, scheduler, both
-RNG states, the iteration and the history, so a resumed run continues with the same numbers as
-an uninterrupted one.
+RNG states, the iteration and the history (and the CPU seconds so far and the caller's
+``Trainer.extra``), so a resumed run continues with the same numbers as an uninterrupted one.
 
 A checkpoint also records what made it (:meth:`Trainer.made_by`: the :data:`RESULT_FIELDS` of
 the :class:`TrainConfig`, the model's class and config, the data set's size and content hash)
@@ -32,6 +32,7 @@ import hashlib
 import json
 import math
 import os
+import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, is_dataclass
 from pathlib import Path
@@ -213,6 +214,10 @@ class Trainer:
         self.iteration = 0
         self.history: list[dict[str, float]] = []
         self.last_eval: float = math.nan
+        # what the caller keeps in the checkpoint beside the training state (JSON-able; e.g.
+        # run_offline's evaluation rows); restored by load()
+        self.extra: dict[str, Any] = {}
+        self._cpu_before, self._cpu_t0 = 0.0, time.process_time()
         self._rng_state = torch.Generator().manual_seed(config.seed).get_state()
         self._data_fingerprint: dict[str, Any] | None = None
         if config.resume and config.checkpoint_path and Path(config.checkpoint_path).exists():
@@ -319,6 +324,12 @@ class Trainer:
             self.save(cfg.checkpoint_path)
         return self.history_frame()
 
+    @property
+    def cpu_s(self) -> float:
+        """Process CPU seconds since this trainer was made, plus those recorded in the
+        checkpoint it resumed (the work of the runs cut off before it, up to their last save)."""
+        return self._cpu_before + time.process_time() - self._cpu_t0
+
     def history_frame(self) -> pd.DataFrame:
         """The history as a DataFrame (one row per iteration)."""
         return pd.DataFrame(self.history)
@@ -360,6 +371,8 @@ class Trainer:
             "history": self.history,
             "last_eval": self.last_eval,
             "train_config": asdict(self.config),
+            "cpu_s": self.cpu_s,
+            "extra_json": json.dumps(self.extra, default=_json_scalar),
         }
 
     def save(self, path: str | os.PathLike) -> None:
@@ -415,6 +428,15 @@ class Trainer:
         self.iteration = int(ckpt["iteration"])
         self.history = list(ckpt["history"])
         self.last_eval = float(ckpt["last_eval"])
+        self.extra = json.loads(ckpt.get("extra_json", "{}"))
+        self._cpu_before, self._cpu_t0 = float(ckpt.get("cpu_s", 0.0)), time.process_time()
+
+
+def _json_scalar(o: Any) -> Any:
+    """``json.dumps``'s ``default`` for :attr:`Trainer.extra`: NumPy scalars as numbers."""
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"Trainer.extra holds a {type(o).__name__}, which a checkpoint cannot keep.")
 
 
 def _check_compatible(model: nn.Module, dataset: Any) -> None:

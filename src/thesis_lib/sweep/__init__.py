@@ -22,6 +22,10 @@ stays stored. With ``keep_going=True`` (``thesis study --keep-going``, for long 
 runs) every other task still runs, and :class:`GridFailed` lists the failures at the end. Either
 way each failure's traceback is kept in ``<store>/failed/<key>.txt`` until the task succeeds.
 
+A long task can resume inside itself too: :func:`task_scratch` gives it a folder,
+``<store>/partial/<key>/``, for a training checkpoint (the ladder's runs keep one there). A task
+cut off finds it when the grid runs again; once its record is stored, the folder is removed.
+
 Example (``train_and_evaluate`` defined at module level in a library module)::
 
     def train_and_evaluate(config: dict) -> list[dict]:
@@ -42,6 +46,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import socket
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -68,7 +73,9 @@ from ._tasks import (
     fn_path,
     json_default,
     require_ray,
+    scratch_of,
     task_id,
+    task_scratch,
 )
 
 EXECUTORS = ("inprocess", "local", "ray")
@@ -251,6 +258,7 @@ def run_tasks(
         if st is not None:
             stamp = datetime.now(UTC).isoformat(timespec="seconds")
             st.write(rec, {**extra, "stored_utc": stamp})
+            shutil.rmtree(scratch_of(st.root, rec["key"]), ignore_errors=True)  # stored: done
         done[rec["key"]] = rec
 
     def failed(exc: TaskFailed, traceback_text: str) -> None:
@@ -262,6 +270,7 @@ def run_tasks(
         finished,
         failed,
         keep_going=keep_going,
+        scratch_root=None if st is None else st.root,
         executor=ex,
         n_jobs=jobs,
         address=address or _env_default("RAY_ADDRESS", None),
@@ -317,5 +326,7 @@ __all__ = [
     "require_ray",
     "resolve_executor",
     "run_tasks",
+    "scratch_of",
     "task_id",
+    "task_scratch",
 ]

@@ -18,6 +18,7 @@ import tempfile
 import traceback
 import warnings
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
 from tqdm.auto import tqdm
@@ -38,6 +39,7 @@ def run_pending(
     failed: Failed,
     *,
     keep_going: bool,
+    scratch_root: Path | None = None,
     executor: str,
     n_jobs: int,
     address: str | None,
@@ -53,6 +55,8 @@ def run_pending(
         finished: called with each task's record as it arrives.
         failed: called with each failed task's ``TaskFailed`` and traceback text.
         keep_going: run every other task after a failure (and return the failures).
+        scratch_root: the store's folder, under which each task finds its scratch folder
+            (:func:`~thesis_lib.sweep.task_scratch`); ``None``: no scratch.
         executor: ``inprocess``, ``local`` or ``ray``.
         n_jobs: processes for ``local``; for ``ray`` without ``address``, the CPUs of the local
             Ray instance it starts (when > 1).
@@ -91,11 +95,11 @@ def run_pending(
         if not todo:
             return failures
         if executor == "inprocess":
-            _run_inprocess(todo, finished, fail, bar)
+            _run_inprocess(todo, finished, fail, bar, scratch_root)
         elif executor == "local":
-            _run_joblib(todo, finished, fail, bar, n_jobs)
+            _run_joblib(todo, finished, fail, bar, n_jobs, scratch_root)
         elif executor == "ray":
-            _run_ray(todo, finished, fail, bar, n_jobs, address)
+            _run_ray(todo, finished, fail, bar, n_jobs, address, scratch_root)
         else:
             raise ValueError(f"unknown executor {executor!r}")
     finally:
@@ -103,10 +107,16 @@ def run_pending(
     return failures
 
 
-def _run_inprocess(todo: list[Task], finished: Callable[..., None], fail: Fail, bar: Any) -> None:
+def _run_inprocess(
+    todo: list[Task],
+    finished: Callable[..., None],
+    fail: Fail,
+    bar: Any,
+    scratch_root: Path | None = None,
+) -> None:
     for t in todo:
         try:
-            rec = execute(t)
+            rec = execute(t, scratch_root)
         except Exception as e:
             exc = TaskFailed.of(t, e)
             if not fail(exc, traceback.format_exc()):
@@ -116,13 +126,13 @@ def _run_inprocess(todo: list[Task], finished: Callable[..., None], fail: Fail, 
         bar.update()
 
 
-def _guarded(task: Task) -> dict[str, Any]:
+def _guarded(task: Task, scratch_root: Path | None = None) -> dict[str, Any]:
     """Run ``task`` in a worker; return ``{"record": …}`` or ``{"error": …, "traceback": …}``.
 
     A worker returns its failure instead of raising it, so the parent knows which task failed.
     """
     try:
-        return {"key": task.key, "record": execute(task)}
+        return {"key": task.key, "record": execute(task, scratch_root)}
     except Exception as e:
         err: BaseException = e
         try:
@@ -150,7 +160,12 @@ THREAD_VARS = (
 
 
 def _run_joblib(
-    todo: list[Task], finished: Callable[..., None], fail: Fail, bar: Any, n_jobs: int
+    todo: list[Task],
+    finished: Callable[..., None],
+    fail: Fail,
+    bar: Any,
+    n_jobs: int,
+    scratch_root: Path | None = None,
 ) -> None:
     """``n_jobs`` local processes (joblib's loky executor, reused across grids).
 
@@ -183,10 +198,10 @@ def _run_joblib(
         if task is None:
             return
         try:
-            fut = executor.submit(_guarded, task)
+            fut = executor.submit(_guarded, task, scratch_root)
         except BrokenProcessPool:  # a worker died (killed, out of memory): a fresh pool
             executor = get_reusable_executor()
-            fut = executor.submit(_guarded, task)
+            fut = executor.submit(_guarded, task, scratch_root)
         pending[fut] = task
 
     for _ in range(n_jobs):
@@ -253,8 +268,8 @@ def _infeasible(resources: Mapping[str, float], cluster: Mapping[str, float]) ->
     return out
 
 
-def _ray_execute(task: Task) -> dict[str, Any]:
-    return _guarded(task)
+def _ray_execute(task: Task, scratch_root: Path | None = None) -> dict[str, Any]:
+    return _guarded(task, scratch_root)
 
 
 def _run_ray(
@@ -264,6 +279,7 @@ def _run_ray(
     bar: Any,
     n_jobs: int,
     address: str | None,
+    scratch_root: Path | None = None,
 ) -> None:
     """Tasks as Ray remote calls with their resources; records gathered with ``ray.wait`` as
     they finish. Uses the Ray this process is connected to; otherwise connects to ``address``
@@ -300,7 +316,7 @@ def _run_ray(
                 )
         remote = ray.remote(_ray_execute)
         for t in todo:
-            by_ref[remote.options(**_ray_options(t.resources)).remote(t)] = t
+            by_ref[remote.options(**_ray_options(t.resources)).remote(t, scratch_root)] = t
         while by_ref:
             ready, _ = ray.wait(list(by_ref), num_returns=1)
             for ref in ready:

@@ -6,6 +6,7 @@ executors (:mod:`thesis_lib.sweep._executors`), so that neither imports the othe
 
 from __future__ import annotations
 
+import contextvars
 import hashlib
 import json
 import socket
@@ -205,10 +206,49 @@ def _rows_to_records(rows: Rows) -> list[dict[str, Any]]:
     return json.loads(json.dumps(recs, default=json_default))
 
 
-def execute(task: Task) -> dict[str, Any]:
-    """Run one task and return its record (rows, config, timing). Used by every executor."""
+#: The running task's scratch folder (:func:`task_scratch`), set by :func:`execute`.
+_SCRATCH: contextvars.ContextVar[Path | None] = contextvars.ContextVar("scratch", default=None)
+
+#: The folder of a store that holds its unfinished tasks' scratch folders, one per task key.
+SCRATCH_FOLDER = "partial"
+
+
+def task_scratch() -> Path | None:
+    """Where the running task may keep what lets it resume after an interruption (a training
+    checkpoint), or ``None`` where it has none (no store, or not inside a task).
+
+    The folder is ``<store>/partial/<key>/``, made on first call. A task killed before it
+    ends (the session's end, Ctrl-C, a lost worker) finds it again when the grid is run again;
+    once the task's record is stored, the folder is removed. Only the task of that key uses it
+    (a running grid locks its tasks), so a file name inside needs no more than what it is.
+
+    Example:
+        >>> task_scratch() is None  # outside a task
+        True
+    """
+    path = _SCRATCH.get()
+    if path is not None:
+        path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def scratch_of(store: str | Path, key: str) -> Path:
+    """The scratch folder of task ``key`` in the store ``store`` (:func:`task_scratch`)."""
+    return Path(store) / SCRATCH_FOLDER / key
+
+
+def execute(task: Task, scratch_root: str | Path | None = None) -> dict[str, Any]:
+    """Run one task and return its record (rows, config, timing). Used by every executor.
+
+    With ``scratch_root`` (a store's folder), the task's :func:`task_scratch` is
+    ``<scratch_root>/partial/<key>``; the executor's caller removes it once the record is stored.
+    """
     t0, c0 = time.time(), time.process_time()
-    rows = task.fn(dict(task.config))
+    token = _SCRATCH.set(None if scratch_root is None else scratch_of(scratch_root, task.key))
+    try:
+        rows = task.fn(dict(task.config))
+    finally:
+        _SCRATCH.reset(token)
     return {
         "key": task.key,
         "fn": fn_path(task.fn),
