@@ -53,7 +53,8 @@ from thesis_lib.data.minari_sets import dataset_key, is_minari_id, open_dataset
 from thesis_lib.data.recipe import DATASET_SIZES, GENERATOR_VERSION
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.registry import RTG_METHODS, check_methods
-from thesis_lib.sweep import Task, task_id, task_scratch
+from thesis_lib.seq.runner import checkpoint_cpu_s
+from thesis_lib.sweep import Task, scratch_file, task_id
 
 __all__ = [
     "CURRENT_LADDER",
@@ -297,9 +298,8 @@ def _train(
         train["eval_every"] = eval_every
     # a run cut off (the session's end) resumes from its last checkpoint (CHECKPOINT_EVERY),
     # kept in the task's scratch folder until its rows are stored
-    scratch = task_scratch()
-    checkpoint = None if scratch is None else scratch / "train.pt"
-    before = _checkpoint_cpu_s(checkpoint)
+    checkpoint = scratch_file("train.pt")
+    before = checkpoint_cpu_s(checkpoint)
     t0 = time.process_time()
     rows = run_offline(
         config["method"],
@@ -324,15 +324,6 @@ def run_rung(config: Mapping[str, Any]) -> str:
     (:data:`RUNG_FREE_METHODS`) carries the first rung at whichever rung it was asked for."""
     arch = ArchSpec.from_task(config["arch"])
     return Rung(arch.d_model, arch.n_layers).label
-
-
-def _checkpoint_cpu_s(path: Path | None) -> float:
-    """The CPU seconds a checkpoint records of the runs it holds (0 where there is none)."""
-    if path is None or not path.exists():
-        return 0.0
-    import torch
-
-    return float(torch.load(path, map_location="cpu", weights_only=True).get("cpu_s", 0.0))
 
 
 def _row(config: Mapping[str, Any], updates: int, ev: Mapping[str, Any]) -> dict[str, Any]:

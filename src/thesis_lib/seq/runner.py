@@ -374,3 +374,12 @@ def _resume_rows(
         )
     rows.extend(trainer.extra.get("rows", []))
     trainer.extra.update(run=run, rows=rows)  # the same list: each save holds the rows so far
+
+
+def checkpoint_cpu_s(path: str | os.PathLike | None) -> float:
+    """The CPU seconds a :func:`run_offline` checkpoint records of the run it holds (the parts
+    cut off before, up to their last save); 0 where there is none. A resumed run's cost is this
+    plus the CPU seconds of the call that finished it."""
+    if path is None or not os.path.exists(path):
+        return 0.0
+    return float(torch.load(path, map_location="cpu", weights_only=True).get("cpu_s", 0.0))

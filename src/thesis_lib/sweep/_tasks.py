@@ -232,6 +232,18 @@ def task_scratch() -> Path | None:
     return path
 
 
+def scratch_file(name: str) -> Path | None:
+    """``name`` in the running task's scratch folder (:func:`task_scratch`), or ``None`` where
+    the task has none: what a task passes as its checkpoint file.
+
+    Example:
+        >>> scratch_file("train.pt") is None  # outside a task
+        True
+    """
+    scratch = task_scratch()
+    return None if scratch is None else scratch / name
+
+
 def scratch_of(store: str | Path, key: str) -> Path:
     """The scratch folder of task ``key`` in the store ``store`` (:func:`task_scratch`)."""
     return Path(store) / SCRATCH_FOLDER / key

@@ -32,7 +32,7 @@ from thesis_lib.paths import results_dir
 from thesis_lib.seq.registry import LEGACY_INIT, LEGACY_SAMPLING, MAMBA_METHODS, ArchSpec
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.subgoals import select_subgoal_indices
-from thesis_lib.sweep import Task, run_tasks, task_id
+from thesis_lib.sweep import Task, run_tasks, scratch_file, task_id
 
 __all__ = [
     "ARCH_FIELDS",
@@ -204,6 +204,7 @@ def offline_rows(config: Mapping[str, Any], columns: Sequence[str]) -> list[dict
         TrainSpec.from_task(config["train"]),
         EvalSpec(**ev),
         task=env_name(config["dataset"]),
+        checkpoint=scratch_file("train.pt"),  # in a stored grid: a run cut off resumes
     )
     where = {"task": task, "tier": tier}
     return [{k: where[k] if k in where else r[k] for k in columns} for r in rows]
