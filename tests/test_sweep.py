@@ -210,6 +210,9 @@ def test_a_task_finds_its_scratch_folder_again_after_it_was_cut_off(tmp_path, ex
     for t in tasks:
         assert (scratch_of(store, t.key) / "attempts.txt").read_text() == "1"
     assert not TaskStore(store).keys()
+    with pytest.raises(GridFailed):  # force: from the start, the first attempt's state cleared
+        run_tasks(tasks, **kw, force=True)
+    assert (scratch_of(store, tasks[0].key) / "attempts.txt").read_text() == "1"
     rows = run_tasks(tasks, **kw)
     assert list(rows["attempts"]) == [2, 2]  # each saw its own first attempt's state
     assert [Path(p).name for p in rows["scratch"]] == [t.key for t in tasks]

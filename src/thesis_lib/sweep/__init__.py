@@ -208,7 +208,8 @@ def run_tasks(
             ``local`` when ``n_jobs > 1``, else ``inprocess``).
         n_jobs: parallel tasks for ``local`` (default ``$THESIS_JOBS`` or 1).
         address: Ray cluster address (default ``$RAY_ADDRESS``; none starts a local Ray).
-        force: recompute finished tasks too (default ``$THESIS_SWEEP_FORCE``).
+        force: recompute finished tasks too, from the start (their scratch folders cleared;
+            default ``$THESIS_SWEEP_FORCE``).
         desc: the progress bar's label.
         progress: show a progress bar with an ETA (default: unless ``TQDM_DISABLE`` is set).
         provenance: extra fields written into each stored record, on top of the git commit,
@@ -249,6 +250,9 @@ def run_tasks(
     if st is not None and not force:
         done = {k: st.read(k) for k in keys if st.has(k)}
     todo = [t for t in tasks if t.key not in done]
+    if st is not None and force:  # recomputed from the start: no resume from a scratch folder
+        for t in todo:
+            shutil.rmtree(scratch_of(st.root, t.key), ignore_errors=True)
     extra: dict[str, Any] = {}
     if st is not None and todo:
         extra = {**default_provenance(), **(provenance or {})}
