@@ -294,7 +294,7 @@ def test_a_ladder_run_cut_off_resumes_from_its_checkpoint(tmp_path, monkeypatch)
     once the run is stored."""
     import thesis_lib.ladder as ladder_mod
     from thesis_lib.seq.trainer import Trainer
-    from thesis_lib.sweep import GridFailed, run_tasks, scratch_of
+    from thesis_lib.sweep import GridFailed, TaskStore, run_tasks, scratch_of
 
     f = _write(tmp_path, BASE + "dataset_size: smoke\nepisodes: 1\ntrain: {warmup_steps: 2}\n")
     dt = [t for t in ladder_tasks(load_ladder_file(f)) if t.config["method"] == "DT"]
@@ -321,6 +321,9 @@ def test_a_ladder_run_cut_off_resumes_from_its_checkpoint(tmp_path, monkeypatch)
     pd.testing.assert_frame_equal(resumed[cols], straight[cols])
     assert not ckpt.parent.exists()
     assert resumed["train_s"].iloc[0] >= round(before["cpu_s"], 1) > 0  # both parts
+    record = TaskStore(store).read(dt[0].key)
+    assert record["resumed_cpu_s"] == pytest.approx(before["cpu_s"], abs=1e-3)
+    assert record["cpu_s"] >= record["resumed_cpu_s"]
 
 
 def test_a_learning_curve_reruns_a_ladder_run_with_denser_evaluations(tmp_path, capsys):

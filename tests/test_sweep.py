@@ -19,6 +19,8 @@ from thesis_lib.sweep import (
     TaskStore,
     config_hash,
     execute,
+    note_resumed_cpu,
+    resumed_cpu_s,
     run_tasks,
     scratch_of,
     task_scratch,
@@ -61,6 +63,14 @@ def resumable(config: dict) -> list[dict]:
     if n < config["succeed_at"]:
         raise RuntimeError(f"cut off at attempt {n}")
     return [{"x": config["x"], "attempts": n, "scratch": str(scratch)}]
+
+
+def resumed_run(config: dict) -> list[dict]:
+    """A task that resumes work whose cut-off parts spent ``config['before']`` CPU seconds (as a
+    training run resumed from its checkpoint tells it), and reports what it was told back."""
+    for seconds in config["before"]:
+        note_resumed_cpu(seconds)
+    return [{"x": config["x"], "told": resumed_cpu_s()}]
 
 
 def frame_task(config: dict) -> pd.DataFrame:
@@ -221,6 +231,25 @@ def test_a_task_finds_its_scratch_folder_again_after_it_was_cut_off(tmp_path, ex
     free = run_tasks([Task(resumable, {"x": 9, "succeed_at": 2})], progress=False)
     assert free["attempts"].tolist() == [0]  # no store: no scratch
     assert task_scratch() is None
+
+
+@pytest.mark.parametrize("executor", ["inprocess", "local"])
+def test_a_resumed_task_costs_the_cpu_seconds_of_its_cut_off_parts_too(tmp_path, executor):
+    """note_resumed_cpu(): a task's record counts the CPU seconds of the parts cut off before
+    (cpu_s, and apart as resumed_cpu_s), and the task reads them back (resumed_cpu_s()); a task
+    that started fresh records only its own; outside a task the note goes nowhere."""
+    tasks = [
+        Task(resumed_run, {"x": 0, "before": [600.0, 400.5]}),
+        Task(resumed_run, {"x": 1, "before": []}),
+    ]
+    rows = run_tasks(tasks, store=tmp_path, executor=executor, n_jobs=2, progress=False)
+    assert rows.set_index("x")["told"].to_dict() == {0: 1000.5, 1: 0.0}
+    resumed, fresh = (TaskStore(tmp_path).read(t.key) for t in tasks)
+    assert resumed["resumed_cpu_s"] == 1000.5 and 1000.5 <= resumed["cpu_s"] < 1100
+    assert "resumed_cpu_s" not in fresh and fresh["cpu_s"] < 100
+    note_resumed_cpu(5.0)  # outside a task
+    assert resumed_cpu_s() == 0.0
+    assert execute(tasks[1])["cpu_s"] < 100  # nothing noted outside leaks into the next task
 
 
 def test_force_recomputes(tmp_path, monkeypatch):

@@ -679,8 +679,9 @@ def test_a_run_cut_off_resumes_from_its_checkpoint_with_the_same_rows(
     tmp_path, monkeypatch, method
 ):
     """run_offline(checkpoint=...): cut off after its checkpoint at 4 updates and called again,
-    a run gives the rows of an uninterrupted one (evaluations before the cut included); a
-    checkpoint of another run's evaluation is refused; the total may grow."""
+    a run gives the rows of an uninterrupted one (evaluations before the cut included) and tells
+    its task the CPU seconds of the part cut off; a checkpoint of another run's evaluation is
+    refused; the total may grow."""
     from thesis_lib.seq.registry import ArchSpec
     from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 
@@ -719,7 +720,10 @@ def test_a_run_cut_off_resumes_from_its_checkpoint_with_the_same_rows(
     monkeypatch.setattr(Trainer, "step", step)
     saved = torch.load(ckpt, weights_only=True)
     assert saved["iteration"] == 4 and saved["cpu_s"] > 0
+    told: list[float] = []  # what the running task is told its cut-off part cost
+    monkeypatch.setattr("thesis_lib.seq.runner.note_resumed_cpu", told.append)
     resumed = run(checkpoint=ckpt, checkpoint_every=2)
+    assert told == [pytest.approx(saved["cpu_s"])]
     assert sorted(set(resumed["iteration"])) == [2, 4, 6]
     pd.testing.assert_frame_equal(resumed, straight)
     with pytest.raises(ValueError, match=r"made by another run \(eval: .*'episodes': 2"):

@@ -53,8 +53,7 @@ from thesis_lib.data.minari_sets import dataset_key, is_minari_id, open_dataset
 from thesis_lib.data.recipe import DATASET_SIZES, GENERATOR_VERSION
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.registry import RTG_METHODS, check_methods
-from thesis_lib.seq.runner import checkpoint_cpu_s
-from thesis_lib.sweep import Task, scratch_file, task_id
+from thesis_lib.sweep import Task, resumed_cpu_s, scratch_file, task_id
 
 __all__ = [
     "CURRENT_LADDER",
@@ -299,7 +298,6 @@ def _train(
     # a run cut off (the session's end) resumes from its last checkpoint (CHECKPOINT_EVERY),
     # kept in the task's scratch folder until its rows are stored
     checkpoint = scratch_file("train.pt")
-    before = checkpoint_cpu_s(checkpoint)
     t0 = time.process_time()
     rows = run_offline(
         config["method"],
@@ -311,7 +309,7 @@ def _train(
         checkpoint=checkpoint,
         checkpoint_every=CHECKPOINT_EVERY,
     )
-    train_s = round(before + time.process_time() - t0, 1)
+    train_s = round(time.process_time() - t0 + resumed_cpu_s(), 1)  # with its cut-off parts
     scores = ds.normalized_scores()
     data_mean = None if scores is None or not len(scores) else float(np.mean(scores))
     want = "max" if config["method"] in RTG_METHODS else "none"

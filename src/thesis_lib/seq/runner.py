@@ -44,6 +44,7 @@ from thesis_lib.seq.registry import (
 )
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer
+from thesis_lib.sweep import note_resumed_cpu
 
 __all__ = ["TARGETS", "EvalSpec", "TrainSpec", "VectorEnvPool", "run_offline"]
 
@@ -311,6 +312,8 @@ def run_offline(
         trainer = Trainer(model, seq, train_cfg, eval_fn=eval_fn)
         if checkpoint is not None:
             _resume_rows(trainer, rows, checkpoint, method, arch, train, eval, task)
+            if trainer.resumed_cpu_s:  # a stored grid's task counts its cut-off parts too
+                note_resumed_cpu(trainer.resumed_cpu_s)
         trainer.train()
         if episode_info is not None:
             model.eval()
@@ -374,12 +377,3 @@ def _resume_rows(
         )
     rows.extend(trainer.extra.get("rows", []))
     trainer.extra.update(run=run, rows=rows)  # the same list: each save holds the rows so far
-
-
-def checkpoint_cpu_s(path: str | os.PathLike | None) -> float:
-    """The CPU seconds a :func:`run_offline` checkpoint records of the run it holds (the parts
-    cut off before, up to their last save); 0 where there is none. A resumed run's cost is this
-    plus the CPU seconds of the call that finished it."""
-    if path is None or not os.path.exists(path):
-        return 0.0
-    return float(torch.load(path, map_location="cpu", weights_only=True).get("cpu_s", 0.0))

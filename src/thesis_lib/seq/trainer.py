@@ -325,6 +325,12 @@ class Trainer:
         return self.history_frame()
 
     @property
+    def resumed_cpu_s(self) -> float:
+        """The CPU seconds recorded in the checkpoint this trainer resumed (the runs cut off
+        before it, up to their last save); 0 for a fresh start."""
+        return self._cpu_before
+
+    @property
     def cpu_s(self) -> float:
         """Process CPU seconds since this trainer was made, plus those recorded in the
         checkpoint it resumed (the work of the runs cut off before it, up to their last save)."""

@@ -232,6 +232,34 @@ def task_scratch() -> Path | None:
     return path
 
 
+#: CPU seconds of the running task's earlier, cut-off parts (:func:`note_resumed_cpu`).
+_RESUMED_CPU: contextvars.ContextVar[list[float] | None] = contextvars.ContextVar(
+    "resumed_cpu", default=None
+)
+
+
+def note_resumed_cpu(seconds: float) -> None:
+    """Tell the running task that it resumed work whose earlier parts, cut off before, spent
+    ``seconds`` CPU seconds (as the checkpoint it resumed from records). :func:`execute` adds
+    them to the task's ``cpu_s``, so that a resumed task costs what the whole task cost;
+    :func:`resumed_cpu_s` gives them to the task's own rows. Outside a task it does nothing.
+
+    Example:
+        >>> note_resumed_cpu(12.5)  # outside a task: nothing to tell
+        >>> resumed_cpu_s()
+        0.0
+    """
+    noted = _RESUMED_CPU.get()
+    if noted is not None:
+        noted.append(float(seconds))
+
+
+def resumed_cpu_s() -> float:
+    """The CPU seconds of the running task's earlier parts (:func:`note_resumed_cpu`); 0 where
+    it started fresh or outside a task."""
+    return float(sum(_RESUMED_CPU.get() or ()))
+
+
 def scratch_file(name: str) -> Path | None:
     """``name`` in the running task's scratch folder (:func:`task_scratch`), or ``None`` where
     the task has none: what a task passes as its checkpoint file.
@@ -257,17 +285,24 @@ def execute(task: Task, scratch_root: str | Path | None = None) -> dict[str, Any
     """
     t0, c0 = time.time(), time.process_time()
     token = _SCRATCH.set(None if scratch_root is None else scratch_of(scratch_root, task.key))
+    resumed: list[float] = []
+    token_cpu = _RESUMED_CPU.set(resumed)
     try:
         rows = task.fn(dict(task.config))
     finally:
         _SCRATCH.reset(token)
-    return {
+        _RESUMED_CPU.reset(token_cpu)
+    record = {
         "key": task.key,
         "fn": fn_path(task.fn),
         "config": json.loads(canonical_json(dict(task.config))),
         "rows": _rows_to_records(rows),
         "wall_s": round(time.time() - t0, 3),
-        "cpu_s": round(time.process_time() - c0, 3),
+        # a resumed task: this call's CPU seconds and those of its earlier parts
+        "cpu_s": round(time.process_time() - c0 + sum(resumed), 3),
         "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "host": socket.gethostname(),
     }
+    if resumed:
+        record["resumed_cpu_s"] = round(sum(resumed), 3)
+    return record

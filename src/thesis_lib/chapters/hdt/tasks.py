@@ -32,7 +32,7 @@ from thesis_lib.paths import results_dir
 from thesis_lib.seq.registry import LEGACY_INIT, LEGACY_SAMPLING, MAMBA_METHODS, ArchSpec
 from thesis_lib.seq.runner import EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.subgoals import select_subgoal_indices
-from thesis_lib.sweep import Task, run_tasks, scratch_file, task_id
+from thesis_lib.sweep import Task, resumed_cpu_s, run_tasks, scratch_file, task_id
 
 __all__ = [
     "ARCH_FIELDS",
@@ -328,7 +328,7 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     curves = pd.DataFrame(
         offline_task({k: v for k, v in config.items() if k not in ("label", "scale")})
     )
-    train_s = time.process_time() - t0
+    train_s = time.process_time() - t0 + resumed_cpu_s()  # a resumed run: its cut-off parts too
     curves = curves.sort_values("iteration", kind="stable")
     target = "none" if curves["target"].eq("none").all() else "max"
     run = curves[curves["target"] == target]
