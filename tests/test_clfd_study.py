@@ -163,15 +163,31 @@ def test_pinned_encoder_is_read_back_on_a_new_machine_not_trained_again(
         ex.pinned_encoder(cfg, "tcn", "tcn")
 
 
-def _fake_rows(tasks: list, rng: np.random.Generator) -> pd.DataFrame:
+def _fake_rows(
+    tasks: list, rng: np.random.Generator, untrained_error: float = 30.0
+) -> pd.DataFrame:
     """Rows shaped as the study's task functions make them, without training: CLfD aligns
-    better than TCN and CMC, stage accuracy is the same on every camera set, and only the CLfD
-    agent learns."""
+    better than TCN and CMC (an untrained encoder: ``untrained_error``), stage accuracy is the
+    same on every camera set, and only the CLfD agent learns."""
     rows = []
     for t in tasks:
         c, seed = t.config, t.config["cfg"]["seed"]
         base = {"seed": seed, "scale": c.get("scale", "study")}
-        if t.fn is ex.study_alignment_task:
+        if t.fn is ex.study_alignment_control_task:
+            ae = untrained_error + rng.normal(0, 0.5)
+            enc = ex.ENCODER_LABELS[c["encoder"]]
+            rows.append(
+                base
+                | {
+                    "claim": "C10",
+                    "method": "untrained",
+                    "setting": f"PickPlace {enc}",
+                    "encoder": enc,
+                    "alignment_error_pct": ae,
+                    "neg_alignment_error": -ae,
+                }
+            )
+        elif t.fn is ex.study_alignment_task:
             ae = {"clfd": 8.0, "cmc": 12.0, "tcn": 15.0}[c["method"]] + rng.normal(0, 0.5)
             enc = ex.ENCODER_LABELS[c["encoder"]]
             rows.append(
@@ -242,6 +258,63 @@ def test_the_study_files_comparisons_evaluate_on_a_full_grid_of_rows(monkeypatch
     clfd = curves[curves.method == "CLfD"]
     assert list(clfd.episode) == list(range(80, 801, 80)) and (clfd.seeds == 5).all()
     assert clfd.success.iloc[-1] == pytest.approx(0.8)
+
+
+def test_the_c10_study_runs_the_untrained_control_and_gates_on_it(monkeypatch):
+    """clfd-c10-v2 (params/02_clfd.v4.study.yml): v1's alignment tasks, the same keys (reused),
+    plus an untrained encoder per backbone and seed; a comparison whose trained method does not
+    beat the untrained encoder is untestable, whatever its interval."""
+    from thesis_lib.book import study as st
+    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study, v1 = st.load_study("02_clfd:v4"), st.load_study("02_clfd")
+    tasks = ex.study_tasks(st.study_config(study, CHAPTERS["02_clfd"]))
+    v1_tasks = ex.study_tasks(st.study_config(v1, CHAPTERS["02_clfd"]))
+    control = [t for t in tasks if t.fn is ex.study_alignment_control_task]
+    assert len(control) == 2 * 5 and not any(
+        t.fn is ex.study_alignment_control_task for t in v1_tasks
+    )
+    v1_align = {t.key for t in v1_tasks if t.fn is ex.study_alignment_task}
+    assert {t.key for t in tasks if t not in control} == v1_align  # v1's runs, reused
+    kw = dict(metric=study.metric, reps=200, interval="welch", gates=study.gates)
+
+    def verdict(untrained_error: float) -> pd.DataFrame:
+        rows = _fake_rows(tasks, np.random.default_rng(0), untrained_error)
+        return evaluate_comparisons(rows, study.comparisons, **kw)
+
+    floor_far = verdict(30.0)  # every method aligns far better than chance
+    assert (floor_far.validity == "valid").all()
+    assert claim_verdicts(floor_far).set_index("claim").verdict["C10"] == "holds"
+    floor_near = verdict(12.5)  # TCN (15) and CMC (12) no better than an untrained encoder
+    by = floor_near.set_index("label")
+    assert (
+        by.loc["CLfD vs TCN, -alignment error (points), both encoders", "verdict"] == "untestable"
+    )
+    assert (
+        "control: TCN - untrained"
+        in by.loc["CLfD vs TCN, -alignment error, ResNet-18 encoder", "gates"]
+    )
+    assert claim_verdicts(floor_near).set_index("claim").verdict["C10"] == "untestable"
+
+
+def test_the_c10_control_task_measures_an_untrained_encoder(clfd_tiny):
+    """The control task's row: the untrained encoder's test alignment error, as Table 4.1's
+    floor row measures it, with no validation history."""
+    cfg = ex.Config(
+        **{**clfd_tiny, "seeds": [3], "alignment_controls": True, "study_claims": ["C10"]}
+    )
+    tasks = [t for t in ex.study_tasks(cfg) if t.fn is ex.study_alignment_control_task]
+    assert len(tasks) == 1  # one backbone in the tiny config
+    (row,) = tasks[0].fn(dict(tasks[0].config))
+    assert row["method"] == "untrained" and row["claim"] == "C10" and row["seed"] == 3
+    assert 0 <= row["alignment_error_pct"] <= 100
+    assert row["neg_alignment_error"] == -row["alignment_error_pct"]
+    assert math.isnan(row["val_best_pct"]) and row["data_sha"]
+    cfg3 = ex.Config(**{**clfd_tiny, "seed": 3})
+    model = ex.build_model(cfg3, tasks[0].config["encoder"], "clfd")
+    floor = ex.alignment_numbers(cfg3, ex.load_data(cfg3), model)
+    assert row["alignment_error_pct"] == pytest.approx(floor["alignment_error_pct"])
 
 
 def test_study_section_renders_before_the_study_ran(unstarted_study):

@@ -83,6 +83,10 @@ class Config:
     """Study: the RL success curve cuts the training episodes into this many equal windows."""
     study_controls: bool = True
     """Study: also run an untrained encoder (same backbone) through stage classification and RL."""
+    alignment_controls: bool = False
+    """Study: also measure C10's alignment error with an untrained encoder of each backbone
+    (``method: untrained``), the trivial answer each trained method must beat (clfd-c10-v2;
+    off in v1, whose grid had no such task)."""
     study_claims: list[str] = field(default_factory=lambda: ["C10", "C11", "C12"])
     """Study: the claims whose tasks run (C10 alignment, C11 stage classification, C12 RL); a
     later study of one claim names it alone (the encoders come from the chapter's store)."""

@@ -372,6 +372,12 @@ def study_tasks(cfg: Config) -> list[Task]:
         for m in methods
         if "C10" in claims
     ]
+    tasks += [
+        _study_task(study_alignment_control_task, c, TRAIN_FIELDS, encoder=enc)
+        for enc in backbones
+        for c in seeded
+        if "C10" in claims and cfg.alignment_controls
+    ]
     kinds = ["clfd"] + ([UNTRAINED] if cfg.study_controls else [])
     tasks += [
         _study_task(study_stage_task, c, TRAIN_FIELDS + STAGE_FIELDS, features=k)
@@ -443,6 +449,40 @@ def study_alignment_task(config: dict[str, Any]) -> list[dict[str, Any]]:
             final_loss=float(rows["loss"].iloc[-1]),
             encoder_sha=sha,
             data_sha=data_fingerprint(load_data(cfg)),
+        )
+    ]
+
+
+@task_id("thesis_lib.chapters.clfd:study_alignment_control_task")
+def study_alignment_control_task(config: dict[str, Any]) -> list[dict[str, Any]]:
+    """C10's control: the alignment error of an untrained encoder of one backbone on one
+    seed's data set, the trivial answer a trained method must beat before its alignment says
+    anything (CLAIMS.md, "Control": an untrained encoder).
+
+    Returns one row as :func:`study_alignment_task`'s, with ``method`` ``"untrained"``: the
+    test alignment error between seen cameras of the encoder as built (seeded by the seed),
+    ``val_best_pct`` NaN (no training, no validation history).
+
+    Used in: ``thesis study 02_clfd:v4`` (C10, ``alignment_controls``).
+    """
+    cfg = _study_config(config)
+    enc = config["encoder"]
+    data = load_data(cfg)
+    numbers = alignment_numbers(cfg, data, build_model(cfg, enc, "clfd"))
+    return [
+        _study_row(
+            config,
+            cfg,
+            "C10",
+            method=UNTRAINED,
+            setting=f"PickPlace {ENCODER_LABELS[enc]}",
+            encoder=ENCODER_LABELS[enc],
+            alignment_error_pct=float(numbers["alignment_error_pct"]),
+            neg_alignment_error=-float(numbers["alignment_error_pct"]),
+            val_best_pct=float("nan"),
+            neg_val_alignment_error=float("nan"),
+            test_seen_unseen_pct=float(numbers["test_seen_unseen_pct"]),
+            data_sha=data_fingerprint(data),
         )
     ]
 
