@@ -298,6 +298,21 @@ def test_the_c10_study_runs_the_untrained_control_and_gates_on_it(monkeypatch):
     assert claim_verdicts(floor_near).set_index("claim").verdict["C10"] == "untestable"
 
 
+def test_the_c10_study_reads_on_the_secondary_metric_without_its_control(monkeypatch):
+    """The untrained control has no best validation checkpoint (the secondary metric): its
+    comparison is left out of the secondary reading, the others are judged on it."""
+    from thesis_lib.book import evidence as evi
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    ev = evi.load_evidence(CHAPTERS["02_clfd"], study="v4", reps=200)
+    assert ev.complete
+    sec = evi.secondary_comparisons(ev, reps=200)
+    assert len(sec) == len(ev.study.comparisons) - 1
+    assert "untrained" not in set(sec["y"])
+    (reading,) = evi.claim_readings(ev, reps=200).to_dict("records")
+    assert reading["claim"] == "C10" and reading["on the thesis's metric"] != "pending"
+
+
 def test_the_c10_control_task_measures_an_untrained_encoder(clfd_tiny):
     """The control task's row: the untrained encoder's test alignment error, as Table 4.1's
     floor row measures it, with no validation history."""

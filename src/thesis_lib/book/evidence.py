@@ -571,16 +571,21 @@ def scale_check_table(ev: Evidence, metric: str | None = None) -> pd.DataFrame:
 def secondary_comparisons(ev: Evidence, reps: int = 10_000) -> pd.DataFrame:
     """The comparisons registered on the primary metric, recomputed on the secondary one (the
     thesis's best evaluation during training): does the verdict depend on the metric?
-    Empty until the study is complete or when the study names no secondary metric."""
+    Empty until the study is complete or when the study names no secondary metric; a
+    comparison with a method that has no value of it (an untrained control has no best
+    validation checkpoint) is left out."""
     sec = ev.study.secondary
     if not ev.complete or not sec or sec not in ev.rows:
         return pd.DataFrame()
+    c = ev.study.columns
+    measured = set(ev.rows.loc[ev.rows[sec].notna(), c["method"]])
     specs = [
         {**s, "metric": sec}
         for s in ev.study.comparisons
-        if s.get("metric", ev.study.metric) == ev.study.metric
+        if s.get("metric", ev.study.metric) == ev.study.metric and {s["x"], s["y"]} <= measured
     ]
-    c = ev.study.columns
+    if not specs:
+        return pd.DataFrame()
     return evaluate_comparisons(
         ev.rows,
         specs,
