@@ -229,6 +229,29 @@ def test_embedding_reward_env_is_eq_4_2():
     env.close()
 
 
+def test_grasp_point_oracle_env_rewards_the_true_distance():
+    """C12's positive control: the state holds the grasp point, the reward is minus its true
+    distance to where the demonstration grasped, and replaying the demonstration reaches 0."""
+    from thesis_lib.clfd.rl import EmbeddingRewardEnv, GraspPointOracle
+
+    env = EmbeddingRewardEnv(GraspPointOracle(), demo_seed=5, image_size=16, max_episode_steps=40)
+    assert env.goal_frame is None  # nothing rendered
+    obs, _ = env.reset()
+    assert obs["observation"].shape == (3 + 15,)
+    np.testing.assert_allclose(obs["achieved_goal"], env.env.grip_pos, atol=1e-6)
+    np.testing.assert_allclose(obs["observation"][:3], obs["achieved_goal"])
+    rewards = []
+    for a in env._demo_actions[: env._end_step]:
+        obs, r, _, _, info = env.step(a)
+        rewards.append(r)
+        assert r == pytest.approx(-np.linalg.norm(env.env.grip_pos - env.goal_embedding), abs=1e-5)
+    assert rewards[-1] == pytest.approx(0.0, abs=1e-5), "the demonstration's grasp is the goal"
+    assert min(rewards) < -0.05  # metres away at the start
+    # the goal is the grasp: the demonstration's grasp point sits at the box centre
+    assert info["grip_box_distance"] < 0.03
+    env.close()
+
+
 def test_chapter_config_rejects_unknown_names():
     from thesis_lib.chapters.clfd import Config
 

@@ -26,11 +26,34 @@ import pandas as pd
 from thesis_lib.clfd.env import STAGES, MultiViewPickPlace, check_cameras, run_demonstration
 
 
+class GraspPointOracle:
+    """C12's positive control: an "encoder" that reads the grasp point's position (m) from the
+    simulator instead of embedding an image.
+
+    With it :class:`EmbeddingRewardEnv`'s state holds the true grasp point, and Eq 4.2's reward
+    becomes minus the true distance (m) to where the guiding demonstration grasped the box: the
+    reward a perfect encoder would give. If DDPG+HER does not learn the pick stage with it, the
+    RL budget is too small for any encoder to; if it does, an encoder whose agent stays at the
+    floor failed on its own features and reward.
+
+    >>> GraspPointOracle().label
+    'oracle'
+    """
+
+    label = "oracle"
+
+    def embed_state(self, env: MultiViewPickPlace) -> np.ndarray:
+        """The grasp point's position in ``env`` (3,), float32."""
+        return np.asarray(env.grip_pos, dtype=np.float32)
+
+
 class EmbeddingRewardEnv(gym.Env):
     """One stage of pick and place, observed through an encoder, rewarded by Eq 4.2.
 
     Args:
-        encoder: anything with ``embed(frames (N, H, W, 3) uint8) -> (N, D)``, e.g. a :class:`CLfD`.
+        encoder: anything with ``embed(frames (N, H, W, 3) uint8) -> (N, D)``, e.g. a :class:`CLfD`,
+            or with ``embed_state(env) -> (D,)``, which reads the simulator and renders nothing
+            (:class:`GraspPointOracle`, the positive control).
         demo_seed: the reset seed of the guiding demonstration (its layout is every episode's start).
         stage: ``"pick"`` (reach and grasp) or ``"place"`` (the thesis's Fig 4.4 shows pick).
         camera: the camera whose image is embedded.
@@ -58,17 +81,29 @@ class EmbeddingRewardEnv(gym.Env):
         self.env = MultiViewPickPlace(
             image_size=image_size, max_episode_steps=10_000, render_camera=camera
         )
-        demo = run_demonstration(self.env, demo_seed, render=True, cameras=(camera,))
+        self._reads_state = hasattr(encoder, "embed_state")
+        demo = run_demonstration(
+            self.env, demo_seed, render=not self._reads_state, cameras=(camera,)
+        )
         if not demo.success:
             raise RuntimeError(
                 f"The demonstration with seed {demo_seed} failed; pick another seed."
             )
-        if demo.frames is None:
-            raise RuntimeError("run_demonstration(render=True) returned no frames.")
         s = STAGES.index(stage)
         last = int(np.flatnonzero(demo.stages == s)[-1])
-        self.goal_frame = demo.frames[last, 0]
-        self.goal_embedding = np.asarray(encoder.embed(self.goal_frame[None])[0], dtype=np.float32)
+        self.goal_frame: np.ndarray | None = None
+        if self._reads_state:  # the state of the last frame of the stage: replay up to it
+            self.env.reset(seed=demo_seed)
+            for a in demo.actions[:last]:
+                self.env.step(a)
+            self.goal_embedding = np.asarray(encoder.embed_state(self.env), dtype=np.float32)
+        else:
+            if demo.frames is None:
+                raise RuntimeError("run_demonstration(render=True) returned no frames.")
+            self.goal_frame = demo.frames[last, 0]
+            self.goal_embedding = np.asarray(
+                encoder.embed(self.goal_frame[None])[0], dtype=np.float32
+            )
         self._start_step = int(np.flatnonzero(demo.stages == s)[0])
         self._end_step = last
         self._demo_actions = demo.actions
@@ -84,7 +119,10 @@ class EmbeddingRewardEnv(gym.Env):
         self._steps = 0
 
     def _obs(self) -> dict[str, np.ndarray]:
-        emb = np.asarray(self.encoder.embed(self.env.render()[None])[0], dtype=np.float32)
+        if self._reads_state:
+            emb = np.asarray(self.encoder.embed_state(self.env), dtype=np.float32)
+        else:
+            emb = np.asarray(self.encoder.embed(self.env.render()[None])[0], dtype=np.float32)
         robot = np.concatenate(
             [self.env.joint_angles, self.env.joint_velocities, [self.env.gripper_opening]]
         )

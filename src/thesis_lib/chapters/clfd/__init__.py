@@ -73,6 +73,7 @@ from thesis_lib.chapters.clfd.tables import (
     summarize_study_rl_curves,
 )
 from thesis_lib.chapters.clfd.tasks import (
+    ORACLE,
     RL_FIELDS,
     STAGE_FIELDS,
     STAGE_PROTOCOLS,
@@ -133,6 +134,7 @@ __all__ = [
     "trained_encoder",
     "trained_encoder_rows",
     # experiments and the study
+    "ORACLE",
     "RL_FIELDS",
     "RL_FINAL_COLUMNS",
     "RL_FINAL_SHARE",

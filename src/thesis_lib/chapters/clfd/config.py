@@ -87,6 +87,11 @@ class Config:
     """Study: also measure C10's alignment error with an untrained encoder of each backbone
     (``method: untrained``), the trivial answer each trained method must beat (clfd-c10-v2;
     off in v1, whose grid had no such task)."""
+    rl_oracle: bool = False
+    """Study: also run C12's positive control, DDPG+HER with the grasp point's true position as
+    state and its true distance to the demonstration's grasp as reward
+    (:class:`~thesis_lib.clfd.rl.GraspPointOracle`; method ``oracle``): can the RL budget learn
+    the pick stage at all (clfd-c12-v4; off before, whose grids had no such task)."""
     study_claims: list[str] = field(default_factory=lambda: ["C10", "C11", "C12"])
     """Study: the claims whose tasks run (C10 alignment, C11 stage classification, C12 RL); a
     later study of one claim names it alone (the encoders come from the chapter's store)."""

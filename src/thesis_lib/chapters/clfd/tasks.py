@@ -58,7 +58,7 @@ from thesis_lib.clfd.metrics import (
     classifier_accuracy,
     train_stage_classifier,
 )
-from thesis_lib.clfd.rl import train_embedding_agent
+from thesis_lib.clfd.rl import GraspPointOracle, train_embedding_agent
 from thesis_lib.clfd.train import ENCODER_LABELS, METHOD_LABELS, CLfD
 from thesis_lib.sweep import Task, task_id
 
@@ -314,6 +314,8 @@ RL_FIELDS = (
 )  # fmt: skip
 #: How the study labels the untrained encoder (the controls of C11 and C12).
 UNTRAINED = "untrained"
+#: How the study labels C12's positive control (:class:`~thesis_lib.clfd.rl.GraspPointOracle`).
+ORACLE = "oracle"
 
 
 #: The columns of the study's rows (:func:`study_alignment_task`, :func:`study_stage_task`,
@@ -350,7 +352,7 @@ def study_tasks(cfg: Config) -> list[Task]:
     * C11 (:func:`study_stage_task`): stage classification from the CLfD encoder on
       ``cfg.rl_encoder``'s backbone (and from an untrained one, with ``study_controls``);
     * C12 (:func:`study_rl_task`): DDPG+HER on the pick stage with each of ``cfg.rl_methods``'
-      encoders (and the untrained one);
+      encoders (and the untrained one; and the grasp-point oracle, with ``rl_oracle``);
 
     each only where ``cfg.study_claims`` names its claim.
 
@@ -386,6 +388,7 @@ def study_tasks(cfg: Config) -> list[Task]:
         if "C11" in claims
     ]
     rl = list(cfg.rl_methods) + ([UNTRAINED] if cfg.study_controls and cfg.rl_methods else [])
+    rl += [ORACLE] if cfg.rl_oracle else []
     fields = TRAIN_FIELDS + RL_FIELDS
     tasks += [
         _study_task(study_rl_task, c, fields, method=m)
@@ -487,10 +490,13 @@ def study_alignment_control_task(config: dict[str, Any]) -> list[dict[str, Any]]
     ]
 
 
-def _study_encoder(cfg: Config, kind: str) -> tuple[CLfD, str | None]:
+def _study_encoder(cfg: Config, kind: str) -> tuple[Any, str | None]:
     """The study's encoder on ``cfg.rl_encoder``'s backbone trained with method ``kind``
     (:func:`~thesis_lib.chapters.clfd.encoders.pinned_encoder`) and the hash of its weights
-    file, or an untrained one (``kind == UNTRAINED``, seeded by ``cfg.seed``) and None."""
+    file, or an untrained one (``kind == UNTRAINED``, seeded by ``cfg.seed``) and None, or
+    the grasp-point oracle (``kind == ORACLE``, RL only) and None."""
+    if kind == ORACLE:
+        return GraspPointOracle(), None
     if kind == UNTRAINED:
         return build_model(cfg, cfg.rl_encoder, "clfd"), None
     model, _ = pinned_encoder(cfg, cfg.rl_encoder, kind)
