@@ -164,11 +164,15 @@ def test_pinned_encoder_is_read_back_on_a_new_machine_not_trained_again(
 
 
 def _fake_rows(
-    tasks: list, rng: np.random.Generator, untrained_error: float = 30.0
+    tasks: list,
+    rng: np.random.Generator,
+    untrained_error: float = 30.0,
+    rl_success: dict[str, float] | None = None,
 ) -> pd.DataFrame:
     """Rows shaped as the study's task functions make them, without training: CLfD aligns
     better than TCN and CMC (an untrained encoder: ``untrained_error``), stage accuracy is the
-    same on every camera set, and only the CLfD agent learns."""
+    same on every camera set, and only the CLfD agent learns (``rl_success``: each RL
+    method's final success instead, by its config name)."""
     rows = []
     for t in tasks:
         c, seed = t.config, t.config["cfg"]["seed"]
@@ -218,6 +222,8 @@ def _fake_rows(
                 )
         else:
             ok = 0.8 if c["method"] == "clfd" else 0.05
+            if rl_success is not None:
+                ok = rl_success[c["method"]]
             curve = {f"success_ep{k}": ok * k / 800 for k in range(80, 801, 80)}
             rows.append(
                 base
@@ -296,6 +302,56 @@ def test_the_c10_study_runs_the_untrained_control_and_gates_on_it(monkeypatch):
         in by.loc["CLfD vs TCN, -alignment error, ResNet-18 encoder", "gates"]
     )
     assert claim_verdicts(floor_near).set_index("claim").verdict["C10"] == "untestable"
+
+
+def test_the_oracle_task_runs_without_an_encoder(clfd_tiny, tmp_path, monkeypatch):
+    """C12's positive control through the study's RL task: no encoder is trained or read, and
+    its row is shaped as the encoders' (the success measured on the true grasp point)."""
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))
+    tiny = {**clfd_tiny, "rl_episodes": 4, "rl_checkpoints": 2, "seeds": [3], "rl_oracle": True}
+    tiny["study_claims"] = ["C12"]
+    tasks = ex.study_tasks(ex.Config(**tiny))
+    assert [t.config["method"] for t in tasks] == ["clfd", ex.UNTRAINED, ex.ORACLE]
+    (row,) = tasks[-1].fn(dict(tasks[-1].config))
+    assert row["method"] == "oracle" and row["encoder_sha"] is None and row["episodes"] == 4
+    assert 0.0 <= row["success_final"] <= 1.0 and math.isfinite(row["final_distance_m"])
+    assert not (tmp_path / "project" / "studies").exists()  # no encoder pinned or trained
+    off = ex.study_tasks(ex.Config(**{**tiny, "rl_oracle": False}))
+    assert [t.key for t in off] == [t.key for t in tasks[:2]]  # the flag leaves other keys
+
+
+def test_the_c12_study_adds_the_oracle_and_gates_on_it(monkeypatch):
+    """clfd-c12-v4 (params/02_clfd.v5.study.yml): v3's RL tasks, the same keys (reused), plus
+    the grasp-point oracle per seed. Where the oracle does not learn, every comparison is
+    withheld; where it does, two encoders at the floor together are judged (v3 withheld them)."""
+    from thesis_lib.book import study as st
+    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study, v3 = st.load_study("02_clfd:v5"), st.load_study("02_clfd:v3")
+    tasks = ex.study_tasks(st.study_config(study, CHAPTERS["02_clfd"]))
+    v3_keys = {t.key for t in ex.study_tasks(st.study_config(v3, CHAPTERS["02_clfd"]))}
+    oracle = [t for t in tasks if t.config["method"] == ex.ORACLE]
+    assert len(oracle) == 5 and {t.key for t in tasks if t not in oracle} == v3_keys
+    kw = dict(metric=study.metric, reps=200, interval="welch", gates=study.gates)
+
+    def verdicts(oracle_success: float, v3_gates: bool = False) -> pd.DataFrame:
+        floor = {"clfd": 0.0, "tcn": 0.0, "cmc": 0.0, "untrained": 0.0, "oracle": oracle_success}
+        rows = _fake_rows(tasks, np.random.default_rng(0), rl_success=floor)
+        return evaluate_comparisons(
+            rows, study.comparisons, **{**kw, "gates": v3.gates if v3_gates else study.gates}
+        )
+
+    learns = verdicts(0.9)
+    by = learns.set_index("label")
+    head = "DDPG+HER with CLfD vs TCN features and reward, success in the last 20% of episodes"
+    assert by.loc[head, "validity"] == "valid"
+    assert "passed level: oracle success_final 0.9" in by.loc[head, "gates"]
+    assert claim_verdicts(learns).set_index("claim").verdict["C12"] == "fails"  # no difference
+    assert (verdicts(0.9, v3_gates=True).set_index("label").loc[head, "verdict"]) == "untestable"
+    stuck = verdicts(0.2)  # even a perfect reward does not learn: nothing can be judged
+    assert (stuck.verdict == "untestable").all()
+    assert "oracle success_final 0.2" in stuck.set_index("label").loc[head, "gates"]
 
 
 def test_the_c10_study_reads_on_the_secondary_metric_without_its_control(monkeypatch):
