@@ -354,6 +354,36 @@ def test_the_c12_study_adds_the_oracle_and_gates_on_it(monkeypatch):
     assert "oracle success_final 0.2" in stuck.set_index("label").loc[head, "gates"]
 
 
+def test_the_c11_transfer_study_runs_new_seeds_and_gates_on_the_seen_accuracy(monkeypatch):
+    """clfd-c11-v2 (params/02_clfd.v6.study.yml): stage tasks only, on seeds none of v1's; the
+    transfer (seen -> unseen) decides; a seen-camera MLP near chance withholds the verdict."""
+    from thesis_lib.book import study as st
+    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    study, v1 = st.load_study("02_clfd:v6"), st.load_study("02_clfd")
+    tasks = ex.study_tasks(st.study_config(study, CHAPTERS["02_clfd"]))
+    v1_keys = {t.key for t in ex.study_tasks(st.study_config(v1, CHAPTERS["02_clfd"]))}
+    assert {t.fn for t in tasks} == {ex.study_stage_task} and len(tasks) == 2 * 5
+    assert {t.config["cfg"]["seed"] for t in tasks} == {5, 6, 7, 8, 9}
+    assert not {t.key for t in tasks} & v1_keys
+
+    def verdict(seen: float, transfer: float) -> str:
+        rows = _fake_rows(tasks, np.random.default_rng(0))
+        clfd = rows["features"] == "CLfD"
+        rows.loc[clfd & (rows["method"] == "Seen"), "stage_accuracy"] += seen - 95.0
+        rows.loc[clfd & (rows["method"] == "Seen->Unseen"), "stage_accuracy"] += transfer - 95.0
+        out = evaluate_comparisons(
+            rows, study.comparisons, metric=study.metric, reps=200, interval="welch",
+            gates=study.gates,
+        )  # fmt: skip
+        return claim_verdicts(out).set_index("claim").verdict["C11"]
+
+    assert verdict(seen=72.0, transfer=71.0) == "holds"
+    assert verdict(seen=72.0, transfer=52.0) == "fails"
+    assert verdict(seen=52.0, transfer=50.0) == "untestable"  # nothing to transfer
+
+
 def test_the_c10_study_reads_on_the_secondary_metric_without_its_control(monkeypatch):
     """The untrained control has no best validation checkpoint (the secondary metric): its
     comparison is left out of the secondary reading, the others are judged on it."""
