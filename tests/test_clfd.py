@@ -249,6 +249,13 @@ def test_grasp_point_oracle_env_rewards_the_true_distance():
     assert min(rewards) < -0.05  # metres away at the start
     # the goal is the grasp: the demonstration's grasp point sits at the box centre
     assert info["grip_box_distance"] < 0.03
+    # ... checked apart from the replay: the box where the demonstration recorded it on the
+    # last pick frame, within a centimetre of the goal
+    from thesis_lib.clfd.env import MultiViewPickPlace, run_demonstration
+
+    demo = run_demonstration(MultiViewPickPlace(image_size=16), 5, render=False)
+    last = int(np.flatnonzero(demo.stages == 0)[-1])
+    assert np.linalg.norm(demo.box_pos[last] - env.goal_embedding) < 0.01
     env.close()
 
 

@@ -312,8 +312,16 @@ def test_the_oracle_task_runs_without_an_encoder(clfd_tiny, tmp_path, monkeypatc
     tiny["study_claims"] = ["C12"]
     tasks = ex.study_tasks(ex.Config(**tiny))
     assert [t.config["method"] for t in tasks] == ["clfd", ex.UNTRAINED, ex.ORACLE]
+    from thesis_lib.clfd.rl import GraspPointOracle
+
+    reads = []
+    real = GraspPointOracle.read_simulator
+    monkeypatch.setattr(
+        GraspPointOracle, "read_simulator", lambda self, env: reads.append(1) or real(self, env)
+    )
     (row,) = tasks[-1].fn(dict(tasks[-1].config))
     assert row["method"] == "oracle" and row["encoder_sha"] is None and row["episodes"] == 4
+    assert len(reads) > 4 * tiny["rl_steps"]  # every step's state came from the simulator
     assert 0.0 <= row["success_final"] <= 1.0 and math.isfinite(row["final_distance_m"])
     assert not (tmp_path / "project" / "studies").exists()  # no encoder pinned or trained
     off = ex.study_tasks(ex.Config(**{**tiny, "rl_oracle": False}))

@@ -31,10 +31,11 @@ class GraspPointOracle:
     simulator instead of embedding an image.
 
     With it :class:`EmbeddingRewardEnv`'s state holds the true grasp point, and Eq 4.2's reward
-    becomes minus the true distance (m) to where the guiding demonstration grasped the box: the
-    reward a perfect encoder would give. If DDPG+HER does not learn the pick stage with it, the
-    RL budget is too small for any encoder to; if it does, an encoder whose agent stays at the
-    floor failed on its own features and reward.
+    becomes minus the true distance (m) to where the guiding demonstration grasped the box: an
+    ideal low-dimensional state, and a reward aligned with the success measure (the grasp point
+    within a few cm of the box). If DDPG+HER does not learn the pick stage with it, the RL
+    budget is too small for any encoder; if it does, the budget suffices for an ideal state,
+    though not necessarily for an encoder's higher-dimensional one.
 
     >>> GraspPointOracle().label
     'oracle'
@@ -42,7 +43,7 @@ class GraspPointOracle:
 
     label = "oracle"
 
-    def embed_state(self, env: MultiViewPickPlace) -> np.ndarray:
+    def read_simulator(self, env: MultiViewPickPlace) -> np.ndarray:
         """The grasp point's position in ``env`` (3,), float32."""
         return np.asarray(env.grip_pos, dtype=np.float32)
 
@@ -52,7 +53,7 @@ class EmbeddingRewardEnv(gym.Env):
 
     Args:
         encoder: anything with ``embed(frames (N, H, W, 3) uint8) -> (N, D)``, e.g. a :class:`CLfD`,
-            or with ``embed_state(env) -> (D,)``, which reads the simulator and renders nothing
+            or with ``read_simulator(env) -> (D,)``, which reads the simulator and renders nothing
             (:class:`GraspPointOracle`, the positive control).
         demo_seed: the reset seed of the guiding demonstration (its layout is every episode's start).
         stage: ``"pick"`` (reach and grasp) or ``"place"`` (the thesis's Fig 4.4 shows pick).
@@ -81,7 +82,7 @@ class EmbeddingRewardEnv(gym.Env):
         self.env = MultiViewPickPlace(
             image_size=image_size, max_episode_steps=10_000, render_camera=camera
         )
-        self._reads_state = hasattr(encoder, "embed_state")
+        self._reads_state = hasattr(encoder, "read_simulator")
         demo = run_demonstration(
             self.env, demo_seed, render=not self._reads_state, cameras=(camera,)
         )
@@ -96,7 +97,7 @@ class EmbeddingRewardEnv(gym.Env):
             self.env.reset(seed=demo_seed)
             for a in demo.actions[:last]:
                 self.env.step(a)
-            self.goal_embedding = np.asarray(encoder.embed_state(self.env), dtype=np.float32)
+            self.goal_embedding = np.asarray(encoder.read_simulator(self.env), dtype=np.float32)
         else:
             if demo.frames is None:
                 raise RuntimeError("run_demonstration(render=True) returned no frames.")
@@ -120,7 +121,7 @@ class EmbeddingRewardEnv(gym.Env):
 
     def _obs(self) -> dict[str, np.ndarray]:
         if self._reads_state:
-            emb = np.asarray(self.encoder.embed_state(self.env), dtype=np.float32)
+            emb = np.asarray(self.encoder.read_simulator(self.env), dtype=np.float32)
         else:
             emb = np.asarray(self.encoder.embed(self.env.render()[None])[0], dtype=np.float32)
         robot = np.concatenate(
