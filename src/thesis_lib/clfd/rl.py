@@ -35,13 +35,9 @@ class GraspPointOracle:
     ideal low-dimensional state, and a reward aligned with the success measure (the grasp point
     within a few cm of the box). If DDPG+HER does not learn the pick stage with it, the RL
     budget is too small for any encoder; if it does, the budget suffices for an ideal state,
-    though not necessarily for an encoder's higher-dimensional one.
-
-    >>> GraspPointOracle().label
-    'oracle'
+    though not necessarily for an encoder's higher-dimensional one. The study labels its runs
+    ``oracle`` (:data:`thesis_lib.chapters.clfd.ORACLE`).
     """
-
-    label = "oracle"
 
     def read_simulator(self, env: MultiViewPickPlace) -> np.ndarray:
         """The grasp point's position in ``env`` (3,), float32."""
