@@ -259,6 +259,27 @@ def test_grasp_point_oracle_env_rewards_the_true_distance():
     env.close()
 
 
+def test_place_stage_starts_where_the_demonstration_left_the_pick_stage():
+    """The place stage's episodes start from the demonstration's state at the stage's first
+    step (box in hand), and its goal is the state at the stage's last step."""
+    from thesis_lib.clfd.env import MultiViewPickPlace, run_demonstration
+    from thesis_lib.clfd.rl import EmbeddingRewardEnv, GraspPointOracle
+
+    env = EmbeddingRewardEnv(GraspPointOracle(), demo_seed=5, stage="place", image_size=16)
+    demo = run_demonstration(MultiViewPickPlace(image_size=16), 5, render=False)
+    first, last = (int(i) for i in np.flatnonzero(demo.stages == 1)[[0, -1]])
+    assert env._start_step == first and env._end_step == last
+    for _ in range(2):  # every reset replays from the layout, not from where the last episode ended
+        obs, info = env.reset()
+        np.testing.assert_allclose(env.env.box_pos, demo.box_pos[first], atol=1e-6)
+        assert info["grip_box_distance"] < 0.03, "the box is in the gripper"
+        env.step(np.array([1.0, 1.0, 1.0, -1.0]))
+    # the goal: the grasp point on the stage's last frame, just above the released box
+    np.testing.assert_allclose(env.goal_embedding[:2], demo.box_pos[last, :2], atol=0.01)
+    assert env.goal_embedding[2] > demo.box_pos[last, 2]
+    env.close()
+
+
 def test_chapter_config_rejects_unknown_names():
     from thesis_lib.chapters.clfd import Config
 

@@ -88,11 +88,10 @@ class EmbeddingRewardEnv(gym.Env):
             )
         s = STAGES.index(stage)
         last = int(np.flatnonzero(demo.stages == s)[-1])
+        self._demo_actions = demo.actions
         self.goal_frame: np.ndarray | None = None
         if self._reads_state:  # the state of the last frame of the stage: replay up to it
-            self.env.reset(seed=demo_seed)
-            for a in demo.actions[:last]:
-                self.env.step(a)
+            self._replay(last)
             self.goal_embedding = np.asarray(encoder.read_simulator(self.env), dtype=np.float32)
         else:
             if demo.frames is None:
@@ -103,7 +102,6 @@ class EmbeddingRewardEnv(gym.Env):
             )
         self._start_step = int(np.flatnonzero(demo.stages == s)[0])
         self._end_step = last
-        self._demo_actions = demo.actions
         d = len(self.goal_embedding)
         self.max_episode_steps = max_episode_steps
         self.action_space = self.env.action_space
@@ -114,6 +112,12 @@ class EmbeddingRewardEnv(gym.Env):
             "desired_goal": box,
         })  # fmt: skip
         self._steps = 0
+
+    def _replay(self, n: int) -> None:
+        """Reset to the demonstration's layout and step its first ``n`` actions."""
+        self.env.reset(seed=self.demo_seed)
+        for a in self._demo_actions[:n]:
+            self.env.step(a)
 
     def _obs(self) -> dict[str, np.ndarray]:
         if self._reads_state:
@@ -147,10 +151,8 @@ class EmbeddingRewardEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         super().reset(seed=seed)
-        self.env.reset(seed=self.demo_seed)
-        if self.stage == "place":  # replay the demonstration up to the start of the stage
-            for a in self._demo_actions[: self._start_step]:
-                self.env.step(a)
+        # the place stage starts where the demonstration's pick stage ended
+        self._replay(self._start_step if self.stage == "place" else 0)
         self._steps = 0
         return self._obs(), self._info()
 
