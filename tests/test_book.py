@@ -246,7 +246,7 @@ def test_a_table_and_a_figure_may_not_share_a_name(tmp_path, monkeypatch):
 def test_git_commit_is_dirty_for_code_changes_not_for_the_studies_own_files(tmp_path):
     import subprocess
 
-    from thesis_lib.provenance import git_commit
+    from thesis_lib.provenance import commit_record, git_commit, git_dirty_paths
 
     def git(*args: str) -> str:
         return subprocess.run(
@@ -272,3 +272,12 @@ def test_git_commit_is_dirty_for_code_changes_not_for_the_studies_own_files(tmp_
     (tmp_path / "code.py").write_text("x = 2\n")
     assert git_commit(tmp_path) == f"{sha}-dirty"
     assert git_commit(tmp_path / "studies") == f"{sha}-dirty"  # from a sub-folder too
+    # the record names what made it dirty (from the top, whatever the folder), not the study
+    assert commit_record(tmp_path / "studies") == {
+        "git_commit": f"{sha}-dirty",
+        "git_dirty": ["code.py"],
+    }
+    git("add", "code.py")
+    git("commit", "-q", "-m", "1")
+    assert commit_record(tmp_path) == {"git_commit": git("rev-parse", "HEAD")}
+    assert git_dirty_paths(tmp_path) == []

@@ -125,6 +125,8 @@ def test_run_tasks_stores_every_task_with_provenance(tmp_path):
     rec = store.read(grid()[2].key)
     assert rec["config"]["x"] == 2 and len(rec["rows"]) == 2
     assert rec["git_commit"]  # a sha (maybe -dirty) or "unknown" outside a checkout
+    # a -dirty commit comes with the files that made it so
+    assert rec["git_commit"].endswith("-dirty") == bool(rec.get("git_dirty"))
     assert rec["versions"]["pandas"] == pd.__version__
     assert rec["stored_utc"].endswith("+00:00")
     assert not list(tmp_path.glob("*.tmp"))

@@ -62,13 +62,35 @@ def git_commit(path: str | Path | None = None) -> str:
     Returns ``"unknown"`` outside a git checkout.
     """
     sha = git_output(["rev-parse", "HEAD"], path)
-    dirty = git_output(
+    dirty = git_dirty_paths(path)
+    if sha is None or dirty is None:
+        return "unknown"
+    return f"{sha.strip()}-dirty" if dirty else sha.strip()
+
+
+def git_dirty_paths(path: str | Path | None = None) -> list[str] | None:
+    """The tracked files (from the checkout's top) whose uncommitted changes make
+    :func:`git_commit` ``-dirty``: everything but ``studies/``. Recorded beside a ``-dirty``
+    commit, so that a reader can tell a code change from an edit of the prose. ``None``
+    outside a git checkout.
+    """
+    out = git_output(
         ["status", "--porcelain", "--untracked-files=no", "--", ":(top)", ":(top,exclude)studies"],
         path,
     )
-    if sha is None or dirty is None:
-        return "unknown"
-    return f"{sha.strip()}-dirty" if dirty.strip() else sha.strip()
+    if out is None:
+        return None
+    # porcelain v1: two status letters, a space, the path ("old -> new" for a rename)
+    return sorted(line[3:].split(" -> ")[-1] for line in out.splitlines() if line.strip())
+
+
+def commit_record(path: str | Path | None = None) -> dict[str, Any]:
+    """``{"git_commit": ...}``, with ``"git_dirty": [paths]`` when the commit is ``-dirty``."""
+    commit = git_commit(path)
+    out: dict[str, Any] = {"git_commit": commit}
+    if commit.endswith("-dirty"):
+        out["git_dirty"] = git_dirty_paths(path) or []
+    return out
 
 
 def package_versions(names: tuple[str, ...] = RECORDED_PACKAGES) -> dict[str, str]:
@@ -94,7 +116,7 @@ def run_metadata(config: Any, seed: int | None, **extra: Any) -> dict[str, Any]:
     return {
         "config": jsonable(config),
         "seed": seed,
-        "git_commit": git_commit(),
+        **commit_record(),
         "versions": package_versions(),
         "platform": {
             "machine": platform.machine(),
@@ -108,7 +130,9 @@ def run_metadata(config: Any, seed: int | None, **extra: Any) -> dict[str, Any]:
 
 __all__ = [
     "RECORDED_PACKAGES",
+    "commit_record",
     "git_commit",
+    "git_dirty_paths",
     "git_output",
     "jsonable",
     "package_versions",

@@ -58,7 +58,7 @@ from typing import Any, TypeAlias
 import pandas as pd
 
 from thesis_lib._io import atomic_write
-from thesis_lib.provenance import RECORDED_PACKAGES, git_commit, package_versions
+from thesis_lib.provenance import RECORDED_PACKAGES, commit_record, package_versions
 
 from ._executors import run_pending
 from ._tasks import (
@@ -85,13 +85,14 @@ EXECUTORS = ("inprocess", "local", "ray")
 
 
 def default_provenance() -> dict[str, Any]:
-    """What every stored task record carries: the git commit and the package versions.
+    """What every stored task record carries: the git commit (with the changed files when it
+    is ``-dirty``) and the package versions, taken when the sweep starts.
 
     The same helpers write ``run.json`` (:mod:`thesis_lib.provenance`), so a task can be
     traced to the code that computed it. Each record also gets ``stored_utc`` when written.
     """
     versions = package_versions((*RECORDED_PACKAGES, "joblib", "ray"))
-    return {"git_commit": git_commit(), "versions": versions}
+    return {**commit_record(), "versions": versions}
 
 
 class TaskStore:
