@@ -451,3 +451,41 @@ def test_a_study_row_is_a_reduction_of_the_chapters_training_task(tmp_path, monk
     assert {k: v for k, v in again.items() if k not in skip} == pytest.approx(
         {k: v for k, v in row.items() if k not in skip}, nan_ok=True
     )
+
+
+def test_counterfactual_summary_means_over_seeds_per_method():
+    """The second study's table: the filter's saved crashes, false alarms and precision per
+    method, averaged over seeds; NaN for the unfiltered agent; an error for v1's rows."""
+    base = {"setting": "Hopper", "crash_rate": 0.5, "eval_score": 50.0}
+    nan = float("nan")
+    rows = pd.DataFrame(
+        [
+            {**base, "method": "SAC", "seed": 0, "crashes_per_1k_steps": 4.0,
+             "saved_crashes": nan, "false_alarms": nan, "filter_precision": nan,
+             "filter_recall": nan, "crash_rate_without_filter": nan},
+            {**base, "method": "SAC", "seed": 1, "crashes_per_1k_steps": 6.0,
+             "saved_crashes": nan, "false_alarms": nan, "filter_precision": nan,
+             "filter_recall": nan, "crash_rate_without_filter": nan},
+            {**base, "method": "SAC+F", "seed": 0, "crashes_per_1k_steps": 1.0,
+             "saved_crashes": 30, "false_alarms": 10, "filter_precision": 0.75,
+             "filter_recall": 0.6, "crash_rate_without_filter": 0.4},
+            {**base, "method": "SAC+F", "seed": 1, "crashes_per_1k_steps": 2.0,
+             "saved_crashes": 10, "false_alarms": 10, "filter_precision": 0.5,
+             "filter_recall": 0.2, "crash_rate_without_filter": 0.6},
+        ]
+    )  # fmt: skip
+    out = ex.summarize_study_counterfactual(rows).set_index("method")
+    assert list(out.index) == ["SAC", "SAC+F"] and (out.seeds == 2).all()
+    assert out.loc["SAC", "crashes_per_1k_steps"] == 5.0 and np.isnan(
+        out.loc["SAC", "saved_crashes"]
+    )
+    assert out.loc["SAC+F", ["saved_crashes", "false_alarms", "filter_precision"]].tolist() == [
+        20.0,
+        10.0,
+        0.625,
+    ]
+    assert out.loc["SAC+F", "crash_rate_without_filter"] == pytest.approx(0.5)
+    empty = ex.summarize_study_counterfactual(pd.DataFrame())
+    assert empty.empty and "filter_precision" in empty
+    with pytest.raises(ValueError, match="saved_crashes"):
+        ex.summarize_study_counterfactual(rows.drop(columns="saved_crashes"))

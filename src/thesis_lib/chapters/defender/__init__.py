@@ -81,6 +81,7 @@ from thesis_lib.chapters.defender.study import (
 )
 from thesis_lib.chapters.defender.tables import (
     STUDY_DATA_NOTE,
+    STUDY_V2_DATA_NOTE,
     compare_table_4_5,
     compare_tables_4_3_4_4,
     compare_thesis_strategies,
@@ -93,6 +94,7 @@ from thesis_lib.chapters.defender.tables import (
     summarize_paper_compat_effect,
     summarize_runs,
     summarize_study,
+    summarize_study_counterfactual,
     summarize_study_curves,
     summarize_study_demo_sources,
     summarize_study_topup,
@@ -125,6 +127,7 @@ __all__ = [
     "STUDY_COLUMNS",
     "STUDY_CURVE_BINS",
     "STUDY_DATA_NOTE",
+    "STUDY_V2_DATA_NOTE",
     "THESIS_SAC_RETURN",
     "THESIS_STATE_ACTION_STRATEGIES",
     "THESIS_STATE_STRATEGIES",
@@ -171,6 +174,7 @@ __all__ = [
     "summarize_paper_compat_effect",
     "summarize_runs",
     "summarize_study",
+    "summarize_study_counterfactual",
     "summarize_study_curves",
     "summarize_study_demo_sources",
     "summarize_study_topup",
