@@ -88,7 +88,7 @@ def _batch(B=3, T=K, seed=0):
     }
 
 
-@pytest.mark.parametrize("init", ["normal", "original", "torch"])
+@pytest.mark.parametrize("init", ["normal", "original", "torch", "d3rlpy"])
 @pytest.mark.parametrize("n_layers,n_heads", [(1, 1), (3, 2)])
 def test_dt_forward_equals_an_independent_formulation(init, n_layers, n_heads):
     torch.manual_seed(0)
@@ -136,6 +136,26 @@ def test_original_init_is_gpt2_in_the_trunk_and_torch_outside():
     assert w.abs().max().item() <= bound and w.std().item() > 0.2 * bound
 
 
+def test_d3rlpy_init_is_normal_in_the_trunk_and_torch_for_the_embeddings_and_head():
+    """d3rlpy 2.8.1's ContinuousDecisionTransformer: ``apply(_init_weights)`` (N(0, 0.02), zero
+    biases) reaches the position table and the GPT blocks, made before it; the return, state
+    and action embeddings and the output head, made after it, keep PyTorch's defaults."""
+    m = _dt("d3rlpy")
+    trunk = m.transformer
+    assert abs(trunk.embed_timestep.weight.std().item() - 0.02) < 0.001
+    for name, p in trunk.blocks.named_parameters():
+        if name.endswith("bias"):
+            assert torch.all(p == 0), name
+        elif p.ndim >= 2:  # every block weight, the residual projections unscaled
+            assert abs(p.std().item() - 0.02) < 0.003, (name, p.std().item())
+    for emb, fan_in in ((m.embed_rtg, 1), (m.embed_state, SD), (m.embed_action, AD)):
+        bound = 1 / math.sqrt(fan_in)  # Kaiming-uniform's bound
+        assert emb.weight.abs().max().item() <= bound and emb.weight.std().item() > 0.2 * bound
+        assert emb.bias.abs().max().item() > 0  # not zeroed
+    head = [p for p in m.predict_action.parameters() if p.ndim == 2][0]
+    assert head.std().item() > 0.05  # 1/sqrt(64) bound: not N(0, 0.02)
+
+
 def test_torch_init_is_the_v1_code_bit_for_bit():
     """``torch`` applies nothing: PyTorch's own draws, in the v1 code's order of construction
     (the three token embeddings, then the trunk's time-step table)."""
@@ -154,7 +174,7 @@ def test_auto_resolves_by_paper_compat_and_bad_schemes_are_named():
     assert resolve_init("auto", False) == "normal"
     assert resolve_init("auto", True) == "original"
     assert _dt("auto", paper_compat=True).config.resolved_init == "original"
-    with pytest.raises(ValueError, match="Unknown init 'gpt3'.*normal, original, torch"):
+    with pytest.raises(ValueError, match="Unknown init 'gpt3'.*normal, original, torch, d3rlpy"):
         DTConfig(SD, AD, init="gpt3")
     with pytest.raises(ValueError, match="Unknown init"):
         ArchSpec(init="xavier")
@@ -300,6 +320,9 @@ def test_parity_file_merges_common_and_rejects_unknown_keys(tmp_path):
     f.write_text("comparisons:\n- {name: a, method: HTD, peer: false}\n")
     with pytest.raises(ValueError, match="Unknown method 'HTD'. Did you mean: 'HDT'"):
         load_parity_file(f)
+    f.write_text("comparisons:\n- {name: a, method: DT, init: xavier}\n")
+    with pytest.raises(ValueError, match="Unknown init 'xavier'.*in parity comparison 'a'"):
+        load_parity_file(f)
     with pytest.raises(FileNotFoundError):
         load_parity_file(tmp_path / "nope.yml")
 
@@ -314,6 +337,12 @@ def test_the_committed_parity_file_parses_and_peer_runs_are_shared():
     peer = {t.key for name in ("dt-study", "dt-study-v1", "dt-study-original")
             for t in tasks[name]["peer"]}  # fmt: skip
     assert len(peer) == 3
+    # ... and so do the d64 medium-replay DTs at three initialisations
+    mr = [
+        {t.key for t in tasks[n]["peer"]}
+        for n in ("dt-mr-d64", "dt-mr-d64-torch", "dt-mr-d64-d3rlpy")
+    ]
+    assert mr[0] == mr[1] == mr[2] and len(mr[0]) == 5
     assert len(unique_tasks(tasks)) < sum(len(s["ours"]) + len(s["peer"]) for s in tasks.values())
 
 

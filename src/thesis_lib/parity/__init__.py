@@ -8,7 +8,8 @@ Every (side, seed) run is one :class:`~thesis_lib.sweep.Task`, stored at once un
 :func:`parity_table` is written to ``studies/parity/parity.csv``.
 
 * **ours** (:func:`ours_run`): :func:`~thesis_lib.seq.runner.run_offline` with the
-  comparison's ``init`` (``auto``, or ``torch`` for the v1 code's scheme) and window
+  comparison's ``init`` (``auto``; ``torch`` for the v1 code's scheme; ``d3rlpy`` for the
+  peer's, :func:`~thesis_lib.seq.models.init_transformer`) and window
   ``sampling`` (``end``, d3rlpy's and today's default; comparisons that name none ran with
   ``start``, the default before, and keep their stored runs);
 * **peer** (:func:`peer_run`): d3rlpy 2.8.1 (``DecisionTransformer``, ``BC``) in its own venv
@@ -48,6 +49,7 @@ from thesis_lib.data.sequence import resolve_sampling
 from thesis_lib.paths import cache_dir
 from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.evaluation import target_returns
+from thesis_lib.seq.models import resolve_init
 from thesis_lib.seq.registry import LEGACY_SAMPLING, check_methods
 from thesis_lib.seq.trainer import TrainConfig
 from thesis_lib.sweep import Task, resumed_cpu_s, scratch_file
@@ -88,7 +90,8 @@ KNOWN_DIFFERENCES: dict[str, str] = {
     "loss": "d3rlpy sums the squared error over action dimensions and averages over all "
     "window positions (padding counted as zero); ours averages over real steps and dimensions",
     "init": "d3rlpy draws the trunk and the time-step table from N(0, 0.02) and leaves the "
-    "state, action and return embeddings and the head at PyTorch's defaults",
+    "state, action and return embeddings and the head at PyTorch's defaults (ours does the "
+    "same with `init: d3rlpy`)",
     "timesteps": "d3rlpy counts time steps from 1, ours from 0",
     "windows": "both draw a window's last step uniformly (d3rlpy left-pads, ours right-pads: the "
     "same under the causal mask); comparisons that name no `sampling` ran with ours drawing "
@@ -145,6 +148,10 @@ class Comparison:
 
         check_methods([self.method])
         resolve_sampling(self.sampling, where=f" in parity comparison {self.name!r}")
+        try:
+            resolve_init(self.init, False)
+        except ValueError as e:
+            raise ValueError(f"{e} (in parity comparison {self.name!r})") from None
         if self.peer and self.method not in PEER_METHODS:
             raise ValueError(
                 f"No peer for {self.method!r} (d3rlpy has {', '.join(PEER_METHODS)}); "

@@ -201,7 +201,7 @@ class _TransformerConfig(ModelConfig):
     paper_compat: bool = False
     """Action token ``a_{t-1}`` and the initialisation as in the authors' code (see the module
     docstring)."""
-    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    init: Literal["auto", "normal", "original", "torch", "d3rlpy"] = "auto"
     """Weight initialisation, of :data:`INIT_SCHEMES`: ``"normal"`` (every Linear and Embedding
     N(0, 0.02), zero biases: CORL, Hugging Face), ``"original"`` (the authors' code: GPT-2's
     init in the trunk only), ``"torch"`` (PyTorch's defaults: the v1 studies), ``"auto"``
@@ -354,7 +354,7 @@ def action_output(actions: torch.Tensor, batch: Tensors, targets: Tensors | None
 # ----------------------------------------------------------------------------------------------
 # Initialisation
 
-INIT_SCHEMES: tuple[str, ...] = ("auto", "normal", "original", "torch")
+INIT_SCHEMES: tuple[str, ...] = ("auto", "normal", "original", "torch", "d3rlpy")
 """Weight initialisations of the transformers (:attr:`DTConfig.init`)."""
 
 
@@ -400,6 +400,10 @@ def init_transformer(model: nn.Module, scheme: str, n_layers: int) -> nn.Module:
       ``embed_ln`` and the heads keep PyTorch's defaults, as in the authors' code, which made
       them outside the GPT-2 model.
     * ``"torch"``: nothing (PyTorch's defaults: Linear Kaiming-uniform, Embedding N(0, 1)).
+    * ``"d3rlpy"``: d3rlpy 2.8.1's ``ContinuousDecisionTransformer``, for the parity runs: every
+      :class:`TokenTransformer` (the time-step table, ``embed_ln``, the GPT blocks, ``ln_f``) as
+      ``"normal"`` (no residual scaling), the token embeddings and the heads at PyTorch's
+      defaults (d3rlpy makes them after its ``apply(_init_weights)``).
 
     Returns:
         ``model``.
@@ -423,9 +427,13 @@ def init_transformer(model: nn.Module, scheme: str, n_layers: int) -> nn.Module:
                     p.zero_()
                 else:  # LayerNorm weights
                     p.fill_(1.0)
+    elif scheme == "d3rlpy":
+        for trunk in (m for m in model.modules() if isinstance(m, TokenTransformer)):
+            _normal_(trunk)
     elif scheme != "torch":
         raise ValueError(
-            f"Unknown init {scheme!r}. Valid: normal, original, torch (or auto, resolved first)."
+            f"Unknown init {scheme!r}. Valid: normal, original, torch, d3rlpy (or auto, resolved "
+            "first)."
         )
     return model
 
