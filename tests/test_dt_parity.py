@@ -342,7 +342,7 @@ def test_the_committed_parity_file_parses_and_peer_runs_are_shared():
         {t.key for t in tasks[n]["peer"]}
         for n in ("dt-mr-d64", "dt-mr-d64-torch", "dt-mr-d64-d3rlpy")
     ]
-    assert mr[0] == mr[1] == mr[2] and len(mr[0]) == 5
+    assert mr[1] < mr[0] == mr[2] and len(mr[0]) == 5  # torch: three of the five seeds
     assert len(unique_tasks(tasks)) < sum(len(s["ours"]) + len(s["peer"]) for s in tasks.values())
 
 
