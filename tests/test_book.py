@@ -281,3 +281,10 @@ def test_git_commit_is_dirty_for_code_changes_not_for_the_studies_own_files(tmp_
     git("commit", "-q", "-m", "1")
     assert commit_record(tmp_path) == {"git_commit": git("rev-parse", "HEAD")}
     assert git_dirty_paths(tmp_path) == []
+    # a rename names both files, and a name with a space or an accent comes back as it is
+    (tmp_path / "a b é.py").write_text("y = 1\n")
+    git("add", "a b é.py")
+    git("commit", "-q", "-m", "2")
+    git("mv", "code.py", "moved.py")
+    (tmp_path / "a b é.py").write_text("y = 2\n")
+    assert git_dirty_paths(tmp_path) == sorted(["a b é.py", "code.py", "moved.py"])

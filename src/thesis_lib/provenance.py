@@ -61,36 +61,54 @@ def git_commit(path: str | Path | None = None) -> str:
 
     Returns ``"unknown"`` outside a git checkout.
     """
-    sha = git_output(["rev-parse", "HEAD"], path)
-    dirty = git_dirty_paths(path)
-    if sha is None or dirty is None:
-        return "unknown"
-    return f"{sha.strip()}-dirty" if dirty else sha.strip()
+    return commit_record(path)["git_commit"]
 
 
 def git_dirty_paths(path: str | Path | None = None) -> list[str] | None:
     """The tracked files (from the checkout's top) whose uncommitted changes make
-    :func:`git_commit` ``-dirty``: everything but ``studies/``. Recorded beside a ``-dirty``
-    commit, so that a reader can tell a code change from an edit of the prose. ``None``
-    outside a git checkout.
+    :func:`git_commit` ``-dirty``: everything but ``studies/``; both names of a renamed file.
+    Recorded beside a ``-dirty`` commit, so that a reader can tell a code change from an edit
+    of the prose. ``None`` outside a git checkout.
     """
     out = git_output(
-        ["status", "--porcelain", "--untracked-files=no", "--", ":(top)", ":(top,exclude)studies"],
+        [
+            "--no-optional-locks",  # a read: never take the index lock a study's commit needs
+            "status",
+            "--porcelain",
+            "-z",  # NUL-separated, names unquoted
+            "--untracked-files=no",
+            "--",
+            ":(top)",
+            ":(top,exclude)studies",
+        ],
         path,
     )
     if out is None:
         return None
-    # porcelain v1: two status letters, a space, the path ("old -> new" for a rename)
-    return sorted(line[3:].split(" -> ")[-1] for line in out.splitlines() if line.strip())
+    # porcelain v1 with -z: "XY path", and for a rename or copy the old path as the next field
+    fields, paths = out.split("\0"), []
+    i = 0
+    while i < len(fields):
+        entry = fields[i]
+        if entry:
+            paths.append(entry[3:])
+            if "R" in entry[:2] or "C" in entry[:2]:
+                i += 1
+                paths.append(fields[i])
+        i += 1
+    return sorted(paths)
 
 
 def commit_record(path: str | Path | None = None) -> dict[str, Any]:
-    """``{"git_commit": ...}``, with ``"git_dirty": [paths]`` when the commit is ``-dirty``."""
-    commit = git_commit(path)
-    out: dict[str, Any] = {"git_commit": commit}
-    if commit.endswith("-dirty"):
-        out["git_dirty"] = git_dirty_paths(path) or []
-    return out
+    """``{"git_commit": ...}`` (:func:`git_commit`), with ``"git_dirty"``, the paths of
+    :func:`git_dirty_paths`, when the commit is ``-dirty``; from one ``git status``."""
+    sha = git_output(["rev-parse", "HEAD"], path)
+    dirty = git_dirty_paths(path)
+    if sha is None or dirty is None:
+        return {"git_commit": "unknown"}
+    if not dirty:
+        return {"git_commit": sha.strip()}
+    return {"git_commit": f"{sha.strip()}-dirty", "git_dirty": dirty}
 
 
 def package_versions(names: tuple[str, ...] = RECORDED_PACKAGES) -> dict[str, str]:
