@@ -68,6 +68,13 @@ def test_training_run_numbers_count_saved_crashes_and_false_alarms():
     assert got["crash_rate_without_filter"] == pytest.approx(3 / 6)
     old = ex.training_run_numbers(ep.drop(columns="would_crash"), total_steps=100, bins=2)
     assert np.isnan(old["filter_precision"]) and np.isnan(old["saved_crashes"])  # v1 logs
+    # a filter that never fired (v1: 4 of 5 InvertedDoublePendulum seeds) saved nothing: zeros,
+    # so that a mean over seeds counts it, and the crash rate without it is the run's own
+    quiet = ep[~ep["filtered"]]
+    got = ex.training_run_numbers(quiet, total_steps=100, bins=2)
+    assert (got["saved_crashes"], got["false_alarms"], got["filter_recall"]) == (0, 0, 0.0)
+    assert np.isnan(got["filter_precision"])
+    assert got["crash_rate_without_filter"] == pytest.approx(2 / 3) == got["crash_rate"]
     for k in ("saved_crashes", "filter_precision", "crash_rate_without_filter"):
         assert k in ex.STUDY_COLUMNS
 

@@ -516,6 +516,10 @@ def test_scale_check_table_ranks_both_scales(project):
     assert t.loc["HDT", "check"] == pytest.approx(65.0)  # 60 + 5, seeds 0-2 add -1, 0, 1
     assert t.loc["HDT", "rank (study)"] == t.loc["HDT", "rank (check)"] == 1
     assert t.loc["DT", "seeds (check)"] == 3
+    low = evi.scale_check_table(
+        evi.load_evidence(CHAPTERS["04_hdt"], reps=200), higher_is_better=False
+    ).set_index("method")  # a measure where less is better (crashes): the order turns over
+    assert (low["rank (check)"] == len(low) + 1 - t["rank (check)"].reindex(low.index)).all()
 
 
 def test_thesis_study_runs_several_in_order_and_status_writes_nothing_before_a_run(project, capsys):

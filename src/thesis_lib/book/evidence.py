@@ -547,9 +547,12 @@ def plot_comparisons(ev: Evidence, metric: str | None = None, ax: Any = None) ->
     return ax.figure
 
 
-def scale_check_table(ev: Evidence, metric: str | None = None) -> pd.DataFrame:
+def scale_check_table(
+    ev: Evidence, metric: str | None = None, higher_is_better: bool = True
+) -> pd.DataFrame:
     """The scale check: per method, the mean of ``metric`` at the study's scale and at the
-    check's, with each scale's rank (1 = best)."""
+    check's, with each scale's rank (1 = best: the highest, or with ``higher_is_better=False``
+    the lowest, e.g. crashes)."""
     metric = metric or ev.study.metric
     c = ev.study.columns
     if ev.check.empty:
@@ -564,7 +567,9 @@ def scale_check_table(ev: Evidence, metric: str | None = None) -> pd.DataFrame:
         if s in means:
             out[s] = means[s].to_numpy()
             out[f"seeds ({s})"] = seeds[s].reindex(means.index).to_numpy()
-            out[f"rank ({s})"] = out[s].rank(ascending=False, method="min").to_numpy()
+            out[f"rank ({s})"] = (
+                out[s].rank(ascending=not higher_is_better, method="min").to_numpy()
+            )
     return out
 
 

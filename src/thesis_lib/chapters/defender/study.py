@@ -131,8 +131,9 @@ def _counterfactual_numbers(
     on a copy of the state, :class:`~thesis_lib.defender.DefenderWrapper`'s counterfactual):
     ``saved_crashes`` (it would have crashed), ``false_alarms`` (it would not),
     ``filter_precision`` = saved / filtered, ``filter_recall`` = saved / (saved + real
-    crashes), and ``crash_rate_without_filter`` = (saved + real crashes) / episodes. NaN where
-    the log has no counterfactual (no filter, or a run made before it existed)."""
+    crashes), and ``crash_rate_without_filter`` = (saved + real crashes) / episodes. A filter
+    that never fired saved nothing and raised no false alarm (precision NaN). NaN where the log
+    has no counterfactual (no filter, or a run made before it existed)."""
     nan = float("nan")
     names = (
         "saved_crashes",
@@ -141,11 +142,7 @@ def _counterfactual_numbers(
         "filter_recall",
         "crash_rate_without_filter",
     )
-    if (
-        "would_crash" not in ep
-        or not filtered.any()
-        or ep.loc[filtered, "would_crash"].isna().any()
-    ):
+    if "would_crash" not in ep or ep.loc[filtered, "would_crash"].isna().any():
         return dict.fromkeys(names, nan)
     saved = int(ep.loc[filtered, "would_crash"].astype(bool).sum())
     alarms = int(filtered.sum()) - saved
@@ -153,9 +150,9 @@ def _counterfactual_numbers(
     return {
         "saved_crashes": saved,
         "false_alarms": alarms,
-        "filter_precision": saved / (saved + alarms),
+        "filter_precision": saved / (saved + alarms) if saved + alarms else nan,
         "filter_recall": saved / (saved + real) if saved + real else nan,
-        "crash_rate_without_filter": (saved + real) / len(ep),
+        "crash_rate_without_filter": (saved + real) / len(ep) if len(ep) else nan,
     }
 
 

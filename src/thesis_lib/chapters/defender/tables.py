@@ -492,15 +492,16 @@ def summarize_study_counterfactual(rows: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index()[cols]
 
 
-STUDY_V2_DATA_NOTE = (
-    "the setting (SB3's SAC v2 with the thesis's 256-256 networks for 200,000 steps per run on "
-    "Hopper, not the authors' SAC v1 for 5,000 episodes; demonstrations from a 30,000-step SAC "
-    "run with those networks)"
-)
-
 STUDY_DATA_NOTE = (
     "the setting (SB3's SAC v2 and TD3 with 64-64 networks for 30,000 steps per run, not the "
     "authors' SAC v1 for 5,000 episodes; demonstrations from a 30,000-step SAC run, a group "
     "with too few roll-outs topped up from the ARS expert then shipped)"
 )
 """What may make the study's answer differ from the thesis's (the readings' last reason)."""
+
+STUDY_V2_DATA_NOTE = (
+    "the setting (SB3's SAC v2 with the thesis's 256-256 networks for 200,000 steps per run on "
+    "Hopper, not the authors' SAC v1 for 5,000 episodes; demonstrations from a 30,000-step SAC "
+    "run with those networks, a group with too few roll-outs topped up from the ARS expert)"
+)
+"""The same for the second study (``defender-c7c9-v2``)."""
