@@ -138,8 +138,9 @@ def test_original_init_is_gpt2_in_the_trunk_and_torch_outside():
 
 def test_d3rlpy_init_is_normal_in_the_trunk_and_torch_for_the_embeddings_and_head():
     """d3rlpy 2.8.1's ContinuousDecisionTransformer: ``apply(_init_weights)`` (N(0, 0.02), zero
-    biases) reaches the position table and the GPT blocks, made before it; the return, state
-    and action embeddings and the output head, made after it, keep PyTorch's defaults."""
+    biases) reaches the position table and the GPT blocks, attached before it; the return,
+    state and action embeddings and the output head, attached after it, keep PyTorch's
+    defaults."""
     m = _dt("d3rlpy")
     trunk = m.transformer
     assert abs(trunk.embed_timestep.weight.std().item() - 0.02) < 0.001

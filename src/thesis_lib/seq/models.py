@@ -204,8 +204,10 @@ class _TransformerConfig(ModelConfig):
     init: Literal["auto", "normal", "original", "torch", "d3rlpy"] = "auto"
     """Weight initialisation, of :data:`INIT_SCHEMES`: ``"normal"`` (every Linear and Embedding
     N(0, 0.02), zero biases: CORL, Hugging Face), ``"original"`` (the authors' code: GPT-2's
-    init in the trunk only), ``"torch"`` (PyTorch's defaults: the v1 studies), ``"auto"``
-    (``"original"`` with ``paper_compat``, else ``"normal"``)."""
+    init in the trunk only), ``"torch"`` (PyTorch's defaults: the v1 studies), ``"d3rlpy"``
+    (d3rlpy's DT, for the parity runs: ``"normal"`` in the trunk, PyTorch's defaults for the
+    token embeddings and heads), ``"auto"`` (``"original"`` with ``paper_compat``, else
+    ``"normal"``)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -226,7 +228,7 @@ class _TransformerConfig(ModelConfig):
 
     @property
     def resolved_init(self) -> str:
-        """``"normal"``, ``"original"`` or ``"torch"`` (``"auto"`` resolved)."""
+        """``"normal"``, ``"original"``, ``"torch"`` or ``"d3rlpy"`` (``"auto"`` resolved)."""
         return resolve_init(self.init, self.paper_compat)
 
     def block_config(self) -> GPTBlockConfig:
@@ -403,7 +405,7 @@ def init_transformer(model: nn.Module, scheme: str, n_layers: int) -> nn.Module:
     * ``"d3rlpy"``: d3rlpy 2.8.1's ``ContinuousDecisionTransformer``, for the parity runs: every
       :class:`TokenTransformer` (the time-step table, ``embed_ln``, the GPT blocks, ``ln_f``) as
       ``"normal"`` (no residual scaling), the token embeddings and the heads at PyTorch's
-      defaults (d3rlpy makes them after its ``apply(_init_weights)``).
+      defaults (d3rlpy attaches them after its ``apply(_init_weights)``).
 
     Returns:
         ``model``.

@@ -128,7 +128,8 @@ class ArchSpec:
     """Initialisation of the transformers (DT, HDT), of
     :data:`~thesis_lib.seq.models.INIT_SCHEMES`: ``auto`` = ``original`` with ``paper_compat``,
     else ``normal`` (every Linear and Embedding N(0, 0.02), as CORL's and Hugging Face's DT);
-    ``torch`` = PyTorch's defaults, what the v1 studies ran with."""
+    ``torch`` = PyTorch's defaults, what the v1 studies ran with; ``d3rlpy`` = d3rlpy's DT's
+    mix, for the parity runs."""
 
     def __post_init__(self) -> None:
         resolve_init(self.init, self.paper_compat)  # validates
@@ -140,7 +141,7 @@ class ArchSpec:
 
     @property
     def resolved_init(self) -> str:
-        """``normal``, ``original`` or ``torch`` (``auto`` resolved)."""
+        """``normal``, ``original``, ``torch`` or ``d3rlpy`` (``auto`` resolved)."""
         return resolve_init(self.init, self.paper_compat)
 
     def task_dict(self) -> dict[str, Any]:
