@@ -75,6 +75,9 @@ def test_training_run_numbers_count_saved_crashes_and_false_alarms():
     assert (got["saved_crashes"], got["false_alarms"], got["filter_recall"]) == (0, 0, 0.0)
     assert np.isnan(got["filter_precision"])
     assert got["crash_rate_without_filter"] == pytest.approx(2 / 3) == got["crash_rate"]
+    # a plain agent's log has the column too (empty): it has no counterfactual
+    plain = ex.training_run_numbers(quiet, total_steps=100, bins=2, has_filter=False)
+    assert np.isnan(plain["saved_crashes"]) and np.isnan(plain["crash_rate_without_filter"])
     for k in ("saved_crashes", "filter_precision", "crash_rate_without_filter"):
         assert k in ex.STUDY_COLUMNS
 
@@ -163,6 +166,7 @@ def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
         assert np.isfinite(row["eval_return"]) and 0 <= row["eval_crash_rate"] <= 1
         assert json.loads(json.dumps(row, default=float)) is not None
     assert plain["method"] == "SAC" and plain["filtered_rate"] == 0.0
+    assert np.isnan(plain["saved_crashes"]) and np.isfinite(filt["saved_crashes"])
     assert "demos_file" not in plain
     assert filt["demos_safe"] == filt["demos_unsafe"] == 3
     # 300 SAC steps on a 20-step pendulum: no roll-out balanced, so the safe group is the expert's

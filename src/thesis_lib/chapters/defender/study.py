@@ -59,7 +59,10 @@ CRASH_DEFINITION = (
 
 
 def training_run_numbers(
-    episodes: pd.DataFrame, total_steps: int, bins: int = STUDY_CURVE_BINS
+    episodes: pd.DataFrame,
+    total_steps: int,
+    bins: int = STUDY_CURVE_BINS,
+    has_filter: bool = True,
 ) -> dict[str, Any]:
     """Reduce one training run's episode log to the study's per-run measures.
 
@@ -73,6 +76,8 @@ def training_run_numbers(
             ``filtered`` and ``timestep`` (the environment step at which it ended, 1-based).
         total_steps: the run's environment steps (the curve's spans are ``total_steps / bins``).
         bins: spans of the curve.
+        has_filter: whether the run had a filter; without one the counterfactual columns are
+            NaN (a plain agent's log has an empty ``would_crash`` column too).
 
     Returns:
         ``episodes``, ``crashes``, ``filtered``; ``crash_rate`` and ``filtered_rate`` (shares of
@@ -120,7 +125,11 @@ def training_run_numbers(
         out[f"crash_rate_b{b}"] = float(crashed[m].mean()) if k else np.nan
         out[f"filtered_rate_b{b}"] = float(filtered[m].mean()) if k else np.nan
         out[f"return_b{b}"] = float(ret[m].mean()) if k else np.nan
-    out.update(_counterfactual_numbers(ep, crashed, filtered))
+    out.update(
+        _counterfactual_numbers(
+            ep if has_filter else ep.drop(columns="would_crash", errors="ignore"), crashed, filtered
+        )
+    )
     return out
 
 
@@ -241,7 +250,7 @@ def study_row(config: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, A
         run_row[k] = None if pd.isna(run_row[k]) else run_row[k]
     steps, cpu = int(first["steps"]), float(first["train_cpu_s"])
     ref = THESIS_SAC_RETURN.get(first["task"], np.nan)
-    numbers = training_run_numbers(ep, steps, int(config["bins"]))
+    numbers = training_run_numbers(ep, steps, int(config["bins"]), bool(config["strategy"]))
     return {
         "method": config["label"],
         "setting": thesis_env_name(first["task"]),
