@@ -67,18 +67,10 @@ def _rows(study, levels: dict[str, float]) -> pd.DataFrame:
 
 
 def _verdicts(study, rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, str]]:
-    from thesis_lib.book import study as st
-    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+    from thesis_lib.book.study import evaluate_rows
+    from thesis_lib.stats.claims import claim_verdicts
 
-    res = evaluate_comparisons(
-        rows,
-        st.study_comparisons(study),
-        metric=study.metric,
-        reps=200,
-        interval=study.interval,
-        gates=st.study_gates(study),
-        parity=st._parity_table(),
-    )
+    res = evaluate_rows(study, rows, reps=200)
     return res, claim_verdicts(res).set_index("claim").verdict.to_dict()
 
 

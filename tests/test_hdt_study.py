@@ -52,19 +52,10 @@ def _rows(study, hopper: dict[str, float], maze: dict[str, float]) -> pd.DataFra
 
 
 def _verdicts(study, rows: pd.DataFrame) -> tuple[pd.DataFrame, pd.Series]:
-    from thesis_lib.book import study as st
-    from thesis_lib.stats.claims import claim_verdicts, evaluate_comparisons
+    from thesis_lib.book.study import evaluate_rows
+    from thesis_lib.stats.claims import claim_verdicts
 
-    main = rows[rows["scale"] == "study"]
-    res = evaluate_comparisons(
-        main,
-        st.study_comparisons(study),
-        metric=study.metric,
-        reps=200,
-        interval=study.interval,
-        gates=st.study_gates(study),
-        parity=st._parity_table(),
-    )
+    res = evaluate_rows(study, rows, reps=200)  # the d32 check's rows left out
     return res, claim_verdicts(res).set_index("claim").verdict
 
 

@@ -742,13 +742,23 @@ def evaluate_study(study: Study | str, reps: int = 10_000) -> pd.DataFrame:
             f"run 'thesis study {study.ref}' first"
         )
     rows = study_rows(study)
-    if "scale" in rows:
-        rows = rows[rows["scale"].fillna("study") == "study"]
     if "task_key" in rows:  # a bad row is named by its task file (thesis_lib.stats.score_matrix)
         where = study.folder.relative_to(project_root()).as_posix()
         rows = rows.assign(task_file=f"{where}/tasks/" + rows["task_key"] + ".json")
+    res = evaluate_rows(study, rows, reps)
+    res.insert(0, "study", study.study)
+    res.insert(1, "chapter", study.chapter)
+    return res
+
+
+def evaluate_rows(study: Study, rows: pd.DataFrame, reps: int = 10_000) -> pd.DataFrame:
+    """``study``'s pre-registered comparisons, gates and parity evidence applied to ``rows``
+    (its scale-check rows left out), complete or not: what :func:`evaluate_study` computes
+    for a finished study, e.g. for rows made by hand to test a study file before it runs."""
+    if "scale" in rows:
+        rows = rows[rows["scale"].fillna("study") == "study"]
     c = study.columns
-    res = evaluate_comparisons(
+    return evaluate_comparisons(
         rows,
         study_comparisons(study),
         metric=study.metric,
@@ -760,9 +770,6 @@ def evaluate_study(study: Study | str, reps: int = 10_000) -> pd.DataFrame:
         gates=study_gates(study),
         parity=_parity_table(),
     )
-    res.insert(0, "study", study.study)
-    res.insert(1, "chapter", study.chapter)
-    return res
 
 
 CLAIMS_COLUMNS = [
@@ -859,6 +866,7 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
 __all__ = [
     "Study",
     "chapter_studies",
+    "evaluate_rows",
     "evaluate_study",
     "history_entries",
     "is_complete",
