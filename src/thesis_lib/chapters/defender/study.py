@@ -125,24 +125,21 @@ def training_run_numbers(
         out[f"crash_rate_b{b}"] = float(crashed[m].mean()) if k else np.nan
         out[f"filtered_rate_b{b}"] = float(filtered[m].mean()) if k else np.nan
         out[f"return_b{b}"] = float(ret[m].mean()) if k else np.nan
-    out.update(
-        _counterfactual_numbers(
-            ep if has_filter else ep.drop(columns="would_crash", errors="ignore"), crashed, filtered
-        )
-    )
+    out.update(_counterfactual_numbers(ep, crashed, filtered, has_filter))
     return out
 
 
 def _counterfactual_numbers(
-    ep: pd.DataFrame, crashed: np.ndarray, filtered: np.ndarray
+    ep: pd.DataFrame, crashed: np.ndarray, filtered: np.ndarray, has_filter: bool = True
 ) -> dict[str, float]:
     """What the filter saved, from the episode log's ``would_crash`` (a filtered action stepped
     on a copy of the state, :class:`~thesis_lib.defender.DefenderWrapper`'s counterfactual):
     ``saved_crashes`` (it would have crashed), ``false_alarms`` (it would not),
     ``filter_precision`` = saved / filtered, ``filter_recall`` = saved / (saved + real
     crashes), and ``crash_rate_without_filter`` = (saved + real crashes) / episodes. A filter
-    that never fired saved nothing and raised no false alarm (precision NaN). NaN where the log
-    has no counterfactual (no filter, or a run made before it existed)."""
+    that never fired saved nothing and raised no false alarm (precision NaN). NaN without a
+    filter (``has_filter=False``: a plain agent's log has an empty ``would_crash`` column too)
+    or where the log has no counterfactual (a run made before it existed)."""
     nan = float("nan")
     names = (
         "saved_crashes",
@@ -151,7 +148,7 @@ def _counterfactual_numbers(
         "filter_recall",
         "crash_rate_without_filter",
     )
-    if "would_crash" not in ep or ep.loc[filtered, "would_crash"].isna().any():
+    if not has_filter or "would_crash" not in ep or ep.loc[filtered, "would_crash"].isna().any():
         return dict.fromkeys(names, nan)
     saved = int(ep.loc[filtered, "would_crash"].astype(bool).sum())
     alarms = int(filtered.sum()) - saved
