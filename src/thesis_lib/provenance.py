@@ -86,16 +86,12 @@ def git_dirty_paths(path: str | Path | None = None) -> list[str] | None:
     if out is None:
         return None
     # porcelain v1 with -z: "XY path", and for a rename or copy the old path as the next field
-    fields, paths = out.split("\0"), []
-    i = 0
-    while i < len(fields):
-        entry = fields[i]
+    fields, paths = iter(out.split("\0")), []
+    for entry in fields:
         if entry:
             paths.append(entry[3:])
             if "R" in entry[:2] or "C" in entry[:2]:
-                i += 1
-                paths.append(fields[i])
-        i += 1
+                paths.append(next(fields))
     return sorted(paths)
 
 
