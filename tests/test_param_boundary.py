@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import shutil
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Literal, get_args
 
 import nbformat
 import pytest
@@ -228,6 +228,17 @@ def test_check_value_refuses_with_name_value_and_expectation(name, value, expect
 def test_chapter_hints_read_without_import_match_the_config(chapter):
     cls = CHAPTERS[chapter].Config
     assert list(CHAPTERS[chapter].hints().items()) == list(config_hints(cls).items())
+
+
+@pytest.mark.parametrize("chapter", sorted(c for c in CHAPTERS if "init" in CHAPTERS[c].hints()))
+def test_a_chapters_init_takes_every_scheme_the_models_know(chapter):
+    """``thesis run -p init d3rlpy`` reaches the models: the hint lists :data:`INIT_SCHEMES`."""
+    from thesis_lib.seq.models import INIT_SCHEMES
+
+    assert get_args(CHAPTERS[chapter].hints()["init"]) == INIT_SCHEMES
+    assert check_value("init", "d3rlpy", CHAPTERS[chapter].hints()["init"]) == "d3rlpy"
+    with pytest.raises(ValueError, match="init"):
+        check_value("init", "xavier", CHAPTERS[chapter].hints()["init"])
 
 
 @pytest.mark.slow

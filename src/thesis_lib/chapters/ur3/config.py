@@ -84,11 +84,12 @@ class Config:
     """Limits: clip (clamp and rate-limit) or reject."""
     viewer_frames: int = 180
     """Frames stored in the 3-D viewer (subsampled)."""
-    init: Literal["auto", "normal", "original", "torch"] = "auto"
+    init: Literal["auto", "normal", "original", "torch", "d3rlpy"] = "auto"
     """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
     ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
-    Hugging Face's DT) or ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
-    names no ``init`` ran with it)."""
+    Hugging Face's DT), ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
+    names no ``init`` ran with it) or ``d3rlpy`` (d3rlpy 2.8.1's DT: ``normal`` in the trunk,
+    PyTorch's defaults for the token embeddings and the head; the parity runs')."""
     sampling: Literal["end", "start"] | None = None
     """How the training windows are drawn (:class:`~thesis_lib.data.SequenceDataset`): ``end``
     (a step uniform over all steps, the window ending at it: d3rlpy's DT), ``start`` (the
