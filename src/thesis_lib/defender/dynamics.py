@@ -12,6 +12,7 @@ Used in: DEFENDER (thesis 4.3).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -80,6 +81,43 @@ class DynamicsModel:
         self._added = 0
         self.n_updates = 0
         self.last_loss = float("nan")
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything a continued run needs: the network, its optimiser, the stored
+        transitions, the counters and the minibatch sampler's state (a checkpoint,
+        :mod:`thesis_lib.rl.resume`)."""
+        return {
+            "net": {k: v.clone() for k, v in self.net.state_dict().items()},
+            "optimizer": self.optimizer.state_dict(),
+            "rng": self._rng.bit_generator.state,
+            "inputs": self._inputs[: self._size].copy(),
+            "targets": self._targets[: self._size].copy(),
+            "buffer_size": len(self._inputs),
+            "size": self._size,
+            "pos": self._pos,
+            "added": self._added,
+            "n_updates": self.n_updates,
+            "last_loss": self.last_loss,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict`'s ``state``, taken from a model of the same sizes.
+
+        Raises:
+            ValueError: a state of another buffer size.
+        """
+        if state["buffer_size"] != len(self._inputs):
+            raise ValueError(
+                f"The dynamics state has a buffer of {state['buffer_size']}, this model "
+                f"{len(self._inputs)}."
+            )
+        self.net.load_state_dict(state["net"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self._rng.bit_generator.state = state["rng"]
+        n = int(state["size"])
+        self._inputs[:n], self._targets[:n] = state["inputs"], state["targets"]
+        self._size, self._pos, self._added = n, int(state["pos"]), int(state["added"])
+        self.n_updates, self.last_loss = int(state["n_updates"]), float(state["last_loss"])
 
     @property
     def size(self) -> int:

@@ -330,6 +330,25 @@ class DefenderWrapper(gym.Wrapper):
             }
         )
 
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        """What lasts across episodes: the dynamics model, the episode log and the step counts
+        (a checkpoint between episodes, :mod:`thesis_lib.rl.resume`; the trajectory's costs
+        start again at every reset)."""
+        return {
+            "dynamics": self.dynamics.state_dict(),
+            "rows": [dict(r) for r in self._rows],
+            "n_filtered_steps": self.n_filtered_steps,
+            "n_real_steps": self.n_real_steps,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict`'s ``state`` (the next call is ``reset``)."""
+        self.dynamics.load_state_dict(state["dynamics"])
+        self._rows = [dict(r) for r in state["rows"]]
+        self.n_filtered_steps = int(state["n_filtered_steps"])
+        self.n_real_steps = int(state["n_real_steps"])
+
     def filter_confusion(self) -> dict[str, float | int]:
         """The filter judged against what would have happened (needs ``counterfactual=True``).
 

@@ -105,6 +105,7 @@ class EpisodeLogger(BaseCallback):
         self._returns = np.zeros(0)
         self._lengths = np.zeros(0, dtype=np.int64)
         self._start = 0.0
+        self._earlier_s = 0.0  # wall seconds of a resumed run's earlier parts
 
     def _on_training_start(self) -> None:
         n_envs = self.training_env.num_envs
@@ -114,7 +115,29 @@ class EpisodeLogger(BaseCallback):
         if self.locals.get("reset_num_timesteps", True) or len(self._returns) != n_envs:
             self._returns = np.zeros(n_envs)
             self._lengths = np.zeros(n_envs, dtype=np.int64)
-            self._start = time.perf_counter()
+            self._start = time.perf_counter() - self._earlier_s
+
+    @property
+    def between_episodes(self) -> bool:
+        """True when no env copy is inside an episode (before the first step, or right after
+        every copy's episode ended): where a checkpoint can be taken (`thesis_lib.rl.resume`)."""
+        return not self._lengths.any()
+
+    def state_dict(self) -> dict[str, Any]:
+        """The log so far and its clock, taken between episodes (`between_episodes`)."""
+        if not self.between_episodes:
+            raise RuntimeError("EpisodeLogger.state_dict is taken between episodes only.")
+        return {
+            "rows": [dict(r) for r in self._rows],
+            "elapsed_s": time.perf_counter() - self._start if len(self._returns) else 0.0,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue the log of `state`: its rows, and its clock for `wall_time_s`."""
+        self._rows = [dict(r) for r in state["rows"]]
+        self._earlier_s = float(state["elapsed_s"])
+        self._returns = np.zeros(0)  # the next training start sizes them
+        self._lengths = np.zeros(0, dtype=np.int64)
 
     def _on_step(self) -> bool:
         rewards = self.locals["rewards"]
@@ -171,23 +194,41 @@ class ProgressBar(BaseCallback):
         logger: the episode logger to read returns from.
         window: how many recent episodes the running mean covers.
         desc: label shown left of the bar (e.g. "TD3 seed 0").
+        total: the run's env steps, for a run learnt in several `learn` calls: one bar from the
+            model's step count to `total`, closed when it is reached. None: a bar per call.
 
     Used in: Background (thesis 2.5-2.7), DEFENDER (4.3).
     """
 
-    def __init__(self, logger: EpisodeLogger, window: int = 10, desc: str | None = None) -> None:
+    def __init__(
+        self,
+        logger: EpisodeLogger,
+        window: int = 10,
+        desc: str | None = None,
+        total: int | None = None,
+    ) -> None:
         super().__init__()
         self.episode_logger = logger
         self.window = window
         self.desc = desc
+        self.total = total
         self._n_logged = 0
         self._pbar: Any = None
 
     def _on_training_start(self) -> None:
         from tqdm.auto import tqdm
 
-        total = self.locals["total_timesteps"] - self.model.num_timesteps
-        self._pbar = tqdm(total=total, desc=self.desc, unit="step", dynamic_ncols=True)
+        if self.total is None:
+            total = self.locals["total_timesteps"] - self.model.num_timesteps
+            self._pbar = tqdm(total=total, desc=self.desc, unit="step", dynamic_ncols=True)
+        elif self._pbar is None:  # a run learnt in chunks: one bar over all, from where it is
+            self._pbar = tqdm(
+                total=self.total,
+                initial=self.model.num_timesteps,
+                desc=self.desc,
+                unit="step",
+                dynamic_ncols=True,
+            )
 
     def _on_step(self) -> bool:
         self._pbar.update(self.training_env.num_envs)
@@ -206,6 +247,9 @@ class ProgressBar(BaseCallback):
         return True
 
     def _on_training_end(self) -> None:
-        if self._pbar is not None:
-            self._pbar.refresh()
+        if self._pbar is None:
+            return
+        self._pbar.refresh()
+        if self.total is None or self.model.num_timesteps >= self.total:
             self._pbar.close()
+            self._pbar = None

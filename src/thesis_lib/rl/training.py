@@ -5,6 +5,7 @@ Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -65,7 +66,12 @@ class TrainResult(NamedTuple):
     config: RLConfig
     """The configuration that was run."""
     wall_time_s: float
-    """Seconds spent in `model.learn`."""
+    """Seconds spent in `model.learn` (a resumed run: with its earlier parts)."""
+    cpu_time_s: float = float("nan")
+    """CPU seconds of this process spent in training (a resumed run: with its earlier parts)."""
+    resumed_cpu_s: float = 0.0
+    """Of `cpu_time_s`, the CPU seconds of the earlier parts a resumed run continued (0 where it
+    ran in one go)."""
 
 
 class Predictor(Protocol):
@@ -178,6 +184,8 @@ def train(
     callbacks: Iterable[BaseCallback] = (),
     progress: bool = True,
     info_keys: Sequence[str] = (),
+    checkpoint: str | Path | None = None,
+    checkpoint_every: int = 20_000,
 ) -> TrainResult:
     """Train SAC, TD3 or DDPG as `config` says and log every training episode.
 
@@ -192,24 +200,161 @@ def train(
         callbacks: further SB3 callbacks, called after the episode logger.
         progress: show a tqdm bar with the step count, last return and mean of the last 10.
         info_keys: `info` entries to copy into each episode row (see `EpisodeLogger`).
+        checkpoint: a folder to keep the run resumable in (`thesis_lib.rl.resume`). Where it
+            holds a checkpoint of this config, training continues from there. The result is the
+            same, bit for bit, as the run that was never stopped. Needs one env copy,
+            `train_freq` 1, and callbacks with `state_dict`/`load_state_dict` (or none).
+        checkpoint_every: env steps between checkpoints; each is taken at the first episode
+            end after this many steps.
 
     Returns:
-        `TrainResult(model, episodes, config, wall_time_s)`.
+        `TrainResult(model, episodes, config, wall_time_s, cpu_time_s, resumed_cpu_s)`. A
+        resumed run's seconds include its earlier parts, up to the checkpoint it resumed from.
+
+    Raises:
+        ValueError: with `checkpoint`: several env copies, a `VecEnv`, `train_freq` above 1, a
+            callback without `state_dict`, or a checkpoint of another config in the folder.
 
     Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
     """
     # Small MLPs train several times faster on one thread than on two busy cores.
     torch.set_num_threads(1)
+    callbacks = list(callbacks)
+    if checkpoint is not None:
+        return _train_resumable(
+            config, env, callbacks, progress, info_keys, Path(checkpoint), checkpoint_every
+        )
     model = make_model(config, env)
     logger = EpisodeLogger(info_keys=info_keys)
     chain: list[BaseCallback] = [logger]
     if progress:
         chain.append(ProgressBar(logger, desc=f"{config.algo} seed {config.seed}"))
     chain.extend(callbacks)
-    start = time.perf_counter()
+    start, cpu0 = time.perf_counter(), time.process_time()
     model.learn(total_timesteps=config.total_timesteps, callback=CallbackList(chain))
     wall_time_s = time.perf_counter() - start
-    return TrainResult(model, logger.episodes, config, wall_time_s)
+    return TrainResult(model, logger.episodes, config, wall_time_s, time.process_time() - cpu0)
+
+
+class _ChunkGuard(BaseCallback):
+    """First in a chunk's callbacks: undoes what each `learn` call's set-up changes, so that
+    learning in chunks is learning in one call. SB3 sets the run's length to the chunk's
+    (the learning-rate schedule reads it) and resets the action noise's process."""
+
+    def __init__(self, total_timesteps: int) -> None:
+        super().__init__()
+        self.total_timesteps = int(total_timesteps)
+        self.noise: ActionNoise | None = None
+
+    def _on_training_start(self) -> None:
+        self.model._total_timesteps = self.total_timesteps
+        if self.noise is not None:
+            self.model.action_noise = self.noise
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def _train_resumable(
+    config: RLConfig,
+    env: gym.Env | VecEnv | None,
+    callbacks: list[BaseCallback],
+    progress: bool,
+    info_keys: Sequence[str],
+    folder: Path,
+    every: int,
+) -> TrainResult:
+    """`train` with checkpoints in `folder` (`thesis_lib.rl.resume`)."""
+    from thesis_lib.rl import resume
+
+    if every < 1:
+        raise ValueError(f"checkpoint_every must be a positive number of steps, got {every}.")
+    if isinstance(env, VecEnv):
+        raise ValueError(
+            "Checkpointed training takes a gymnasium env (or none), not a VecEnv: it wraps the "
+            "env to record its resets."
+        )
+    lacking = [type(cb).__name__ for cb in callbacks if not resume.stateful_parts([cb])]
+    if lacking:
+        raise ValueError(
+            f"Checkpointed training cannot restore the callbacks {', '.join(lacking)}: give "
+            "them state_dict/load_state_dict, or train without checkpoint."
+        )
+    if config.n_envs != 1:
+        raise ValueError(f"Checkpointed training needs n_envs 1, got {config.n_envs}.")
+    if env is None:
+        if config.env_id is None:
+            raise ValueError("RLConfig.env_id is None and no env was passed: give one of them.")
+        env = gym.make(config.env_id)
+    recorder = resume.ResetRecorder(env)
+    logger = EpisodeLogger(info_keys=info_keys)
+    wrappers = resume.stateful_parts(resume.wrapper_chain(env))
+    parts: dict[str, Any] = {
+        "episode_logger": logger,
+        **{f"wrapper{i}:{type(w).__name__}": w for i, w in enumerate(wrappers)},
+        **{f"callback{i}:{type(cb).__name__}": cb for i, cb in enumerate(callbacks)},
+    }
+    config_json = json.loads(json.dumps(config_dict(config), default=str))
+    earlier_wall = earlier_cpu = 0.0
+    found = resume.latest_checkpoint(folder)
+    if found is None:
+        model = make_model(config, recorder)
+    else:
+        model, state = resume.load_checkpoint(
+            found, algo_class(config.algo), recorder, parts, device=config.device
+        )
+        if state["config"] != config_json:
+            raise ValueError(
+                f"{found} is a checkpoint of another run (its config differs from this one's); "
+                "remove the folder or give another."
+            )
+        model.set_logger(silent_logger())
+        earlier_wall, earlier_cpu = float(state["wall_s"]), float(state["cpu_s"])
+    resume.check_resumable(model)
+    guard = _ChunkGuard(config.total_timesteps)
+    chain: list[BaseCallback] = [guard, logger]
+    if progress:
+        chain.append(
+            ProgressBar(
+                logger, desc=f"{config.algo} seed {config.seed}", total=config.total_timesteps
+            )
+        )
+    chain.extend(callbacks)
+    start, cpu0 = time.perf_counter(), time.process_time()
+
+    def learn(steps: int) -> bool:
+        """Learn `steps` more env steps; False where a callback stopped training."""
+        target = model.num_timesteps + steps
+        guard.noise = copy.deepcopy(model.action_noise)
+        model.learn(steps, callback=CallbackList(chain), reset_num_timesteps=False)
+        return model.num_timesteps >= target
+
+    total = config.total_timesteps
+    while model.num_timesteps < total:
+        next_save = (model.num_timesteps // every + 1) * every
+        if not learn(min(total, next_save) - model.num_timesteps):
+            break
+        stopped = False
+        while model.num_timesteps < total and not logger.between_episodes:
+            if not learn(1):
+                stopped = True
+                break
+        if stopped or model.num_timesteps >= total:
+            break
+        resume.save_checkpoint(
+            folder,
+            model,
+            recorder,
+            parts,
+            {
+                "config": config_json,
+                "wall_s": earlier_wall + time.perf_counter() - start,
+                "cpu_s": earlier_cpu + time.process_time() - cpu0,
+            },
+        )
+    wall_time_s = earlier_wall + time.perf_counter() - start
+    cpu_time_s = earlier_cpu + time.process_time() - cpu0
+    return TrainResult(model, logger.episodes, config, wall_time_s, cpu_time_s, earlier_cpu)
 
 
 def _curve_task(config: RLConfig, progress: bool, cache_dir: str | None = None) -> pd.DataFrame:

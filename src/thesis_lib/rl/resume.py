@@ -1,0 +1,258 @@
+"""Checkpoints of an SB3 training run, taken between episodes, from which the run continues bit
+for bit: the resumed run's episodes and networks are those of the run that was never stopped.
+
+:func:`~thesis_lib.rl.train` with ``checkpoint=<folder>`` uses them. It learns in chunks
+(``learn(reset_num_timesteps=False)``, which SB3 continues exactly). After each chunk it finishes
+the running episode one step at a time, then saves at that episode boundary:
+
+- the model, with SB3's ``save``: networks, optimisers, entropy coefficient, counters;
+- the filled part of the replay buffer;
+- every random state the rest of the run draws from: torch's, NumPy's, Python's, the action
+  space's, and the environment's **as it was before its last reset**. On resume that reset is
+  made again, so no simulator state needs saving;
+- the episode log, and the wall and CPU seconds spent so far;
+- the state of each wrapper in the env's chain, and of each extra callback, that has
+  ``state_dict``/``load_state_dict``. DEFENDER's filter has them: its dynamics model and its
+  episode log.
+
+Why by hand: SB3's ``CheckpointCallback`` saves the model (and optionally the buffer) at any step.
+It does not save the random states or the running episode, so a run continued from it is a
+different run. No library resumes an SB3 run exactly.
+
+Limits, each refused with a clear error: one env copy, ``train_freq`` 1, and plain ``Box``
+replay buffers. Work done after the last checkpoint is lost when a run is killed. Its CPU time is
+not counted in the resumed run's cost.
+
+Used in: DEFENDER (thesis 4.3), through its study's tasks (``thesis study 03_defender``).
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import shutil
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.buffers import ReplayBuffer
+
+from thesis_lib._io import atomic_write
+
+CHECKPOINT_VERSION = 1
+"""Format of the files :func:`save_checkpoint` writes; another version is refused on load."""
+
+LATEST = "LATEST"
+"""The file of a checkpoint folder that names its newest complete checkpoint."""
+
+
+class ResetRecorder(gym.Wrapper):
+    """Keeps what the environment's last reset drew from: the state of its random generator just
+    before the reset, and the seed the reset was given (None for SB3's automatic resets).
+
+    A checkpoint saves them. On resume the environment is put back in that state and reset again,
+    which gives the same first observation and the same simulator state.
+
+    Example:
+        >>> env = ResetRecorder(gym.make("Pendulum-v1"))
+        >>> _ = env.reset(seed=3)
+        >>> env.seed_of_reset
+        3
+        >>> state = env.rng_before_reset
+        >>> first, _ = env.reset()
+        >>> env.unwrapped.np_random.bit_generator.state = env.rng_before_reset
+        >>> again, _ = env.reset()
+        >>> bool((first == again).all())
+        True
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.rng_before_reset: dict[str, Any] | None = None
+        self.seed_of_reset: int | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        rng = getattr(self.env.unwrapped, "_np_random", None)
+        self.rng_before_reset = None if rng is None else dict(rng.bit_generator.state)
+        self.seed_of_reset = seed
+        return self.env.reset(seed=seed, options=options)
+
+
+def stateful_parts(objects: Sequence[Any]) -> list[Any]:
+    """The objects of ``objects`` that a checkpoint saves and restores: those with
+    ``state_dict`` and ``load_state_dict`` methods."""
+    return [o for o in objects if callable(getattr(o, "state_dict", None))]
+
+
+def wrapper_chain(env: gym.Env) -> list[gym.Env]:
+    """``env`` and every env it wraps, outermost first.
+
+    >>> [type(e).__name__ for e in wrapper_chain(gym.make("Pendulum-v1"))][-1]
+    'PendulumEnv'
+    """
+    chain: list[gym.Env] = []
+    inner: Any = env
+    while isinstance(inner, gym.Env):
+        chain.append(inner)
+        inner = getattr(inner, "env", None)
+    return chain
+
+
+def _buffer_state(buffer: ReplayBuffer) -> dict[str, Any]:
+    n = buffer.buffer_size if buffer.full else buffer.pos
+    arrays = {
+        name: value[:n].copy()
+        for name, value in vars(buffer).items()
+        if isinstance(value, np.ndarray) and value.shape[:1] == (buffer.buffer_size,)
+    }
+    return {
+        "class": type(buffer).__name__,
+        "buffer_size": buffer.buffer_size,
+        "pos": buffer.pos,
+        "full": buffer.full,
+        "arrays": arrays,
+    }
+
+
+def _load_buffer(buffer: ReplayBuffer, state: Mapping[str, Any]) -> None:
+    if state["class"] != type(buffer).__name__ or state["buffer_size"] != buffer.buffer_size:
+        raise ValueError(
+            f"The checkpoint's replay buffer ({state['class']} of {state['buffer_size']}) does not "
+            f"fit the model's ({type(buffer).__name__} of {buffer.buffer_size})."
+        )
+    for name, value in state["arrays"].items():
+        getattr(buffer, name)[: len(value)] = value
+    buffer.pos, buffer.full = int(state["pos"]), bool(state["full"])
+
+
+def _replay_buffer(model: BaseAlgorithm) -> ReplayBuffer:
+    buffer = getattr(model, "replay_buffer", None)
+    if type(buffer) is not ReplayBuffer:
+        raise ValueError(
+            f"Checkpointed training saves a plain ReplayBuffer, got {type(buffer).__name__}."
+        )
+    return buffer
+
+
+def check_resumable(model: BaseAlgorithm) -> None:
+    """Raise ``ValueError`` where :func:`save_checkpoint` could not continue ``model`` exactly."""
+    vec_env = model.get_env()
+    n_envs = 0 if vec_env is None else vec_env.num_envs
+    if n_envs != 1:
+        raise ValueError(
+            f"Checkpointed training needs one env copy, got {n_envs}: a checkpoint is taken "
+            "between episodes, and copies end their episodes at different steps."
+        )
+    freq = getattr(model, "train_freq", None)
+    if freq is None or freq.frequency != 1 or freq.unit.value != "step":
+        raise ValueError(
+            f"Checkpointed training needs train_freq 1 (one update per env step), got {freq}: "
+            "otherwise the chunks it learns in would not split the run where it splits itself."
+        )
+    _replay_buffer(model)
+
+
+def latest_checkpoint(folder: str | Path) -> Path | None:
+    """The newest complete checkpoint in ``folder``, or None where there is none."""
+    pointer = Path(folder) / LATEST
+    if not pointer.is_file():
+        return None
+    part = Path(folder) / pointer.read_text().strip()
+    return part if (part / "state.pt").is_file() else None
+
+
+def save_checkpoint(
+    folder: str | Path,
+    model: BaseAlgorithm,
+    recorder: ResetRecorder,
+    parts: Mapping[str, Any],
+    extra: Mapping[str, Any],
+) -> Path:
+    """Save ``model``'s run at an episode boundary into ``folder``; return the checkpoint's path.
+
+    ``parts``: named objects with ``state_dict`` (the episode logger, stateful wrappers and
+    callbacks). ``extra``: anything else to keep (the config, seconds spent). The checkpoint is
+    written under a temporary name, renamed, and only then named in ``LATEST``; older ones are
+    removed after. A run killed while saving keeps its previous checkpoint.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    name = f"step-{int(model.num_timesteps):010d}"
+    tmp = folder / f".{name}.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    model.save(tmp / "model.zip")
+    torch.save(_buffer_state(_replay_buffer(model)), tmp / "buffer.pt")
+    state = {
+        "version": CHECKPOINT_VERSION,
+        "num_timesteps": int(model.num_timesteps),
+        "rng": {
+            "torch": torch.get_rng_state(),
+            "numpy": np.random.get_state(),  # noqa: NPY002 (SB3 seeds the legacy global RNG)
+            "python": random.getstate(),
+            "action_space": dict(model.action_space.np_random.bit_generator.state),
+            "env_before_reset": recorder.rng_before_reset,
+            "env_reset_seed": recorder.seed_of_reset,
+        },
+        "parts": {key: part.state_dict() for key, part in parts.items()},
+        **extra,
+    }
+    torch.save(state, tmp / "state.pt")
+    final = folder / name
+    shutil.rmtree(final, ignore_errors=True)
+    os.replace(tmp, final)
+    atomic_write(folder / LATEST, lambda tmp: tmp.write_text(name))
+    for old in folder.glob("step-*"):
+        if old.name != name:
+            shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def load_checkpoint(
+    path: str | Path,
+    algo_cls: type[BaseAlgorithm],
+    env: ResetRecorder,
+    parts: Mapping[str, Any],
+    device: str | torch.device = "auto",
+) -> tuple[BaseAlgorithm, dict[str, Any]]:
+    """The model of the checkpoint at ``path`` on ``env`` (a fresh env of the same run), with its
+    replay buffer and random states restored and ``parts`` loaded; and the checkpoint's state
+    (its ``extra`` entries). The next ``learn`` call resets ``env`` as the saved run did.
+
+    Raises:
+        ValueError: a checkpoint of another format version, or a ``parts`` key it lacks.
+    """
+    path = Path(path)
+    state = torch.load(path / "state.pt", weights_only=False)
+    if state.get("version") != CHECKPOINT_VERSION:
+        raise ValueError(
+            f"{path} is a checkpoint of format {state.get('version')}, this code reads "
+            f"{CHECKPOINT_VERSION}; remove the folder to start the run again."
+        )
+    missing = sorted(set(parts) - set(state["parts"]))
+    if missing:
+        raise ValueError(f"{path} has no state for {', '.join(missing)}.")
+    model = algo_cls.load(path / "model.zip", env=env, device=device)
+    _load_buffer(_replay_buffer(model), torch.load(path / "buffer.pt", weights_only=False))
+    for key, part in parts.items():
+        part.load_state_dict(state["parts"][key])
+    # `load` re-seeds everything with the run's seed: put back where the run was instead.
+    rng = state["rng"]
+    torch.set_rng_state(rng["torch"])
+    np.random.set_state(rng["numpy"])  # noqa: NPY002 (SB3 seeds the legacy global RNG)
+    random.setstate(rng["python"])
+    model.action_space.np_random.bit_generator.state = rng["action_space"]
+    vec_env = model.get_env()
+    assert vec_env is not None
+    vec_env._reset_seeds()  # the seed `load` set would otherwise drive the next reset
+    if rng["env_reset_seed"] is not None:
+        vec_env.seed(int(rng["env_reset_seed"]))
+    elif rng["env_before_reset"] is not None:
+        env.unwrapped.np_random.bit_generator.state = rng["env_before_reset"]
+    return model, state
