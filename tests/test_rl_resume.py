@@ -70,12 +70,35 @@ def _pendulum(algo: str, **kw) -> RLConfig:
     )
 
 
+class Record(BaseCallback):
+    """Records what the model's schedules read at each step; stops training at ``stop``."""
+
+    def __init__(self, stop: int | None = None) -> None:
+        super().__init__()
+        self.stop = stop
+        self.progress: list[float] = []
+
+    def _on_step(self) -> bool:
+        self.progress.append(self.model._current_progress_remaining)
+        return self.stop is None or self.num_timesteps < self.stop
+
+    def state_dict(self) -> dict:
+        return {"progress": list(self.progress)}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.progress = list(state["progress"])
+
+
 @pytest.mark.parametrize(
-    "algo, noise",
-    [("SAC", None), ("TD3", "ornstein-uhlenbeck")],  # OU noise: a process SB3 resets per call
+    "algo, kw",
+    [
+        ("SAC", {}),
+        ("TD3", {"action_noise": "ornstein-uhlenbeck"}),  # a noise process SB3 resets per call
+        ("SAC", {"learning_starts": 500}),  # random actions past the checkpoint: the space's RNG
+    ],
 )
-def test_a_stopped_run_resumes_to_the_uninterrupted_run(tmp_path, algo, noise):
-    cfg = _pendulum(algo, **({"action_noise": noise} if noise else {}))
+def test_a_stopped_run_resumes_to_the_uninterrupted_run(tmp_path, algo, kw):
+    cfg = _pendulum(algo, **kw)
     plain = train(cfg, progress=False)
     # 250 does not divide Pendulum's 200-step episodes: the run finishes the episode first
     with pytest.raises(Interrupt):
@@ -83,20 +106,46 @@ def test_a_stopped_run_resumes_to_the_uninterrupted_run(tmp_path, algo, noise):
             cfg, progress=False, checkpoint=tmp_path, checkpoint_every=250, callbacks=[StopAt(550)]
         )
     assert resume.latest_checkpoint(tmp_path).name == "step-0000000400"
-    resumed = train(cfg, progress=False, checkpoint=tmp_path, checkpoint_every=250)
+    # the same callbacks (a checkpoint is refused by a run with other parts), this one never fires
+    resumed = train(
+        cfg, progress=False, checkpoint=tmp_path, checkpoint_every=250, callbacks=[StopAt(10**9)]
+    )
     _same_run(plain, resumed)
     # its cost: this part's CPU plus the earlier part's, up to its checkpoint
     assert 0 < resumed.resumed_cpu_s < resumed.cpu_time_s
     assert resumed.episodes.wall_time_s.is_monotonic_increasing
 
 
-def test_checkpoints_leave_the_run_unchanged_and_keep_only_the_newest(tmp_path):
+def test_checkpoints_leave_the_run_unchanged_and_keep_the_newest_two(tmp_path):
     cfg = _pendulum("SAC")
-    plain = train(cfg, progress=False)
-    chunked = train(cfg, progress=False, checkpoint=tmp_path, checkpoint_every=150)
+    seen = Record()
+    plain = train(cfg, progress=False, callbacks=[seen])
+    seen_chunked = Record()
+    chunked = train(
+        cfg, progress=False, checkpoint=tmp_path, checkpoint_every=150, callbacks=[seen_chunked]
+    )
     _same_run(plain, chunked)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["LATEST", "step-0000000800"]
+    # the schedules see the run's length, not the chunk's
+    assert seen.progress == seen_chunked.progress and len(seen.progress) == 900
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "LATEST",
+        "step-0000000600",
+        "step-0000000800",
+    ]
     assert (tmp_path / "LATEST").read_text() == "step-0000000800"
+    # a checkpoint a crash of the machine cut short: the one before it is used
+    (tmp_path / "step-0000000800" / "state.pt").write_bytes(b"")
+    assert resume.latest_checkpoint(tmp_path).name == "step-0000000600"
+
+
+def test_a_callback_that_stops_training_stops_a_checkpointed_run_as_a_plain_one(tmp_path):
+    cfg = _pendulum("SAC")
+    plain = train(cfg, progress=False, callbacks=[Record(stop=650)])
+    chunked = train(
+        cfg, progress=False, checkpoint=tmp_path, checkpoint_every=200, callbacks=[Record(stop=650)]
+    )
+    assert plain.model.num_timesteps == chunked.model.num_timesteps == 650
+    _same_run(plain, chunked)
 
 
 def _hopper_demos(n: int, seed: int) -> list[Demonstration]:
@@ -163,7 +212,9 @@ def test_defenders_filter_resumes_with_its_dynamics_model_and_log(tmp_path):
         info_keys=["filtered", "would_crash"],
         checkpoint=tmp_path,
         checkpoint_every=150,
+        callbacks=[StopAt(10**9)],
     )
+    assert resumed.resumed_cpu_s > 0  # it resumed: a fresh start would match too
     _same_run(plain, resumed)
     assert plain.episodes[keys].equals(resumed.episodes[keys])
     assert plain.episodes["filtered"].any()  # the filter fired: its state mattered
@@ -179,10 +230,19 @@ def test_defenders_filter_resumes_with_its_dynamics_model_and_log(tmp_path):
         assert torch.equal(pa, pb)
 
 
-def test_a_checkpoint_of_another_config_is_refused(tmp_path):
+def test_a_checkpoint_of_another_run_is_refused_before_it_is_loaded(tmp_path):
     train(_pendulum("SAC"), progress=False, checkpoint=tmp_path, checkpoint_every=200)
-    with pytest.raises(ValueError, match="another run"):
+    with pytest.raises(ValueError, match="another run.*config"):
         train(_pendulum("SAC", seed=2), progress=False, checkpoint=tmp_path, checkpoint_every=200)
+    other_env = gym.wrappers.TimeLimit(gym.make("Pendulum-v1").unwrapped, 100)
+    with pytest.raises(ValueError, match="another run.*env"):
+        train(
+            _pendulum("SAC"),
+            env=other_env,
+            progress=False,
+            checkpoint=tmp_path,
+            checkpoint_every=200,
+        )
 
 
 @pytest.mark.parametrize(

@@ -251,5 +251,10 @@ class ProgressBar(BaseCallback):
             return
         self._pbar.refresh()
         if self.total is None or self.model.num_timesteps >= self.total:
+            self.close()
+
+    def close(self) -> None:
+        """Close the bar (a run learnt in chunks that stops early or raises)."""
+        if self._pbar is not None:
             self._pbar.close()
             self._pbar = None

@@ -17,11 +17,14 @@ the running episode one step at a time, then saves at that episode boundary:
 
 Why by hand: SB3's ``CheckpointCallback`` saves the model (and optionally the buffer) at any step.
 It does not save the random states or the running episode, so a run continued from it is a
-different run. No library resumes an SB3 run exactly.
+different run. We know of no library that continues an SB3 run exactly.
 
-Limits, each refused with a clear error: one env copy, ``train_freq`` 1, and plain ``Box``
-replay buffers. Work done after the last checkpoint is lost when a run is killed. Its CPU time is
-not counted in the resumed run's cost.
+Limits, each refused with a clear error: one env copy, ``train_freq`` 1, plain ``Box`` replay
+buffers, callbacks without ``state_dict``. Not refused: a wrapper that keeps state across episodes
+without ``state_dict`` (gymnasium's ``NormalizeObservation``) starts that state again on resume.
+Work done after the last checkpoint is lost when a run is killed, and its CPU time is not counted
+in the resumed run's cost. Checkpoints are flushed to disk before they are named, and the one
+before is kept, so a crash of the machine leaves one that loads.
 
 Used in: DEFENDER (thesis 4.3), through its study's tasks (``thesis study 03_defender``).
 """
@@ -55,14 +58,14 @@ class ResetRecorder(gym.Wrapper):
     before the reset, and the seed the reset was given (None for SB3's automatic resets).
 
     A checkpoint saves them. On resume the environment is put back in that state and reset again,
-    which gives the same first observation and the same simulator state.
+    which gives the same first observation and the same simulator state (for an environment
+    whose reset draws only from its ``np_random``, as gymnasium's do).
 
     Example:
         >>> env = ResetRecorder(gym.make("Pendulum-v1"))
         >>> _ = env.reset(seed=3)
         >>> env.seed_of_reset
         3
-        >>> state = env.rng_before_reset
         >>> first, _ = env.reset()
         >>> env.unwrapped.np_random.bit_generator.state = env.rng_before_reset
         >>> again, _ = env.reset()
@@ -87,7 +90,12 @@ class ResetRecorder(gym.Wrapper):
 def stateful_parts(objects: Sequence[Any]) -> list[Any]:
     """The objects of ``objects`` that a checkpoint saves and restores: those with
     ``state_dict`` and ``load_state_dict`` methods."""
-    return [o for o in objects if callable(getattr(o, "state_dict", None))]
+    return [
+        o
+        for o in objects
+        if callable(getattr(o, "state_dict", None))
+        and callable(getattr(o, "load_state_dict", None))
+    ]
 
 
 def wrapper_chain(env: gym.Env) -> list[gym.Env]:
@@ -158,13 +166,54 @@ def check_resumable(model: BaseAlgorithm) -> None:
     _replay_buffer(model)
 
 
-def latest_checkpoint(folder: str | Path) -> Path | None:
-    """The newest complete checkpoint in ``folder``, or None where there is none."""
-    pointer = Path(folder) / LATEST
-    if not pointer.is_file():
+def _steps_of(part: Path) -> int:
+    return int(part.name.split("-", 1)[1])
+
+
+def _read_state(part: Path) -> dict[str, Any] | None:
+    """The state of the checkpoint ``part``, or None where it is incomplete or unreadable."""
+    files = [part / f for f in ("state.pt", "model.zip", "buffer.pt")]
+    if not all(f.is_file() and f.stat().st_size > 0 for f in files):
         return None
-    part = Path(folder) / pointer.read_text().strip()
-    return part if (part / "state.pt").is_file() else None
+    try:
+        return dict(torch.load(part / "state.pt", weights_only=False))
+    except Exception:  # a file cut short by a crash of the machine: try the one before
+        return None
+
+
+def latest_checkpoint(folder: str | Path, run: Mapping[str, Any] | None = None) -> Path | None:
+    """The newest checkpoint in ``folder`` that loads, or None where there is none: the one
+    ``LATEST`` names, else (a crash cut it short) the one before it.
+
+    Raises:
+        ValueError: with ``run``, a checkpoint taken of another run: one whose ``run`` entries
+            (config, env, parts) differ from ``run``'s.
+    """
+    folder = Path(folder)
+    pointer = folder / LATEST
+    named = folder / pointer.read_text().strip() if pointer.is_file() else None
+    others = sorted(folder.glob("step-*"), key=_steps_of, reverse=True)
+    for part in [p for p in [named] if p is not None] + [p for p in others if p != named]:
+        state = _read_state(part)
+        if state is None:
+            continue
+        if run is not None:
+            differ = sorted(k for k in run if state.get(k) != run[k])
+            if differ:
+                raise ValueError(
+                    f"{part} is a checkpoint of another run (its {', '.join(differ)} differ from "
+                    "this one's); remove the folder or give another."
+                )
+        return part
+    return None
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def save_checkpoint(
@@ -177,9 +226,10 @@ def save_checkpoint(
     """Save ``model``'s run at an episode boundary into ``folder``; return the checkpoint's path.
 
     ``parts``: named objects with ``state_dict`` (the episode logger, stateful wrappers and
-    callbacks). ``extra``: anything else to keep (the config, seconds spent). The checkpoint is
-    written under a temporary name, renamed, and only then named in ``LATEST``; older ones are
-    removed after. A run killed while saving keeps its previous checkpoint.
+    callbacks). ``extra``: anything else to keep (what run it is, seconds spent). The checkpoint
+    is written under a temporary name, flushed to disk, renamed, and only then named in
+    ``LATEST``. The checkpoint before it is kept; older ones are removed. A run killed while
+    saving keeps its previous checkpoint.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -189,11 +239,13 @@ def save_checkpoint(
     tmp.mkdir()
     model.save(tmp / "model.zip")
     torch.save(_buffer_state(_replay_buffer(model)), tmp / "buffer.pt")
+    cuda = torch.cuda.is_available() and torch.cuda.is_initialized()
     state = {
         "version": CHECKPOINT_VERSION,
         "num_timesteps": int(model.num_timesteps),
         "rng": {
             "torch": torch.get_rng_state(),
+            "cuda": torch.cuda.get_rng_state_all() if cuda else None,
             "numpy": np.random.get_state(),  # noqa: NPY002 (SB3 seeds the legacy global RNG)
             "python": random.getstate(),
             "action_space": dict(model.action_space.np_random.bit_generator.state),
@@ -204,13 +256,24 @@ def save_checkpoint(
         **extra,
     }
     torch.save(state, tmp / "state.pt")
+    for f in ("model.zip", "buffer.pt", "state.pt"):
+        _fsync(tmp / f)
+    _fsync(tmp)
     final = folder / name
     shutil.rmtree(final, ignore_errors=True)
     os.replace(tmp, final)
-    atomic_write(folder / LATEST, lambda tmp: tmp.write_text(name))
-    for old in folder.glob("step-*"):
-        if old.name != name:
-            shutil.rmtree(old, ignore_errors=True)
+    _fsync(folder)
+
+    def write_pointer(path: Path) -> None:
+        path.write_text(name)
+        _fsync(path)
+
+    atomic_write(folder / LATEST, write_pointer)
+    _fsync(folder)
+    for old in sorted(folder.glob("step-*"), key=_steps_of)[:-2]:
+        shutil.rmtree(old, ignore_errors=True)
+    for stale in folder.glob(".step-*.tmp"):  # a save a kill cut short
+        shutil.rmtree(stale, ignore_errors=True)
     return final
 
 
@@ -222,11 +285,12 @@ def load_checkpoint(
     device: str | torch.device = "auto",
 ) -> tuple[BaseAlgorithm, dict[str, Any]]:
     """The model of the checkpoint at ``path`` on ``env`` (a fresh env of the same run), with its
-    replay buffer and random states restored and ``parts`` loaded; and the checkpoint's state
-    (its ``extra`` entries). The next ``learn`` call resets ``env`` as the saved run did.
+    replay buffer and random states restored and ``parts`` loaded; and the checkpoint's whole
+    state (with the ``extra`` entries it was saved with). The next ``learn`` call resets ``env``
+    as the saved run did.
 
     Raises:
-        ValueError: a checkpoint of another format version, or a ``parts`` key it lacks.
+        ValueError: a checkpoint of another format version, or ``parts`` other than its own.
     """
     path = Path(path)
     state = torch.load(path / "state.pt", weights_only=False)
@@ -235,9 +299,11 @@ def load_checkpoint(
             f"{path} is a checkpoint of format {state.get('version')}, this code reads "
             f"{CHECKPOINT_VERSION}; remove the folder to start the run again."
         )
-    missing = sorted(set(parts) - set(state["parts"]))
-    if missing:
-        raise ValueError(f"{path} has no state for {', '.join(missing)}.")
+    if set(parts) != set(state["parts"]):
+        raise ValueError(
+            f"{path} holds the state of {', '.join(sorted(state['parts']))}, this run has "
+            f"{', '.join(sorted(parts))}."
+        )
     model = algo_cls.load(path / "model.zip", env=env, device=device)
     _load_buffer(_replay_buffer(model), torch.load(path / "buffer.pt", weights_only=False))
     for key, part in parts.items():
@@ -245,6 +311,8 @@ def load_checkpoint(
     # `load` re-seeds everything with the run's seed: put back where the run was instead.
     rng = state["rng"]
     torch.set_rng_state(rng["torch"])
+    if rng.get("cuda") is not None and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(rng["cuda"])
     np.random.set_state(rng["numpy"])  # noqa: NPY002 (SB3 seeds the legacy global RNG)
     random.setstate(rng["python"])
     model.action_space.np_random.bit_generator.state = rng["action_space"]

@@ -66,7 +66,8 @@ class TrainResult(NamedTuple):
     config: RLConfig
     """The configuration that was run."""
     wall_time_s: float
-    """Seconds spent in `model.learn` (a resumed run: with its earlier parts)."""
+    """Seconds spent in training, checkpoints included (a resumed run: with its earlier
+    parts)."""
     cpu_time_s: float = float("nan")
     """CPU seconds of this process spent in training (a resumed run: with its earlier parts)."""
     resumed_cpu_s: float = 0.0
@@ -203,9 +204,11 @@ def train(
         checkpoint: a folder to keep the run resumable in (`thesis_lib.rl.resume`). Where it
             holds a checkpoint of this config, training continues from there. The result is the
             same, bit for bit, as the run that was never stopped. Needs one env copy,
-            `train_freq` 1, and callbacks with `state_dict`/`load_state_dict` (or none).
-        checkpoint_every: env steps between checkpoints; each is taken at the first episode
-            end after this many steps.
+            `train_freq` 1, callbacks with `state_dict`/`load_state_dict` (or none), and
+            the same of every wrapper that keeps state across episodes (a wrapper without
+            them, such as gymnasium's `NormalizeObservation`, starts again on resume).
+        checkpoint_every: a checkpoint is taken at the first episode end at or after each
+            multiple of this many env steps (a multiple an episode spans is skipped).
 
     Returns:
         `TrainResult(model, episodes, config, wall_time_s, cpu_time_s, resumed_cpu_s)`. A
@@ -238,8 +241,9 @@ def train(
 
 class _ChunkGuard(BaseCallback):
     """First in a chunk's callbacks: undoes what each `learn` call's set-up changes, so that
-    learning in chunks is learning in one call. SB3 sets the run's length to the chunk's
-    (the learning-rate schedule reads it) and resets the action noise's process."""
+    learning in chunks trains the model as one call would. SB3 sets the run's length to the
+    chunk's (the learning-rate schedule reads it) and resets the action noise's process. (The
+    callbacks themselves see a training start and end per chunk.)"""
 
     def __init__(self, total_timesteps: int) -> None:
         super().__init__()
@@ -253,6 +257,18 @@ class _ChunkGuard(BaseCallback):
 
     def _on_step(self) -> bool:
         return True
+
+
+class _Chain(CallbackList):
+    """`CallbackList` that remembers whether a callback asked to stop. SB3 counts the step before
+    it asks the callbacks, so the step count cannot tell."""
+
+    stopped = False
+
+    def _on_step(self) -> bool:
+        ok = super()._on_step()
+        self.stopped = self.stopped or not ok
+        return ok
 
 
 def _train_resumable(
@@ -294,64 +310,65 @@ def _train_resumable(
         **{f"wrapper{i}:{type(w).__name__}": w for i, w in enumerate(wrappers)},
         **{f"callback{i}:{type(cb).__name__}": cb for i, cb in enumerate(callbacks)},
     }
-    config_json = json.loads(json.dumps(config_dict(config), default=str))
+    run = {  # what a checkpoint must have been taken of
+        "config": json.loads(json.dumps(config_dict(config), default=str)),
+        "env": repr(env),
+        "part_names": sorted(parts),
+    }
     earlier_wall = earlier_cpu = 0.0
-    found = resume.latest_checkpoint(folder)
+    found = resume.latest_checkpoint(folder, run)
     if found is None:
         model = make_model(config, recorder)
     else:
         model, state = resume.load_checkpoint(
             found, algo_class(config.algo), recorder, parts, device=config.device
         )
-        if state["config"] != config_json:
-            raise ValueError(
-                f"{found} is a checkpoint of another run (its config differs from this one's); "
-                "remove the folder or give another."
-            )
         model.set_logger(silent_logger())
         earlier_wall, earlier_cpu = float(state["wall_s"]), float(state["cpu_s"])
     resume.check_resumable(model)
     guard = _ChunkGuard(config.total_timesteps)
-    chain: list[BaseCallback] = [guard, logger]
-    if progress:
-        chain.append(
-            ProgressBar(
-                logger, desc=f"{config.algo} seed {config.seed}", total=config.total_timesteps
-            )
-        )
-    chain.extend(callbacks)
+    bar = (
+        ProgressBar(logger, desc=f"{config.algo} seed {config.seed}", total=config.total_timesteps)
+        if progress
+        else None
+    )
+    chain: list[BaseCallback] = [guard, logger, *([bar] if bar else []), *callbacks]
     start, cpu0 = time.perf_counter(), time.process_time()
 
     def learn(steps: int) -> bool:
         """Learn `steps` more env steps; False where a callback stopped training."""
-        target = model.num_timesteps + steps
         guard.noise = copy.deepcopy(model.action_noise)
-        model.learn(steps, callback=CallbackList(chain), reset_num_timesteps=False)
-        return model.num_timesteps >= target
+        calls = _Chain(chain)
+        model.learn(steps, callback=calls, reset_num_timesteps=False)
+        return not calls.stopped
 
     total = config.total_timesteps
-    while model.num_timesteps < total:
-        next_save = (model.num_timesteps // every + 1) * every
-        if not learn(min(total, next_save) - model.num_timesteps):
-            break
-        stopped = False
-        while model.num_timesteps < total and not logger.between_episodes:
-            if not learn(1):
-                stopped = True
+    try:
+        while model.num_timesteps < total:
+            next_save = (model.num_timesteps // every + 1) * every
+            if not learn(min(total, next_save) - model.num_timesteps):
                 break
-        if stopped or model.num_timesteps >= total:
-            break
-        resume.save_checkpoint(
-            folder,
-            model,
-            recorder,
-            parts,
-            {
-                "config": config_json,
-                "wall_s": earlier_wall + time.perf_counter() - start,
-                "cpu_s": earlier_cpu + time.process_time() - cpu0,
-            },
-        )
+            stopped = False
+            while model.num_timesteps < total and not logger.between_episodes:
+                if not learn(1):
+                    stopped = True
+                    break
+            if stopped or model.num_timesteps >= total:
+                break
+            resume.save_checkpoint(
+                folder,
+                model,
+                recorder,
+                parts,
+                {
+                    **run,
+                    "wall_s": earlier_wall + time.perf_counter() - start,
+                    "cpu_s": earlier_cpu + time.process_time() - cpu0,
+                },
+            )
+    finally:
+        if bar is not None:
+            bar.close()
     wall_time_s = earlier_wall + time.perf_counter() - start
     cpu_time_s = earlier_cpu + time.process_time() - cpu0
     return TrainResult(model, logger.episodes, config, wall_time_s, cpu_time_s, earlier_cpu)

@@ -291,7 +291,8 @@ def train_task(config: dict[str, Any]) -> list[dict[str, Any]]:
         paper_compat=config["paper_compat"],
         checkpoint=task_scratch(),  # inside a study: resumable; elsewhere None
     )
-    note_resumed_cpu(res.resumed_cpu_s)  # the task's cost includes its earlier parts
+    if res.resumed_cpu_s:
+        note_resumed_cpu(res.resumed_cpu_s)  # the task's cost includes its earlier parts
     run = {
         "steps": int(res.model.num_timesteps),
         "train_cpu_s": time.process_time() - c0 + res.resumed_cpu_s,
