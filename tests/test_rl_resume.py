@@ -282,6 +282,7 @@ def test_a_defender_study_task_resumes_from_its_scratch_folder(tmp_path, monkeyp
     """The study's path: ``train_task`` run by the sweep with a scratch folder, killed after its
     first checkpoint, run again: the same rows as a run in one go, and the cost of both parts."""
     from thesis_lib.chapters.defender import tasks
+    from thesis_lib.rl import training
     from thesis_lib.sweep import Task
     from thesis_lib.sweep._tasks import execute, scratch_of
 
@@ -297,17 +298,17 @@ def test_a_defender_study_task_resumes_from_its_scratch_folder(tmp_path, monkeyp
     }  # fmt: skip
     task = Task(tasks.train_task, config)
     whole = execute(task)  # no store: no scratch, no checkpoint
-    saved = resume.save_checkpoint
+    saved = training.save_checkpoint
 
     def save_then_die(*args, **kw):
         saved(*args, **kw)
         raise Interrupt
 
-    monkeypatch.setattr(resume, "save_checkpoint", save_then_die)
+    monkeypatch.setattr(training, "save_checkpoint", save_then_die)
     with pytest.raises(Interrupt):
         execute(task, scratch_root=tmp_path)
     assert resume.latest_checkpoint(scratch_of(tmp_path, task.key)) is not None
-    monkeypatch.setattr(resume, "save_checkpoint", saved)
+    monkeypatch.setattr(training, "save_checkpoint", saved)
     again = execute(task, scratch_root=tmp_path)
     timing = {"wall_time_s", "train_cpu_s"}
     strip = [{k: v for k, v in r.items() if k not in timing} for r in whole["rows"]]

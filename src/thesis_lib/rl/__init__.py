@@ -3,7 +3,9 @@
 `train(RLConfig(...))` builds and seeds an SB3 model, trains it with a per-episode log
 (return, length, terminated/truncated, crash) and a progress bar, and returns a `TrainResult`.
 `learning_curves` runs algorithms x seeds as joblib tasks and returns one tidy DataFrame;
-`evaluate` rolls out any object with `predict`.
+`evaluate` rolls out any object with `predict`. `train(..., checkpoint=folder)` keeps a run
+resumable: killed and run again, it continues from its last checkpoint and ends exactly where
+the run never stopped would (`latest_checkpoint` names the checkpoint it would resume from).
 
 Speed on the 2-core CI machine: env steps per second of training on Pendulum-v1 (one gradient
 step per env step, batch 256, one torch thread, `nice`, 2,000 steps, other jobs sharing the
@@ -46,6 +48,7 @@ from thesis_lib.rl.callbacks import (
     is_crash,
 )
 from thesis_lib.rl.config import ALGOS, AUTO_NOISE, RLConfig
+from thesis_lib.rl.resume import ResetRecorder, latest_checkpoint
 from thesis_lib.rl.training import (
     CURVE_COLUMNS,
     EVAL_COLUMNS,
@@ -98,12 +101,14 @@ __all__ = [
     "Predictor",
     "ProgressBar",
     "RLConfig",
+    "ResetRecorder",
     "TrainResult",
     "config_dict",
     "config_from_params",
     "evaluate",
     "find_horizon",
     "is_crash",
+    "latest_checkpoint",
     "learning_curves",
     "make_action_noise",
     "make_model",

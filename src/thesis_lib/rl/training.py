@@ -38,6 +38,15 @@ from thesis_lib.rl.callbacks import (
     is_crash,
 )
 from thesis_lib.rl.config import RLConfig, algo_class, did_you_mean
+from thesis_lib.rl.resume import (
+    ResetRecorder,
+    check_resumable,
+    latest_checkpoint,
+    load_checkpoint,
+    save_checkpoint,
+    stateful_parts,
+    wrapper_chain,
+)
 
 CURVE_COLUMNS: tuple[str, ...] = ("algo", "seed", *EPISODE_COLUMNS)
 """Columns of `learning_curves`, in order."""
@@ -281,8 +290,6 @@ def _train_resumable(
     every: int,
 ) -> TrainResult:
     """`train` with checkpoints in `folder` (`thesis_lib.rl.resume`)."""
-    from thesis_lib.rl import resume
-
     if every < 1:
         raise ValueError(f"checkpoint_every must be a positive number of steps, got {every}.")
     if isinstance(env, VecEnv):
@@ -290,7 +297,7 @@ def _train_resumable(
             "Checkpointed training takes a gymnasium env (or none), not a VecEnv: it wraps the "
             "env to record its resets."
         )
-    lacking = [type(cb).__name__ for cb in callbacks if not resume.stateful_parts([cb])]
+    lacking = [type(cb).__name__ for cb in callbacks if not stateful_parts([cb])]
     if lacking:
         raise ValueError(
             f"Checkpointed training cannot restore the callbacks {', '.join(lacking)}: give "
@@ -302,9 +309,9 @@ def _train_resumable(
         if config.env_id is None:
             raise ValueError("RLConfig.env_id is None and no env was passed: give one of them.")
         env = gym.make(config.env_id)
-    recorder = resume.ResetRecorder(env)
+    recorder = ResetRecorder(env)
     logger = EpisodeLogger(info_keys=info_keys)
-    wrappers = resume.stateful_parts(resume.wrapper_chain(env))
+    wrappers = stateful_parts(wrapper_chain(env))
     parts: dict[str, Any] = {
         "episode_logger": logger,
         **{f"wrapper{i}:{type(w).__name__}": w for i, w in enumerate(wrappers)},
@@ -316,16 +323,16 @@ def _train_resumable(
         "part_names": sorted(parts),
     }
     earlier_wall = earlier_cpu = 0.0
-    found = resume.latest_checkpoint(folder, run)
+    found = latest_checkpoint(folder, run)
     if found is None:
         model = make_model(config, recorder)
     else:
-        model, state = resume.load_checkpoint(
+        model, state = load_checkpoint(
             found, algo_class(config.algo), recorder, parts, device=config.device
         )
         model.set_logger(silent_logger())
         earlier_wall, earlier_cpu = float(state["wall_s"]), float(state["cpu_s"])
-    resume.check_resumable(model)
+    check_resumable(model)
     guard = _ChunkGuard(config.total_timesteps)
     bar = (
         ProgressBar(logger, desc=f"{config.algo} seed {config.seed}", total=config.total_timesteps)
@@ -355,7 +362,7 @@ def _train_resumable(
                     break
             if stopped or model.num_timesteps >= total:
                 break
-            resume.save_checkpoint(
+            save_checkpoint(
                 folder,
                 model,
                 recorder,
