@@ -245,6 +245,32 @@ def test_a_checkpoint_of_another_run_is_refused_before_it_is_loaded(tmp_path):
         )
 
 
+def test_the_same_env_built_again_is_the_same_run(tmp_path):
+    """An env class without a ``repr`` of its own (its default names a memory address) still
+    resumes: the check reads gymnasium's ``str`` of the chain."""
+    from gymnasium.envs.classic_control import PendulumEnv
+
+    cfg = _pendulum("SAC")
+    with pytest.raises(Interrupt):
+        train(
+            cfg,
+            env=gym.wrappers.TimeLimit(PendulumEnv(), 200),
+            progress=False,
+            checkpoint=tmp_path,
+            checkpoint_every=200,
+            callbacks=[StopAt(500)],
+        )
+    resumed = train(
+        cfg,
+        env=gym.wrappers.TimeLimit(PendulumEnv(), 200),
+        progress=False,
+        checkpoint=tmp_path,
+        checkpoint_every=200,
+        callbacks=[StopAt(10**9)],
+    )
+    assert resumed.resumed_cpu_s > 0 and resumed.model.num_timesteps == 900
+
+
 @pytest.mark.parametrize(
     "kw, message",
     [

@@ -112,6 +112,23 @@ def wrapper_chain(env: gym.Env) -> list[gym.Env]:
     return chain
 
 
+def env_fingerprint(env: gym.Env) -> str:
+    """What a checkpoint records of the env it was taken on, to refuse resuming on another:
+    gymnasium's ``str`` of the wrapper chain, and the ``repr`` of each layer whose class writes
+    its own (DEFENDER's filter names its strategies there). No memory addresses, so the same
+    env built again matches.
+
+    >>> env_fingerprint(gym.make("Pendulum-v1"))
+    '<TimeLimit<OrderEnforcing<PassiveEnvChecker<PendulumEnv<Pendulum-v1>>>>>'
+    """
+    own = [
+        repr(layer)
+        for layer in wrapper_chain(env)
+        if type(layer).__repr__ not in (object.__repr__, gym.Env.__repr__, gym.Wrapper.__repr__)
+    ]
+    return " ".join([str(env), *own])
+
+
 def _buffer_state(buffer: ReplayBuffer) -> dict[str, Any]:
     n = buffer.buffer_size if buffer.full else buffer.pos
     arrays = {

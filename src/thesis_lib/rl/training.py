@@ -41,6 +41,7 @@ from thesis_lib.rl.config import RLConfig, algo_class, did_you_mean
 from thesis_lib.rl.resume import (
     ResetRecorder,
     check_resumable,
+    env_fingerprint,
     latest_checkpoint,
     load_checkpoint,
     save_checkpoint,
@@ -225,7 +226,8 @@ def train(
 
     Raises:
         ValueError: with `checkpoint`: several env copies, a `VecEnv`, `train_freq` above 1, a
-            callback without `state_dict`, or a checkpoint of another config in the folder.
+            callback without `state_dict`, or a checkpoint in the folder of another run (another
+            config, env or set of callbacks).
 
     Used in: Background (thesis 2.5-2.7), CLfD (4.2), DEFENDER (4.3).
     """
@@ -319,7 +321,7 @@ def _train_resumable(
     }
     run = {  # what a checkpoint must have been taken of
         "config": json.loads(json.dumps(config_dict(config), default=str)),
-        "env": repr(env),
+        "env": env_fingerprint(env),
         "part_names": sorted(parts),
     }
     earlier_wall = earlier_cpu = 0.0
