@@ -46,13 +46,25 @@ def find_horizon(env: gym.Env | VecEnv) -> int | None:
         except AttributeError:
             spec = env.get_attr("spec", indices=[0])[0]
             return None if spec is None else spec.max_episode_steps
-    inner: Any = env
-    while inner is not None:
-        if isinstance(inner, gym.wrappers.TimeLimit):
-            return inner._max_episode_steps
-        inner = getattr(inner, "env", None)
+    for layer in wrapper_chain(env):
+        if isinstance(layer, gym.wrappers.TimeLimit):
+            return layer._max_episode_steps
     spec = getattr(env, "spec", None)
     return None if spec is None else spec.max_episode_steps
+
+
+def wrapper_chain(env: gym.Env) -> list[gym.Env]:
+    """``env`` and every env it wraps, outermost first.
+
+    >>> [type(e).__name__ for e in wrapper_chain(gym.make("Pendulum-v1"))][-1]
+    'PendulumEnv'
+    """
+    chain: list[gym.Env] = []
+    inner: Any = env
+    while isinstance(inner, gym.Env):
+        chain.append(inner)
+        inner = getattr(inner, "env", None)
+    return chain
 
 
 def is_crash(terminated: bool, length: int, horizon: int | None) -> bool:

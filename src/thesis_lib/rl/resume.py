@@ -45,6 +45,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.buffers import ReplayBuffer
 
 from thesis_lib._io import atomic_write
+from thesis_lib.rl.callbacks import wrapper_chain
 
 CHECKPOINT_VERSION = 1
 """Format of the files :func:`save_checkpoint` writes; another version is refused on load."""
@@ -96,20 +97,6 @@ def stateful_parts(objects: Sequence[Any]) -> list[Any]:
         if callable(getattr(o, "state_dict", None))
         and callable(getattr(o, "load_state_dict", None))
     ]
-
-
-def wrapper_chain(env: gym.Env) -> list[gym.Env]:
-    """``env`` and every env it wraps, outermost first.
-
-    >>> [type(e).__name__ for e in wrapper_chain(gym.make("Pendulum-v1"))][-1]
-    'PendulumEnv'
-    """
-    chain: list[gym.Env] = []
-    inner: Any = env
-    while isinstance(inner, gym.Env):
-        chain.append(inner)
-        inner = getattr(inner, "env", None)
-    return chain
 
 
 def env_fingerprint(env: gym.Env) -> str:

@@ -36,6 +36,7 @@ from thesis_lib.rl.callbacks import (
     ProgressBar,
     find_horizon,
     is_crash,
+    wrapper_chain,
 )
 from thesis_lib.rl.config import RLConfig, algo_class, did_you_mean
 from thesis_lib.rl.resume import (
@@ -46,7 +47,6 @@ from thesis_lib.rl.resume import (
     load_checkpoint,
     save_checkpoint,
     stateful_parts,
-    wrapper_chain,
 )
 
 CURVE_COLUMNS: tuple[str, ...] = ("algo", "seed", *EPISODE_COLUMNS)
