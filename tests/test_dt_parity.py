@@ -20,7 +20,7 @@ import torch
 import torch.nn.functional as F
 
 from thesis_lib.chapters import CHAPTERS
-from thesis_lib.seq import ArchSpec
+from thesis_lib.seq import ArchSpec, TrainSpec
 from thesis_lib.seq.models import (
     HDT,
     DecisionTransformer,
@@ -197,6 +197,11 @@ def test_task_dicts_keep_the_v1_keys():
     assert ArchSpec(paper_compat=True).task_dict()["init"] == "original"
     assert ArchSpec.from_task({"d_model": 32}).init == "torch"
     assert ArchSpec.from_task(ArchSpec().task_dict()) == ArchSpec(init="normal")
+    # nor a precision: every task before it trained in float32
+    assert "precision" not in TrainSpec().task_dict()
+    assert TrainSpec.from_task(TrainSpec(precision="bf16").task_dict()).precision == "bf16"
+    with pytest.raises(ValueError, match="Unknown precision 'half'"):
+        TrainSpec(precision="half")
 
 
 def test_v1_study_files_keep_their_init_and_task_keys():
@@ -344,6 +349,17 @@ def test_the_committed_parity_file_parses_and_peer_runs_are_shared():
         for n in ("dt-mr-d64", "dt-mr-d64-torch", "dt-mr-d64-d3rlpy")
     ]
     assert mr[1] < mr[0] == mr[2] and len(mr[0]) == 5  # torch: three of the five seeds
+    # bfloat16 training is ours to vary: dt-peer-r4-bf16 reads dt-peer-r4's peer runs, and its
+    # own side is new runs, which train in bf16
+    bf = {n: tasks[n] for n in ("dt-peer-r4", "dt-peer-r4-bf16")}
+    assert [t.key for t in bf["dt-peer-r4"]["peer"]] == [
+        t.key for t in bf["dt-peer-r4-bf16"]["peer"]
+    ]
+    assert not {t.key for t in bf["dt-peer-r4"]["ours"]} & {
+        t.key for t in bf["dt-peer-r4-bf16"]["ours"]
+    }
+    assert all(t.config["train"]["precision"] == "bf16" for t in bf["dt-peer-r4-bf16"]["ours"])
+    assert all("precision" not in t.config["train"] for t in bf["dt-peer-r4-bf16"]["peer"])
     assert len(unique_tasks(tasks)) < sum(len(s["ours"]) + len(s["peer"]) for s in tasks.values())
 
 

@@ -120,6 +120,44 @@ def test_resume_matches_an_uninterrupted_run(kind, tmp_path):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
 
 
+@pytest.mark.parametrize("kind", ["dt", "hdt"])
+def test_bf16_trains_in_bfloat16_and_learns_as_float32_does(kind):
+    """Mixed precision: the step's matrix products run in bfloat16 while the parameters,
+    gradients and evaluation stay float32, and the run learns as the float32 run does (the two
+    differ by rounding only, so their losses agree closely but not exactly)."""
+    seen: list[torch.dtype] = []
+
+    def run(precision):
+        trainer = Trainer(_model(kind), _dataset(), _cfg(iterations=80, precision=precision))
+        for m in trainer.model.modules():
+            if isinstance(m, nn.Linear):
+                m.register_forward_hook(lambda m, i, o: seen.append(o.dtype))
+        return trainer, trainer.train()["loss"].to_numpy()
+
+    t32, loss32 = run("fp32")
+    assert set(seen) == {torch.float32}
+    seen.clear()
+    t16, loss16 = run("bf16")
+    assert set(seen) == {torch.bfloat16}
+    assert all(p.dtype == torch.float32 for p in t16.model.parameters())
+    assert all(p.grad is None or p.grad.dtype == torch.float32 for p in t16.model.parameters())
+    seen.clear()
+    t16.model.eval()
+    with torch.no_grad():
+        t16.model(batch_to_torch(t16.dataset, t16.dataset.sample(4), "cpu"))
+    assert set(seen) == {torch.float32}  # outside the step: float32
+    # both learn, to the same level; not the same numbers
+    assert loss16[-10:].mean() < 0.5 * loss16[:10].mean()
+    assert loss16[0] == pytest.approx(loss32[0], rel=0.02)
+    assert loss16[-20:].mean() == pytest.approx(loss32[-20:].mean(), rel=0.2)
+    assert not np.array_equal(loss16, loss32)
+
+
+def test_an_unknown_precision_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"Unknown precision 'fp16'\. Valid: fp32, bf16"):
+        TrainConfig(precision="fp16")
+
+
 def _checkpointed(path):
     """A tiny DT run of 10 iterations that leaves its checkpoint at ``path``."""
     trainer = Trainer(_model("dt"), _dataset(), _cfg(iterations=10, checkpoint_path=str(path)))
@@ -136,6 +174,7 @@ def _checkpointed(path):
         (dict(warmup_steps=2), "warmup_steps: 5 -> 2"),
         (dict(batch_size=4), "batch_size: 8 -> 4"),
         (dict(grad_clip=1.0), "grad_clip: 0.25 -> 1.0"),
+        (dict(precision="bf16"), "precision: (absent) -> 'bf16'"),
     ],
 )
 def test_a_checkpoint_is_not_resumed_by_another_training_config(tmp_path, change, differs):

@@ -424,23 +424,28 @@ def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
+#: The ``train`` keys of a comparison that only our side reads (the peer trains in float32).
+OURS_ONLY = ("precision",)
+
+
 def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]]]:
     """Each comparison's tasks, one per side and seed: ``{name: {"ours": [...], "peer": [...]}}``.
 
-    A peer run's config holds no ``init`` or ``sampling`` (they are ours to vary), so
-    comparisons that differ only there share their peer runs (the same task keys: run and
-    stored once).
+    A peer run's config holds no ``init``, ``sampling`` or training ``precision`` (they are
+    ours to vary; d3rlpy trains in float32), so comparisons that differ only there share their
+    peer runs (the same task keys: run and stored once).
     """
     out: dict[str, dict[str, list[Any]]] = {}
     for c in comparisons:
         sides: dict[str, list[Any]] = {"ours": [], "peer": []}
         for seed in c.seeds:
-            config = {
+            train = {**c.train, "seed": int(seed)}
+            config: dict[str, Any] = {
                 "method": c.method,
                 "dataset": c.dataset,
                 "dataset_size": c.dataset_size,
                 "arch": dict(c.arch),
-                "train": {**c.train, "seed": int(seed)},
+                "train": train,
                 "episodes": c.episodes,
             }
             recipe = data_recipe(c)
@@ -451,7 +456,8 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
                 ours["sampling"] = c.sampling
             sides["ours"].append(Task(ours_run, ours))
             if c.peer:
-                sides["peer"].append(Task(peer_run, config))
+                peer_train = {k: v for k, v in train.items() if k not in OURS_ONLY}
+                sides["peer"].append(Task(peer_run, {**config, "train": peer_train}))
         out[c.name] = sides
     return out
 
@@ -534,6 +540,7 @@ def parity_table(
             "method": c.method,
             "init": c.init if c.method != "BC" else "",
             "sampling": c.sampling or LEGACY_SAMPLING,
+            "precision": c.train.get("precision", "fp32"),
             "dataset": f"{c.dataset} ({c.dataset_size})",
             "arch": f"d{size['d_model']} L{size['n_layers']}" if c.method != "BC" else "MLP",
             "updates": c.train.get("iterations"),

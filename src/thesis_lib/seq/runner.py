@@ -43,7 +43,7 @@ from thesis_lib.seq.registry import (
     check_methods,
 )
 from thesis_lib.seq.subgoals import subgoal_fn
-from thesis_lib.seq.trainer import TrainConfig, Trainer
+from thesis_lib.seq.trainer import PRECISIONS, TrainConfig, Trainer
 from thesis_lib.sweep import note_resumed_cpu
 
 __all__ = ["TARGETS", "EvalSpec", "TrainSpec", "VectorEnvPool", "run_offline"]
@@ -80,6 +80,9 @@ class TrainSpec:
     """Training device (``cpu``, ``cuda``, ``auto``)."""
     progress: bool = False
     """Progress bar of the training."""
+    precision: str = "fp32"
+    """Training precision, :attr:`~thesis_lib.seq.trainer.TrainConfig.precision` (``"fp32"`` or
+    ``"bf16"``, mixed precision)."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size"):
@@ -88,19 +91,27 @@ class TrainSpec:
         if self.eval_every < 0:
             raise ValueError(f"Expect `eval_every` >= 0, actually: {self.eval_every!r}.")
         resolve_sampling(self.sampling)  # validates
+        if self.precision not in PRECISIONS:
+            raise ValueError(
+                f"Unknown precision {self.precision!r}. Valid: {', '.join(PRECISIONS)}."
+            )
 
     def task_dict(self) -> dict[str, Any]:
         """The spec as a sweep task's JSON: every field, ``sampling`` left out where it is
-        ``start``, the sampling of every task stored before the field existed (so their keys
-        stay valid; :meth:`from_task` reads a missing ``sampling`` as ``start``).
+        ``start`` and ``precision`` where it is ``fp32``, as every task stored before the
+        field existed ran (so their keys stay valid; :meth:`from_task` reads them back so).
 
         Example:
             >>> "sampling" in TrainSpec(sampling="start").task_dict(), TrainSpec().task_dict()["sampling"]
             (False, None)
+            >>> "precision" in TrainSpec().task_dict(), TrainSpec(precision="bf16").task_dict()["precision"]
+            (False, 'bf16')
         """
         d = asdict(self)
         if d["sampling"] == LEGACY_SAMPLING:
             del d["sampling"]
+        if d["precision"] == "fp32":
+            del d["precision"]
         return d
 
     @classmethod
@@ -306,6 +317,7 @@ def run_offline(
             seed=seed,
             device=train.device,
             progress=train.progress,
+            precision=train.precision,
             checkpoint_path=None if checkpoint is None else os.fspath(checkpoint),
             checkpoint_every=checkpoint_every,
         )
