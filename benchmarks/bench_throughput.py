@@ -20,10 +20,22 @@ alike), and reports the ratio of runs per CPU-hour:
 the bf16 DT learns as d3rlpy's does).
 
 Measured here (2026-11-28, 2-core AMD EPYC with AVX-512 BF16, beside a running two-process
-study; 100 updates x 3 repeats):
+study and a parity run; 50 updates x 3 repeats, the DM and HDM 30 x 3):
 
-    method  size   fp32 ms/update  bf16 ms/update  runs/CPU-h fp32  bf16  ratio
-    (filled in below by the run recorded in the docstring's table)
+    method   size   fp32 ms/update  bf16 ms/update  eval s/run  runs/CPU-h fp32  bf16  ratio
+    DT       study            54.5            35.2          18             6.39  9.74   1.52
+    HDT      study            88.0            58.5          27             3.97  5.88   1.48
+    DM-noRTG study            73.1            48.1          23             4.78  7.14   1.49
+    HDM      study           168.7           116.6          52             2.07  2.95   1.43
+    DT       peer            211.4           102.5          53             1.66  3.34   2.01
+    HDT      peer            335.0           162.3          84             1.05  2.11   2.01
+
+So bf16 doubles the runs per CPU-hour at the peer's size (d128, 3 layers, and more above it:
+the matrix products grow as d^2 and bf16 halves their cost), and gives about 1.5x at the v2
+studies' d64: there a step is bound by what bf16 does not speed up (the dropout masks, about a
+quarter of a bf16 step; the normalisations; the Mamba's scan, which runs in float32). The other
+levers of issue #36 add little on this CPU (``bench_ensemble.py``: stacking seeds at most 8%,
+``torch.compile`` slower).
 
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50

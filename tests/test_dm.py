@@ -54,6 +54,29 @@ def test_loss_falls_on_a_tiny_dataset(kind, paper_compat):
         assert {"loss_subgoal", "loss_action"} <= set(h.columns)
 
 
+@pytest.mark.parametrize("kind", ["dm", "hdm"])
+def test_bf16_training_keeps_the_residual_stream_float32_and_learns(kind):
+    """Under bfloat16 autocast the token embeddings come in bf16; the trunk lifts them to
+    float32 (the RMSNorms would otherwise warn and leave their fused kernel), and the model
+    learns as in float32."""
+    import warnings
+
+    seq = _dataset(hier=kind == "hdm")
+    model = _model(kind)
+    streams: list[torch.dtype] = []
+    for m in model.modules():
+        if type(m).__name__ == "MambaBlock":
+            m.register_forward_hook(lambda m, i, o: streams.append(o.dtype))
+    cfg = TrainConfig(
+        iterations=60, batch_size=8, warmup_steps=5, lr=3e-3, progress=False, precision="bf16"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the mismatched-dtype RMSNorm warns
+        h = Trainer(model, seq, cfg).train()
+    assert streams and set(streams) == {torch.float32}
+    assert h["loss"].iloc[-10:].mean() < 0.5 * h["loss"].iloc[:10].mean()
+
+
 def test_no_positional_input_and_causal():
     """Timesteps are not read; a later token does not change earlier outputs (right padding is harmless)."""
     m = _model("dm-rtg").eval()
