@@ -42,7 +42,9 @@ the Linears 16 s; backward 58 s; AdamW 14 s), the 5 evaluations 5 s (already bat
   data-dependent branch: 36 against 21 ms, slower still.
 
 So on this CPU the levers add up to about 1.3x at most (ensemble 8%, dropout and optimizer
-10-15%); the 2x of issue #36 needs the GPU, where stacking seeds does pay.
+10-15%). Not tried then: bfloat16 mixed precision, which this CPU runs natively (AVX-512
+BF16): ``bench_throughput.py`` measures 2.0x the runs per CPU-hour at d128 with 3 layers and
+about 1.5x at d64 with 2 (2026-11-28).
 
     python benchmarks/bench_ensemble.py                 # 5 seeds, d32, 1 layer, batch 64
     python benchmarks/bench_ensemble.py --d-model 128 --n-layer 3
