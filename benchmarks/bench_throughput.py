@@ -7,12 +7,16 @@ two parts of such a run in each precision, in turns (so that background load aff
 alike), and reports the ratio of runs per CPU-hour:
 
 * **train**: the median CPU time of one ``Trainer.step`` (batch 64, K 20, Hopper's sizes,
-  dropout 0.1: sample, forward, loss, backward, clip, AdamW) over ``--repeats`` blocks of
-  ``--updates`` steps;
+  dropout 0.1 in the transformers, none in the DM/HDM as in the studies: sample, forward,
+  loss, backward, clip, AdamW) over ``--repeats`` blocks of ``--updates`` steps;
 * **evaluate**: one ``model.act`` on a full window for a batch of 10 episodes plus 10
   Hopper-v5 steps, times the 5 x 1,000 steps of a run's evaluations. Acting is float32 in
   both precisions (``TrainConfig.precision`` changes the training step only), so this part is
-  the same on both sides and only dilutes the ratio.
+  the same on both sides and only dilutes the ratio. It is an upper bound: episodes that end
+  early take fewer steps, and the DM/HDM of the study act by their recurrent step, several
+  times cheaper than the window; so the ratios below are, if anything, low.
+
+A run's fixed costs (loading the data, building the environments) are left out of both.
 
 ``run = updates x train + evaluations``; the ratio is float32's run over bfloat16's. The sizes:
 ``study`` is the v2 studies' (d64, 2 layers per model), ``peer`` the DT paper's and d3rlpy's
@@ -132,9 +136,9 @@ def main() -> None:
             for t in trainers.values():
                 time_steps(t, 3)  # warm-up
             times: dict[str, list[float]] = {p: [] for p in PRECISIONS}
-            for _ in range(args.repeats):  # in turns
-                for p, t in trainers.items():
-                    times[p].append(time_steps(t, args.updates))
+            for r in range(args.repeats):  # in turns, each precision first every other time
+                for p in PRECISIONS[:: 1 if r % 2 == 0 else -1]:
+                    times[p].append(time_steps(trainers[p], args.updates))
             step = {p: statistics.median(v) for p, v in times.items()}
             # acting is float32 on both sides: one measurement serves both
             eval_s = RUN_EVAL_STEPS * time_evaluation_step(trainers["fp32"], args.acts)

@@ -64,9 +64,12 @@ def test_bf16_training_keeps_the_residual_stream_float32_and_learns(kind):
     seq = _dataset(hier=kind == "hdm")
     model = _model(kind)
     streams: list[torch.dtype] = []
+    linears: list[torch.dtype] = []
     for m in model.modules():
         if type(m).__name__ == "MambaBlock":
             m.register_forward_hook(lambda m, i, o: streams.append(o.dtype))
+        if isinstance(m, torch.nn.Linear):
+            m.register_forward_hook(lambda m, i, o: linears.append(o.dtype))
     cfg = TrainConfig(
         iterations=60, batch_size=8, warmup_steps=5, lr=3e-3, progress=False, precision="bf16"
     )
@@ -74,6 +77,7 @@ def test_bf16_training_keeps_the_residual_stream_float32_and_learns(kind):
         warnings.simplefilter("error")  # the mismatched-dtype RMSNorm warns
         h = Trainer(model, seq, cfg).train()
     assert streams and set(streams) == {torch.float32}
+    assert torch.bfloat16 in linears  # the step ran under autocast
     assert h["loss"].iloc[-10:].mean() < 0.5 * h["loss"].iloc[:10].mean()
 
 

@@ -360,6 +360,15 @@ def test_the_committed_parity_file_parses_and_peer_runs_are_shared():
     }
     assert all(t.config["train"]["precision"] == "bf16" for t in bf["dt-peer-r4-bf16"]["ours"])
     assert all("precision" not in t.config["train"] for t in bf["dt-peer-r4-bf16"]["peer"])
+    # an explicit fp32 is the default: the same runs
+    from thesis_lib.parity import Comparison
+
+    plain, fp32 = (
+        Comparison(name=n, method="DT", train={"iterations": 5, **extra})
+        for n, extra in (("plain", {}), ("fp32", {"precision": "fp32"}))
+    )
+    same = parity_tasks([plain, fp32])
+    assert [t.key for t in same["plain"]["ours"]] == [t.key for t in same["fp32"]["ours"]]
     assert len(unique_tasks(tasks)) < sum(len(s["ours"]) + len(s["peer"]) for s in tasks.values())
 
 

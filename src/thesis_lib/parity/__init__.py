@@ -452,6 +452,8 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
             if recipe is not None and recipe != LEGACY_DATA_RECIPE:  # old runs keep their keys
                 config["data_recipe"] = recipe
             ours = {**config, "init": c.init}
+            if train.get("precision") == "fp32":  # as TrainSpec.task_dict: the runs before it
+                ours["train"] = {k: v for k, v in train.items() if k != "precision"}
             if c.sampling is not None:  # runs from before the option keep their keys
                 ours["sampling"] = c.sampling
             sides["ours"].append(Task(ours_run, ours))

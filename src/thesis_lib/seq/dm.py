@@ -179,6 +179,9 @@ class TokenMamba(nn.Module):
         change no real output (the loss masks them).
         """
         x = interleave_embeddings(*tokens)  # (B, n T, d)
+        # at least float32 from here, under bfloat16 autocast too (TrainConfig.precision): the
+        # residual stream (Mamba.forward) starts at this LayerNorm
+        x = x.to(torch.promote_types(x.dtype, torch.float32))
         y = self.mamba(self.drop(self.embed_ln(x)))
         return deinterleave_embeddings(y, len(tokens))
 

@@ -620,9 +620,9 @@ class Mamba(nn.Module):
             ``(B, L, d_model)``, or ``(output, MambaState)`` with ``return_state``.
         """
         self._check(x, 3)
-        # Under bfloat16 autocast (TrainConfig.precision) the token embeddings come in bfloat16:
-        # the residual stream stays float32, as a DT's does, and the RMSNorms get their weights'
-        # dtype. A no-op for float32 and float64.
+        # Under bfloat16 autocast (TrainConfig.precision) token embeddings may come in bfloat16:
+        # the residual stream stays float32 and the RMSNorms get their weights' dtype. A no-op
+        # for float32 and float64.
         x = x.to(torch.promote_types(x.dtype, torch.float32))
         states = []
         for block in self.layers:

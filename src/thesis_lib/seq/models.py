@@ -111,7 +111,10 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | No
         raise ValueError(
             f"Prediction shape {tuple(pred.shape)} differs from target shape {tuple(target.shape)}."
         )
-    err = (pred - target.to(pred.dtype)) ** 2  # (B, T, D)
+    # at least float32: under bfloat16 autocast the heads' predictions come in bf16, and the
+    # targets and the loss keep their precision (as autocast's own mse_loss does)
+    dtype = torch.promote_types(torch.promote_types(pred.dtype, target.dtype), torch.float32)
+    err = (pred.to(dtype) - target.to(dtype)) ** 2  # (B, T, D)
     if mask is None:
         return err.mean()
     return err[mask.bool()].mean()  # (n_real, D) -> scalar

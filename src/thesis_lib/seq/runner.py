@@ -117,7 +117,8 @@ class TrainSpec:
     @classmethod
     def from_task(cls, d: Mapping[str, Any]) -> TrainSpec:
         """The spec of a task's ``train`` dict (:meth:`task_dict`); a missing ``sampling`` is
-        ``start``, as every task stored before the field existed ran.
+        ``start`` and a missing ``precision`` ``fp32``, as every task stored before the field
+        existed ran.
 
         Example:
             >>> TrainSpec.from_task({"seed": 1}).sampling

@@ -99,12 +99,12 @@ class TrainConfig:
     """Show a tqdm bar with the loss and the last evaluation return."""
     precision: str = "fp32"
     """``"fp32"``: every op in float32. ``"bf16"``: the training step's forward (and so its
-    backward) under ``torch.autocast`` to bfloat16: matrix products and attention in bfloat16,
-    parameters, gradients and AdamW in float32 (mixed precision). On a CPU with AVX-512 BF16 it
-    trains the v2 studies' d64 DT about 1.6x and the d128 3-layer DT about 2x as fast per
-    update (``benchmarks/bench_throughput.py``); its numbers differ from float32's by rounding,
-    so a run is not the float32 run, and a checkpoint is resumed only in its own precision.
-    Evaluation (``eval_fn``) runs in float32 either way."""
+    backward) under ``torch.autocast`` to bfloat16: matrix products and attention in bfloat16;
+    parameters, gradients, the loss and AdamW in float32 (mixed precision). On a CPU with
+    AVX-512 BF16 it trains the v2 studies' d64 DT about 1.5x and the d128 3-layer DT about 2x
+    as fast per update (``benchmarks/bench_throughput.py``); its numbers differ from float32's
+    by rounding, so a run is not the float32 run, and a checkpoint is resumed only in its own
+    precision. Evaluation (``eval_fn``) runs in float32 either way."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size", "warmup_steps"):

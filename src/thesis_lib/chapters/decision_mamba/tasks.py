@@ -287,6 +287,7 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
                     warmup_steps=cfg.warmup_steps,
                     progress=False,
                     device=cfg.device,
+                    precision=cfg.precision,
                 ),
             )
             times = []

@@ -99,7 +99,7 @@ class Config:
     """Training device."""
     precision: Literal["fp32", "bf16"] = "fp32"
     """Training precision (:attr:`~thesis_lib.seq.trainer.TrainConfig.precision`): ``fp32``, or
-    ``bf16`` mixed precision (matrix products in bfloat16; about 1.6x the updates per CPU-second
+    ``bf16`` mixed precision (matrix products in bfloat16; about 1.5x the updates per CPU-second
     at d64 and 2x at d128 with 3 layers on a CPU with AVX-512 BF16;
     the numbers differ from float32's by rounding). Every study so far ran in ``fp32``."""
     progress: bool = False
