@@ -404,7 +404,10 @@ def test_parity_table_says_parity_only_inside_the_band():
             {"score": s, "data_score_mean": 32.0, "data_sha": "x", "peer": "d3rlpy"} for s in scores
         ]
 
-    comps = [Comparison(n, "DT") for n in ("same", "gap", "two")] + [Comparison("half", "BC")]
+    comps = [Comparison(n, "DT") for n in ("same", "gap")] + [
+        Comparison("two", "DT", train={"precision": "bf16"}),
+        Comparison("half", "BC"),
+    ]
     got = {
         "same": {"ours": rows([31, 32, 33]), "peer": rows([32, 31, 33])},
         "gap": {"ours": rows([16, 17, 18]), "peer": rows([32, 31, 33])},
@@ -420,7 +423,14 @@ def test_parity_table_says_parity_only_inside_the_band():
     # the Claims page's reading of each line
     from thesis_lib.chapters.claims import parity_view
 
-    view = parity_view(t.reset_index()).set_index("comparison")["result"]
+    view = parity_view(t.reset_index()).set_index("comparison")
+    assert view["precision"].to_dict() == {
+        "same": "fp32",
+        "gap": "fp32",
+        "two": "bf16",
+        "half": "fp32",
+    }
+    view = view["result"]
     assert view.to_dict() == {
         "same": "at parity",
         "gap": "gap",

@@ -217,6 +217,7 @@ def parity_view(table: pd.DataFrame) -> pd.DataFrame:
         "method": table["method"],
         "init": table["init"].fillna(""),
         "windows": table["sampling"] if "sampling" in table else "start",  # drawn by
+        "precision": table["precision"] if "precision" in table else "fp32",  # ours trained in
         "model": table["arch"],
         "updates": table["updates"],
         "ours (seeds)": [side(m, s) for m, s in zip(table["ours"], table["ours_seeds"], strict=True)],
