@@ -34,17 +34,17 @@ study and a parity run; 50 updates x 3 repeats, the DM and HDM 30 x 3):
     DT       peer            211.4           102.5          53             1.66  3.34   2.01
     HDT      peer            335.0           162.3          84             1.05  2.11   2.01
 
-Whole runs agree: parity's ``dt-peer-r4-bf16`` (the DT at the peer's size, 10k updates and a
-10-episode evaluation, three seeds) took 967 to 1,000 CPU-seconds a run, its float32 twin
-``dt-peer-r4`` 2,646 to 2,960 (another day, beside other work), and scored the same (40.9 both,
-at parity with d3rlpy's float32 DT).
+Whole runs show as much or more: parity's ``dt-peer-r4-bf16`` (the DT at the peer's size, 10k
+updates and a 10-episode evaluation, three seeds) took 967 to 1,000 CPU-seconds a run, its
+float32 twin ``dt-peer-r4`` 2,646 to 2,960 (another day, beside other work), and scored the
+same (40.9 both, at parity with d3rlpy's float32 DT).
 
-So bf16 doubles the runs per CPU-hour at the peer's size (d128, 3 layers, and more above it:
-the matrix products grow as d^2 and bf16 halves their cost), and gives about 1.5x at the v2
-studies' d64: there a step is bound by what bf16 does not speed up (the dropout masks, about a
-quarter of a bf16 step; the normalisations; the Mamba's scan, which runs in float32). The other
-levers of issue #36 add little on this CPU (``bench_ensemble.py``: stacking seeds at most 8%,
-``torch.compile`` slower).
+So bf16 doubles the runs per CPU-hour at the peer's size (d128, 3 layers; the matrix
+products, which bf16 speeds up, grow as d^2, so larger models should gain more), and gives
+about 1.5x at the v2 studies' d64: there a step is bound by what bf16 does not speed up (the
+dropout masks, about a quarter of a bf16 step; the normalisations; the Mamba's scan, which
+runs in float32). The other levers of issue #36 add little on this CPU (``bench_ensemble.py``:
+stacking seeds at most 8%, ``torch.compile`` slower).
 
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50
