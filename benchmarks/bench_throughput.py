@@ -24,15 +24,15 @@ A run's fixed costs (loading the data, building the environments) are left out o
 the bf16 DT learns as d3rlpy's does).
 
 Measured here (2026-11-28, 2-core AMD EPYC with AVX-512 BF16, beside a running two-process
-study and a parity run; 50 updates x 3 repeats, the DM and HDM 30 x 3):
+study; 50 updates x 3 repeats, the DM and HDM 30 x 3):
 
-    method   size   fp32 ms/update  bf16 ms/update  eval s/run  runs/CPU-h fp32  bf16  ratio
-    DT       study            54.5            35.2          18             6.39  9.74   1.52
-    HDT      study            88.0            58.5          27             3.97  5.88   1.48
-    DM-noRTG study            73.1            48.1          23             4.78  7.14   1.49
-    HDM      study           168.7           116.6          52             2.07  2.95   1.43
-    DT       peer            211.4           102.5          53             1.66  3.34   2.01
-    HDT      peer            335.0           162.3          84             1.05  2.11   2.01
+    method   size   fp32 ms/update  bf16 ms/update  eval s/run  runs/CPU-h fp32   bf16  ratio
+    DT       study            50.4            31.9          14             6.95  10.80   1.55
+    HDT      study            79.2            51.9          20             4.44   6.68   1.51
+    DM-noRTG study            71.9            46.7          21             4.87   7.37   1.51
+    HDM      study           173.9           116.8          50             2.01   2.96   1.47
+    DT       peer            202.4            96.2          50             1.74   3.56   2.05
+    HDT      peer            330.1           154.9          85             1.06   2.20   2.07
 
 Whole runs show as much or more: parity's ``dt-peer-r4-bf16`` (the DT at the peer's size, 10k
 updates and a 10-episode evaluation, three seeds) took 967 to 1,000 CPU-seconds a run, its
