@@ -43,7 +43,7 @@ from thesis_lib.seq.registry import (
     check_methods,
 )
 from thesis_lib.seq.subgoals import subgoal_fn
-from thesis_lib.seq.trainer import PRECISIONS, TrainConfig, Trainer
+from thesis_lib.seq.trainer import TrainConfig, Trainer, check_precision
 from thesis_lib.sweep import note_resumed_cpu
 
 __all__ = ["TARGETS", "EvalSpec", "TrainSpec", "VectorEnvPool", "run_offline"]
@@ -91,10 +91,7 @@ class TrainSpec:
         if self.eval_every < 0:
             raise ValueError(f"Expect `eval_every` >= 0, actually: {self.eval_every!r}.")
         resolve_sampling(self.sampling)  # validates
-        if self.precision not in PRECISIONS:
-            raise ValueError(
-                f"Unknown precision {self.precision!r}. Valid: {', '.join(PRECISIONS)}."
-            )
+        check_precision(self.precision)
 
     def task_dict(self) -> dict[str, Any]:
         """The spec as a sweep task's JSON: every field, ``sampling`` left out where it is

@@ -52,6 +52,7 @@ __all__ = [
     "TrainConfig",
     "Trainer",
     "batch_to_torch",
+    "check_precision",
     "data_fingerprint",
 ]
 
@@ -62,6 +63,13 @@ RESULT_FIELDS = ("seed", "lr", "weight_decay", "warmup_steps", "batch_size", "gr
 #: :attr:`TrainConfig.precision`'s values. ``precision`` changes a run's numbers too; a checkpoint
 #: records it only where it is not ``fp32`` (so the checkpoints made before the field still match).
 PRECISIONS = ("fp32", "bf16")
+
+
+def check_precision(precision: str) -> None:
+    """Raise a ValueError naming the valid values if ``precision`` is not one of
+    :data:`PRECISIONS` (:class:`TrainConfig` and :class:`~thesis_lib.seq.runner.TrainSpec`)."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"Unknown precision {precision!r}. Valid: {', '.join(PRECISIONS)}.")
 
 
 @dataclass
@@ -122,10 +130,7 @@ class TrainConfig:
             )
         if self.device not in ("cpu", "cuda", "auto") and not self.device.startswith("cuda:"):
             raise ValueError(f"Unknown device {self.device!r}. Valid: cpu, cuda, cuda:N, auto.")
-        if self.precision not in PRECISIONS:
-            raise ValueError(
-                f"Unknown precision {self.precision!r}. Valid: {', '.join(PRECISIONS)}."
-            )
+        check_precision(self.precision)
 
 
 def _warmup(step: int, warmup_steps: int) -> float:
