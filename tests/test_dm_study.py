@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 
 from thesis_lib.chapters import CHAPTERS
 
@@ -113,3 +114,62 @@ def test_a_dm_under_bc_minus_five_withholds_c4_and_its_c5_comparison(studies):
     assert verdicts["C4"] == "untestable"
     assert by.loc["DM (without RTG) vs DT, hopper medium-replay", "verdict"] == "untestable"
     assert by.loc["HDM vs HDT, hopper medium-replay", "validity"] == "valid"
+
+
+# ------------------------------------------------------------------ the GPU timing study (C6)
+
+
+@pytest.fixture
+def gpu_study(monkeypatch):
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    return st.load_study("05_decision_mamba:gpu")
+
+
+def test_the_gpu_study_times_v2s_c6_tasks_on_cuda_and_trains_nothing(gpu_study, studies):
+    """dm-c6-gpu-v1: v2's timing tasks (same fields but the device, repeats and data size),
+    each carrying ``device: cuda`` in its config (so its key), and no training run; v2's own
+    timing tasks carry no device (their keys are those of the rows already stored)."""
+    gpu = _tasks(gpu_study, "05_decision_mamba")
+    assert len(gpu) == 30 and {t.fn.__name__ for t in gpu} == {"timing_task"}
+    assert {t.config["device"] for t in gpu} == {"cuda"}
+    assert {t.config["dataset"] for t in gpu} == {"hopper/medium", "maze2d-umaze/expert"}
+    v2 = [t for t in _tasks(studies[0], "05_decision_mamba") if t.fn.__name__ == "timing_task"]
+    assert not any("device" in t.config for t in v2)
+    same = {"method", "dataset", "timing_arch", "timing_batch_size", "timing_train_iters"}
+    assert {tuple(t.config[k] for k in sorted(same)) for t in gpu} <= {
+        tuple(t.config[k] for k in sorted(same)) for t in v2
+    }
+    assert {t.key for t in gpu}.isdisjoint({t.key for t in v2})
+
+
+def test_the_gpu_studys_rows_decide_c6_as_v2s(gpu_study):
+    """Rows shaped as a GPU run makes them (plus the GPU's name and the scan) go through the
+    same comparisons: a DM action slower than a DT's on the window fails C6."""
+    rows = _rows(gpu_study, LEVELS).assign(device="NVIDIA H200", scan_backend="torch")
+    res, verdicts = _verdicts(gpu_study, rows)
+    assert verdicts == {"C6": "fails"}
+    assert set(res["seeds"]) == {3}
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error on a machine without GPU")
+def test_a_gpu_timing_task_without_a_gpu_says_so():
+    from thesis_lib.chapters.decision_mamba.tasks import timing_task
+
+    with pytest.raises(RuntimeError, match="no CUDA GPU"):
+        timing_task(
+            {
+                "method": "DT",
+                "dataset": "hopper/medium",
+                "seed": 0,
+                "timing_arch": "1/16/5",
+                "timing_batch_size": 4,
+                "timing_train_iters": 1,
+                "timing_infer_steps": 5,
+                "timing_infer_episodes": 1,
+                "dataset_size": "smoke",
+                "n_transitions": None,
+                "device": "cuda",
+            }
+        )

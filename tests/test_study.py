@@ -182,6 +182,45 @@ def test_a_later_study_runs_beside_the_first_and_takes_over_its_claims_once_comp
     assert evi.load_evidence(CHAPTERS["04_hdt"], reps=200).study.study == "fake-v1"
 
 
+def test_a_study_read_beside_another_is_listed_in_the_history_and_decides_nothing(project):
+    """`beside:` (C6's GPU timings beside the CPU study): its verdicts go to ``history``, with
+    ", beside <id>", never to the claim's verdict, also while the study it is beside is the
+    only other one; the Claims page's v1/v2 table leaves it out."""
+    aside = {**V2, "study": "fake-gpu", "beside": "fake-v1"}
+    del aside["supersedes"]
+    (project / "params" / "04_hdt.gpu.study.yml").write_text(yaml.safe_dump(aside))
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    st.run_study(CHAPTERS["04_hdt"], study="gpu", progress=False)
+    info = json.loads((project / "studies" / "04_hdt" / "gpu" / "run.json").read_text())
+    assert info["complete"] and info["beside"] == "fake-v1" and "supersedes" not in info
+    claims = st.write_claims(CHAPTERS, reps=200).set_index("claim")
+    # fake-gpu finds DT not better than HDT (fails), but fake-v1's verdict stays the claim's
+    assert claims.loc["C3", "study"] == "fake-v1" and claims.loc["C3", "verdict"] == "holds"
+    assert claims.loc["C3", "history"] == "fake-v1: holds; fake-gpu: fails, beside fake-v1"
+    from thesis_lib.chapters.claims import studies_table
+
+    side = studies_table(claims.reset_index()).set_index("claim")
+    assert side.loc["C3", ["v1 study", "v2 study"]].tolist() == [
+        "fake-v1", "none registered yet",
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "patch, message",
+    [
+        ({"beside": "fake-v9"}, "`beside: fake-v9` names no other study of 04_hdt"),
+        ({"beside": "fake-v1", "supersedes": "fake-v1"}, "not both"),
+        ({"beside": ["fake-v1"]}, "Expect `beside` to be the id of a study"),
+    ],
+)
+def test_a_wrong_beside_is_refused_at_load(project, patch, message):
+    (project / "params" / "04_hdt.gpu.study.yml").write_text(
+        yaml.safe_dump({**STUDY, "study": "fake-gpu", **patch})
+    )
+    with pytest.raises(ValueError, match=re.escape(message)):
+        st.load_study("04_hdt:gpu")
+
+
 def test_thesis_study_names_a_later_study_by_tag_or_file(project, capsys):
     from thesis_lib.cli import main
 
@@ -1013,8 +1052,11 @@ def test_every_registered_study_declares_its_columns_and_passes_the_check(file):
     columns = CHAPTERS[study.chapter].study_columns
     assert len(columns) == len(set(columns)) and {"method", "setting", "seed"} <= set(columns)
     st.study_config(study, CHAPTERS[study.chapter])  # the study file names real columns
-    if study.tag:  # a later study: what it supersedes exists, and its tasks are not v1's
-        assert study.supersedes in {s.study for s in st.chapter_studies(study.chapter)}
+    if study.tag:  # a later study: what it supersedes (or is read beside) exists, and its
+        # tasks are not v1's
+        assert (study.supersedes or study.beside) in {
+            s.study for s in st.chapter_studies(study.chapter)
+        }
         first = st.load_study(study.chapter)
         keys = {t.key for t in st.study_tasks(study, CHAPTERS[study.chapter])}
         shared = keys & {t.key for t in st.study_tasks(first, CHAPTERS[study.chapter])}

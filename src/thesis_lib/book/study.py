@@ -5,7 +5,10 @@ A chapter may register later studies beside its first, each in a file of its own
 ``studies/<chapter>/<tag>/`` and named ``<chapter>:<tag>`` on the command line
 (``thesis study 04_hdt:v2``). A later study names the one it replaces (``supersedes:``); the
 earlier one keeps its file, its rows and its verdicts, and ``studies/claims.csv`` shows them
-beside the later one (column ``history``), so a change of verdict stays visible.
+beside the later one (column ``history``), so a change of verdict stays visible. A study that
+answers the same claims another way without replacing anything names the study it is read
+beside (``beside:``; the GPU timings of C6 beside the CPU study's): its verdicts go to the
+claims' ``history`` only, never to the claim's verdict.
 
 A study file fixes, before anything runs, the chapter config (settings, seeds, sizes), the
 metric, and the comparisons that test the thesis's claims (``CLAIMS.md``). ``thesis study
@@ -65,6 +68,7 @@ STUDY_KEYS = {
     "gates",
     "interval",
     "supersedes",
+    "beside",
 }
 SCALE_CHECK_KEYS = {"config", "note"}
 REQUIRED_KEYS = ("study", "chapter", "config", "metric", "comparisons")
@@ -100,6 +104,10 @@ class Study:
     supersedes: str | None = None
     """The id of the earlier study of the same chapter that this one replaces (its verdicts
     move to the claims' ``history`` once this one is complete)."""
+    beside: str | None = None
+    """The id of the study of the same chapter that this one is reported beside (the same
+    claims on other hardware, say): its verdicts are listed in the claims' ``history`` and never
+    decide a claim."""
     tag: str = ""
     """Which of the chapter's studies: ``""`` for ``params/<chapter>.study.yml``, ``"v2"`` for
     ``params/<chapter>.v2.study.yml`` (from the file's name; not pre-registered)."""
@@ -107,12 +115,17 @@ class Study:
     @property
     def hash(self) -> str:
         """Hash of everything pre-registered (all fields but the file's path and tag;
-        ``gates``, ``interval`` and ``supersedes`` only where a file sets them, so v1 study
-        files keep their hash)."""
+        ``gates``, ``interval``, ``supersedes`` and ``beside`` only where a file sets them, so
+        earlier study files keep their hash)."""
         d = dataclasses.asdict(self)
         d.pop("path")
         d.pop("tag")
-        for key, unset in (("gates", []), ("interval", None), ("supersedes", None)):
+        for key, unset in (
+            ("gates", []),
+            ("interval", None),
+            ("supersedes", None),
+            ("beside", None),
+        ):
             if d[key] == unset:
                 d.pop(key)
         return config_hash(d)
@@ -261,6 +274,17 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
         raise ValueError(
             f"Expect `supersedes` to be the id of an earlier study, actually: {supersedes!r}{where}"
         )
+    beside = data.get("beside")
+    if beside is not None and not (isinstance(beside, str) and beside):
+        raise ValueError(
+            f"Expect `beside` to be the id of a study of the same chapter, actually: {beside!r}"
+            f"{where}"
+        )
+    if beside is not None and supersedes is not None:
+        raise ValueError(
+            f"A study either replaces an earlier one (`supersedes`) or is read beside another "
+            f"(`beside`), not both{where}."
+        )
     interval = data.get("interval")
     if interval is not None and interval not in INTERVALS:
         raise ValueError(
@@ -283,6 +307,7 @@ def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
         gates=[dict(g) for g in gates],
         interval=interval,
         supersedes=supersedes,
+        beside=beside,
     )
 
 
@@ -321,6 +346,17 @@ def load_study(ref_or_path: str | Path) -> Study:
             raise ValueError(
                 f"{p}: `supersedes: {study.supersedes}` names no earlier study of "
                 f"{study.chapter} (earlier: {', '.join(earlier) or 'none'})."
+            )
+    if study.beside is not None:
+        ids = {
+            (yaml.safe_load(f.read_text()) or {}).get("study")
+            for f in study_files()
+            if _name_parts(f)[0] == study.chapter and f.resolve() != p.resolve()
+        }
+        if study.beside not in ids:
+            raise ValueError(
+                f"{p}: `beside: {study.beside}` names no other study of {study.chapter} "
+                f"(its studies: {', '.join(sorted(map(str, ids - {None}))) or 'none'})."
             )
     return study
 
@@ -685,6 +721,8 @@ def write_study_summary(
     }
     if study.supersedes:
         info["supersedes"] = study.supersedes
+    if study.beside:
+        info["beside"] = study.beside
     atomic_write(out / "run.json", lambda tmp: tmp.write_text(json.dumps(info, indent=1) + "\n"))
     return info
 
@@ -819,19 +857,23 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
     Where several studies of a chapter pre-register a claim (a later study that supersedes an
     earlier one), the verdict is the last complete one's, and ``history`` lists every study of
     the claim, first to last, with its verdict or its progress (``hdt-c1c3-v1: untestable;
-    hdt-c1c3-v2: pending, 12/450 tasks``)."""
+    hdt-c1c3-v2: pending, 12/450 tasks``). A study read ``beside`` another is listed in
+    ``history`` (``dm-c6-gpu-v1: fails, beside dm-c4c6-v2``) and decides nothing."""
     rows: dict[str, dict[str, Any]] = {}
     history: dict[str, list[str]] = {}
     for p in study_files():
         study = load_study(p)
         info = read_run_info(study)
         claims = dict.fromkeys(c["claim"] for c in study.comparisons)
+        aside = f", beside {study.beside}" if study.beside else ""
         if not is_complete(study, info):
             done = info.get("tasks_done", 0) if info.get("study_hash") == study.hash else 0
             total = len(study_tasks(study, chapters[study.chapter]))
             for cl in claims:
-                history.setdefault(cl, []).append(f"{study.study}: pending, {done}/{total} tasks")
-                if rows.get(cl, {}).get("verdict", "pending") != "pending":
+                history.setdefault(cl, []).append(
+                    f"{study.study}: pending, {done}/{total} tasks{aside}"
+                )
+                if study.beside or rows.get(cl, {}).get("verdict", "pending") != "pending":
                     continue  # an earlier complete study answers it until this one completes
                 rows[cl] = {
                     "claim": cl,
@@ -843,7 +885,9 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
             continue
         verdicts = claim_verdicts(evaluate_study(study, reps=reps))
         for r in verdicts.to_dict("records"):
-            history.setdefault(r["claim"], []).append(f"{study.study}: {r['verdict']}")
+            history.setdefault(r["claim"], []).append(f"{study.study}: {r['verdict']}{aside}")
+            if study.beside:
+                continue  # read beside another study: listed, never the claim's verdict
             rows[r["claim"]] = {
                 **r,
                 "chapter": study.chapter,

@@ -100,7 +100,8 @@ def studies_table(claims: pd.DataFrame) -> pd.DataFrame:
     """Per claim, its first study and its latest side by side (the v1 study and the second
     study that supersedes it, issue #36), each with its verdict, or its progress while it runs;
     read from ``history`` of ``claims.csv``. The verdict the ledger shows is the latest
-    *complete* study's.
+    *complete* study's. A study read beside another (``, beside <id>`` in its entry) is left
+    out: it is shown in the chapter.
 
     >>> t = studies_table(pd.DataFrame({"claim": ["C14"], "verdict": ["untestable"],
     ...     "history": ["ur3-c14-v1: untestable; ur3-c14-v2: pending, 0/52 tasks"]}))
@@ -115,7 +116,9 @@ def studies_table(claims: pd.DataFrame) -> pd.DataFrame:
         if not entries and isinstance(r.get("study", None), str):
             entries.append((r["study"], str(r.get("verdict", "pending"))))
         first = entries[0] if entries else ("no study yet", "pending")
-        later = entries[-1] if len(entries) > 1 else ("none registered yet", "")
+        # a study read beside another (C6 on a GPU) is not the claim's later study
+        own = [e for e in entries[1:] if ", beside " not in e[1]]
+        later = own[-1] if own else ("none registered yet", "")
         rows.append(
             {
                 "claim": cid,

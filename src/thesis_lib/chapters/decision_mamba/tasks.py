@@ -49,6 +49,7 @@ from thesis_lib.seq import (
     DTConfig,
     HDMConfig,
     HDTConfig,
+    resolve_scan_backend,
 )
 from thesis_lib.seq.evaluation import evaluate, target_returns
 from thesis_lib.seq.registry import LEGACY_INIT, LEGACY_SAMPLING, build_model
@@ -238,6 +239,13 @@ def _timing_env(task: str) -> Any:
     return gym.vector.SyncVectorEnv([lambda: make(task)])
 
 
+def _sync(device: torch.device) -> None:
+    """Wait for ``device``'s queued kernels (CUDA runs them after the call returns), so a
+    timer read next counts them; nothing on the CPU."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None) -> pd.DataFrame:
     """Table 5.6: ms per training iteration and per inference step of each method, at ``cfg.timing_arch``.
 
@@ -251,6 +259,8 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
       the authors' code, and with the recurrent step (``recurrent``, not in the thesis).
 
     The models are untrained (time does not depend on the weights, only on episode lengths).
+    They run on ``cfg.device``; on a GPU each timed training step ends with a synchronisation,
+    and acting synchronises at every step (the action goes back to the environment).
 
     Used in: Decision Mamba chapter (Table 5.6).
 
@@ -294,6 +304,7 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
             for i in range(cfg.timing_train_iters + 1):
                 t0 = time.perf_counter()
                 trainer.step()
+                _sync(trainer.device)  # a GPU's kernels run after the call returns
                 if i:
                     times.append((time.perf_counter() - t0) * 1e3)
             rows.append(
@@ -386,6 +397,8 @@ def study_tasks(cfg: Config) -> list[Task]:
         study_task(cfg, m, d, s, arch) for d in cfg.datasets for s in cfg.seeds for m in cfg.methods
     ]
     timing = {k: getattr(cfg, k) for k in TIMING_FIELDS}
+    if cfg.device != "cpu":  # the CPU studies' task keys hold no device
+        timing["device"] = cfg.device
     tasks += [
         Task(timing_task, {"method": m, "dataset": d, "seed": s, **timing})
         for d in cfg.timing_datasets
@@ -399,8 +412,10 @@ def study_tasks(cfg: Config) -> list[Task]:
 def timing_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     """One C6 study task: Table 5.6's timings of one method on one environment, one repeat.
 
-    ``config`` holds ``method, dataset, seed`` (the repeat: model init and episode starts) and
-    the ``timing_*``, ``dataset_size`` and ``n_transitions`` fields of :class:`Config`. Returns
+    ``config`` holds ``method, dataset, seed`` (the repeat: model init and episode starts),
+    the ``timing_*``, ``dataset_size`` and ``n_transitions`` fields of :class:`Config`, and
+    ``device`` where it is not the CPU (a GPU study: ``cuda``; its rows also name the GPU,
+    ``device``, and the DM/HDM's scan, ``scan_backend``). Returns
     one row: ``method, setting ("<task/tier> (timing)"), seed, scale``, the ms per training
     iteration (``train_ms``) and per action (``act_ms_window``; DM/HDM also
     ``act_ms_recurrent``), and the speeds ``train_per_s``, ``act_per_s_window``,
@@ -409,10 +424,17 @@ def timing_task(config: dict[str, Any]) -> list[dict[str, Any]]:
 
     Used in: ``thesis study 05_decision_mamba`` (C6).
     """
+    device = str(config.get("device", "cpu"))
+    if device != "cpu" and not torch.cuda.is_available():
+        raise RuntimeError(
+            f"This study task times the models on device {device!r}, but torch sees no CUDA GPU "
+            f"here (torch {torch.__version__}). Run the study on a machine with one."
+        )
     cfg = Config(
         methods=[config["method"]],
         seed=int(config["seed"]),
         timing_datasets=[config["dataset"]],
+        device=device,
         **{k: config[k] for k in TIMING_FIELDS},
     )
     t = run_table_5_6(cfg)
@@ -435,4 +457,8 @@ def timing_task(config: dict[str, Any]) -> list[dict[str, Any]]:
     row["act_per_s_recurrent"] = 1e3 / row["act_ms_recurrent"]
     own = "act_ms_recurrent" if config["method"] in MAMBA_METHODS else "act_ms_window"
     row["act_per_s"] = 1e3 / row[own]  # each method acting its own way (DM/HDM: recurrent)
+    if device != "cpu":  # which GPU, and which selective scan the DM/HDM ran there
+        dev = torch.device("cuda" if device == "auto" else device)
+        row["device"] = torch.cuda.get_device_name(dev)
+        row["scan_backend"] = resolve_scan_backend(dev) if config["method"] in MAMBA_METHODS else ""
     return [row]
