@@ -92,6 +92,22 @@ def test_study_runs_resumes_and_records_its_hash(project):
     assert sorted(csv["method"].unique()) == ["DT", "HDT"]
 
 
+def test_run_json_names_the_versions_its_tasks_ran_with(project):
+    """Tasks run on another machine (the GPU study's) and summarised here: run.json's
+    ``versions`` are the latest task's, not the summarising process's."""
+    study = st.load_study("04_hdt")
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    files = sorted((project / "studies" / "04_hdt" / "tasks").glob("*.json"))
+    for i, f in enumerate(files):
+        rec = json.loads(f.read_text())
+        rec["versions"] = {"python": "3.12.3", "torch": f"2.11.{i}"}
+        rec["stored_utc"] = f"2026-11-28T21:{i:02d}:00+00:00"
+        f.write_text(json.dumps(rec))
+    keys = [t.key for t in st.study_tasks(study, CHAPTERS["04_hdt"])]
+    info = st.write_study_summary(study, keys)
+    assert info["versions"] == {"python": "3.12.3", "torch": f"2.11.{len(files) - 1}"}
+
+
 def test_verdicts_follow_from_the_rows(project):
     st.run_study(CHAPTERS["04_hdt"], progress=False)
     res = st.evaluate_study("04_hdt", reps=500)

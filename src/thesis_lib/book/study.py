@@ -695,11 +695,24 @@ def study_rows(
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+def _task_versions(records: list[dict[str, Any]]) -> dict[str, str]:
+    """The package versions the study's tasks ran with: the latest stored task's (each task's
+    record keeps its own), not the summarising process's, which may be another machine (the
+    GPU study's tasks ran on the machine lent, its summary is rewritten here). With no task
+    stored yet: this process's."""
+    stamped = [r for r in records if isinstance(r.get("versions"), dict)]
+    if not stamped:
+        return package_versions()
+    latest = max(stamped, key=lambda r: str(r.get("stored_utc") or r.get("finished_at") or ""))
+    return dict(latest["versions"])
+
+
 def write_study_summary(
     study: Study, keys: list[str], records: list[dict[str, Any]] | None = None
 ) -> dict[str, Any]:
     """Rewrite the study's ``rows.csv`` and ``run.json`` (in :attr:`Study.folder`) from the
-    stored tasks (``records``, when the caller has read them already)."""
+    stored tasks (``records``, when the caller has read them already). ``run.json``'s
+    ``versions`` are those of the latest task's run (:func:`_task_versions`)."""
     out = study.folder
     out.mkdir(parents=True, exist_ok=True)
     recs = records if records is not None else task_records(study, keys)
@@ -716,7 +729,7 @@ def write_study_summary(
         "commits": sorted({r.get("commit", "unknown") for r in recs}),
         "cpu_hours": round(sum(float(r.get("cpu_s", 0.0)) for r in recs) / 3600, 3),
         "wall_hours": round(sum(float(r.get("wall_s", 0.0)) for r in recs) / 3600, 3),
-        "versions": package_versions(),
+        "versions": _task_versions(recs),
         "budget_cpu_hours": study.budget_cpu_hours,
     }
     if study.supersedes:
