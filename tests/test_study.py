@@ -1127,3 +1127,15 @@ def test_claims_refuse_rows_without_a_seed_column(project):
         path.write_text(json.dumps(rec))
     with pytest.raises(ValueError, match="Expect the rows to have the column 'seed'"):
         st.write_claims(CHAPTERS, reps=100)
+
+
+def test_a_study_file_this_code_cannot_read_does_not_stop_loading_another(project):
+    """A long run loads its own study again to commit its rows: a file added meanwhile with a
+    key newer than the run's code (dm-c6-gpu-v1's ``beside`` stopped dm-c4c6-v2's commits)
+    is read for its ``study:`` id alone when checking ``supersedes``."""
+    (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump(V2))
+    newer = {**STUDY, "study": "fake-a", "a_key_from_the_future": 1}
+    (project / "params" / "04_hdt.a.study.yml").write_text(yaml.safe_dump(newer))
+    assert st.load_study("04_hdt:v2").supersedes == "fake-v1"
+    with pytest.raises(ValueError, match="a_key_from_the_future"):
+        st.load_study("04_hdt:a")

@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import yaml
 
 from thesis_lib._io import atomic_write
 from thesis_lib.book.chapter import Chapter
@@ -321,8 +322,6 @@ def load_study(ref_or_path: str | Path) -> Study:
             unlike its ``chapter:`` (its tasks and rows would go to another chapter's study);
             a tagged study's ``supersedes`` names no earlier study of its chapter.
     """
-    import yaml
-
     p = Path(ref_or_path)
     if p.suffix not in (".yml", ".yaml"):
         p = study_path(*split_ref(str(ref_or_path)))
@@ -341,7 +340,7 @@ def load_study(ref_or_path: str | Path) -> Study:
         split_ref(study_ref(chapter, tag))  # a well-formed tag
         study.tag = tag
     if study.supersedes is not None:
-        earlier = [s.study for s in _earlier_studies(study)]
+        earlier = _earlier_study_ids(study)
         if study.supersedes not in earlier:
             raise ValueError(
                 f"{p}: `supersedes: {study.supersedes}` names no earlier study of "
@@ -361,8 +360,10 @@ def load_study(ref_or_path: str | Path) -> Study:
     return study
 
 
-def _earlier_studies(study: Study) -> list[Study]:
-    """The studies of ``study``'s chapter registered before it (by :func:`study_files`' order)."""
+def _earlier_study_ids(study: Study) -> list[str]:
+    """The ids of the studies of ``study``'s chapter registered before it (by
+    :func:`study_files`' order), read from their files' ``study:`` alone: a file written later
+    than the running code (a key it does not know) must not stop a long run's commits."""
     out = []
     for p in study_files():
         chapter, tag = _name_parts(p)
@@ -370,7 +371,7 @@ def _earlier_studies(study: Study) -> list[Study]:
             continue
         if tag == study.tag:
             break
-        out.append(load_study(p))
+        out.append(str((yaml.safe_load(p.read_text()) or {}).get("study")))
     return out
 
 
