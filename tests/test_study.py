@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import os
@@ -733,7 +734,12 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project, m
     since = evi.code_changes_since(ev)  # the task function is not library code: all of it counts
     assert list(since.subject) == ["change the model"]
     assert "Since then, 1 commit(s) changed the code its tasks run" in evi.status_line(ev)
+    assert "except as the uncommitted" not in evi.status_line(ev)
     assert "Its study file" not in evi.status_line(ev)
+    dirty = dataclasses.replace(ev, info={**ev.info, "commits": [ev.info["commits"][0] + "-dirty"]})
+    line = evi.status_line(dirty)  # run on an uncommitted tree (the GPU study's copy)
+    assert f"run at commit(s) {ev.info['commits'][0][:7]} with uncommitted changes." in line
+    assert "took no part in these rows, except as the uncommitted changes" in line
     study_file = project / "params" / "04_hdt.study.yml"
     study_file.write_text(study_file.read_text() + "# a note\n")
     git("commit", "-qam", "the study file")

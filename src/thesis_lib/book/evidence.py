@@ -113,12 +113,19 @@ def load_evidence(chapter: Chapter, reps: int = 10_000, study: str = "") -> Evid
 
 
 def status_line(ev: Evidence) -> str:
-    """The study, tasks done of total, CPU-hours, the commits it ran at, and once it is
-    complete whether the library changed since (:func:`code_changes_since`)."""
+    """The study, tasks done of total, CPU-hours, the commits it ran at (a commit with
+    uncommitted changes says so), and once it is complete whether the library changed since
+    (:func:`code_changes_since`)."""
     i = ev.info
     if not i or i.get("study_hash") != ev.study.hash:
         return f"Study {ev.study.study}: not run yet (`thesis study {ev.study.ref}`)."
-    commits = ", ".join(c[:7] for c in i.get("commits", [])) or "none"
+    commits = (
+        ", ".join(
+            c[:7] + (" with uncommitted changes" if c.endswith("-dirty") else "")
+            for c in i.get("commits", [])
+        )
+        or "none"
+    )
     state = "complete" if ev.complete else "in progress: verdicts wait for the full grid"
     line = (
         f"Study {i['study']}: {i['tasks_done']}/{i['tasks_total']} tasks ({state}), "
@@ -132,7 +139,13 @@ def status_line(ev: Evidence) -> str:
             " The code its tasks run has not changed since."
             if code.empty
             else f" Since then, {len(code)} commit(s) changed the code its tasks run (newest "
-            f"{code.commit.iloc[0]}, {code.date.iloc[0]}); they took no part in these rows."
+            f"{code.commit.iloc[0]}, {code.date.iloc[0]}); they took no part in these rows"
+            + (
+                ", except as the uncommitted changes some tasks ran with (each task's record "
+                "lists its changed files)."
+                if any(c.endswith("-dirty") for c in i.get("commits", []))
+                else "."
+            )
         )
         if not file.empty:  # a later study that reads earlier runs (``reuse``) is one of these
             line += (
