@@ -740,6 +740,10 @@ def test_status_line_says_what_changed_in_the_library_since_the_study(project, m
     line = evi.status_line(dirty)  # run on an uncommitted tree (the GPU study's copy)
     assert f"run at commit(s) {ev.info['commits'][0][:7]} with uncommitted changes." in line
     assert "took no part in these rows, except as the uncommitted changes" in line
+    older = dataclasses.replace(  # an older commit was dirty, the newest clean: no caveat
+        ev, info={**ev.info, "commits": [ev.info["commits"][0], "0" * 40 + "-dirty"]}
+    )
+    assert "except as the uncommitted" not in evi.status_line(older)
     study_file = project / "params" / "04_hdt.study.yml"
     study_file.write_text(study_file.read_text() + "# a note\n")
     git("commit", "-qam", "the study file")

@@ -141,9 +141,9 @@ def status_line(ev: Evidence) -> str:
             else f" Since then, {len(code)} commit(s) changed the code its tasks run (newest "
             f"{code.commit.iloc[0]}, {code.date.iloc[0]}); they took no part in these rows"
             + (
-                ", except as the uncommitted changes some tasks ran with (each task's record "
-                "lists its changed files)."
-                if any(c.endswith("-dirty") for c in i.get("commits", []))
+                ", except as the uncommitted changes its latest tasks ran with (each task's "
+                "record lists its changed files)."
+                if f"{since.attrs.get('since')}-dirty" in i.get("commits", [])
                 else "."
             )
         )
@@ -229,7 +229,8 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     """The commits after the study's last commit that changed what its rows depend on: the
     library code its task functions run (:func:`study_code_paths`; the whole library, less
     ``book/``, where they cannot be traced) and its study file. Columns ``commit, date,
-    subject, changed`` (``code``, ``study file`` or ``code, study file``), newest first;
+    subject, changed`` (``code``, ``study file`` or ``code, study file``), newest first, and
+    ``attrs["since"]``, the study's newest commit, which the list starts after;
     ``None`` where it cannot be known: before the study ran, or where git or the study's
     commits cannot be read (a copy without history).
 
@@ -264,7 +265,9 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     rank = {h: i for i, h in enumerate(order.split())}
     rows = [[*line.split("\t", 2), ", ".join(w)] for line, w in found.items()]
     rows.sort(key=lambda r: rank.get(r[0], len(rank)))
-    return pd.DataFrame(rows, columns=cols)
+    out = pd.DataFrame(rows, columns=cols)
+    out.attrs["since"] = last  # the study's newest commit, which the list starts after
+    return out
 
 
 def _mean_ci(values: np.ndarray, reps: int, seed: int = 0) -> tuple[float, float, float]:
