@@ -348,22 +348,22 @@ def load_study(ref_or_path: str | Path) -> Study:
             )
     if study.beside is not None:
         ids = {
-            (yaml.safe_load(f.read_text()) or {}).get("study")
+            _file_study_id(f)
             for f in study_files()
             if _name_parts(f)[0] == study.chapter and f.resolve() != p.resolve()
         }
         if study.beside not in ids:
             raise ValueError(
                 f"{p}: `beside: {study.beside}` names no other study of {study.chapter} "
-                f"(its studies: {', '.join(sorted(map(str, ids - {None}))) or 'none'})."
+                f"(its studies: {', '.join(sorted(ids)) or 'none'})."
             )
     return study
 
 
 def _earlier_study_ids(study: Study) -> list[str]:
     """The ids of the studies of ``study``'s chapter registered before it (by
-    :func:`study_files`' order), read from their files' ``study:`` alone: a file written later
-    than the running code (a key it does not know) must not stop a long run's commits."""
+    :func:`study_files`' order), by :func:`_file_study_id`: a file written later than the
+    running code must not stop a long run's commits."""
     out = []
     for p in study_files():
         chapter, tag = _name_parts(p)
@@ -371,8 +371,14 @@ def _earlier_study_ids(study: Study) -> list[str]:
             continue
         if tag == study.tag:
             break
-        out.append(str((yaml.safe_load(p.read_text()) or {}).get("study")))
+        out.append(_file_study_id(p))
     return out
+
+
+def _file_study_id(p: Path) -> str:
+    """The ``study:`` id of the study file ``p``, read without validating the rest: a file
+    written later than the running code (a key it does not know) must still be nameable."""
+    return str((yaml.safe_load(p.read_text()) or {}).get("study"))
 
 
 def study_chapter(ref_or_path: str | Path) -> str:
