@@ -43,8 +43,10 @@ the Linears 16 s; backward 58 s; AdamW 14 s), the 5 evaluations 5 s (already bat
 
 So on this CPU the levers add up to about 1.3x at most (ensemble 8%, dropout and optimizer
 10-15%). Not tried then: bfloat16 mixed precision, which this CPU runs natively (AVX-512
-BF16): ``bench_throughput.py`` measures 2.0x the runs per CPU-hour at d128 with 3 layers and
-about 1.5x at d64 with 2 (2026-11-28).
+BF16): ``bench_throughput.py`` measures 1.5-2.0x the runs per CPU-hour at d128 with 3 layers
+and 1.2-1.55x at d64 with 2 (two days). The cheaper dropout mask and fused AdamW are now
+``TrainConfig(kernels="fast")`` (32-bit lanes, exact to 2^-32); on top of bfloat16 they take
+a tenth to a fifth off a transformer's step (2026-11-29).
 
     python benchmarks/bench_ensemble.py                 # 5 seeds, d32, 1 layer, batch 64
     python benchmarks/bench_ensemble.py --d-model 128 --n-layer 3

@@ -1,30 +1,35 @@
 """Runs per CPU-hour of the sequence-model studies: float32 (the v1 code) against bfloat16 mixed
-precision (``TrainConfig(precision="bf16")``), at equal config, in one process (issue #36).
+precision (``TrainConfig(precision="bf16")``), alone and with the fast training kernels
+(``TrainConfig(kernels="fast")``: lane dropout masks and fused AdamW), at equal config, in one
+process (issue #36).
 
 A study run of the second studies (hdt-c1c3-v2, dm-c4c6-v2) is 10k training updates and five
 evaluations of 10 episodes of up to 1,000 steps. This script times, per method and size, the
-two parts of such a run in each precision, in turns (so that background load affects both
-alike), and reports the ratio of runs per CPU-hour:
+two parts of such a run in each variant, in turns (so that background load affects all alike),
+and reports the ratio of runs per CPU-hour to float32's:
 
 * **train**: the median CPU time of one ``Trainer.step`` (batch 64, K 20, Hopper's sizes,
   dropout 0.1 in the transformers, none in the DM/HDM as in the studies: sample, forward,
   loss, backward, clip, AdamW) over ``--repeats`` blocks of ``--updates`` steps;
 * **evaluate**: one ``model.act`` on a full window for a batch of 10 episodes plus 10
-  Hopper-v5 steps, times the 5 x 1,000 steps of a run's evaluations. Acting is float32 in
-  both precisions (``TrainConfig.precision`` changes the training step only), so this part is
-  the same on both sides and only dilutes the ratio. It is an upper bound: episodes that end
-  early take fewer steps, and the DM/HDM of the study act by their recurrent step, several
-  times cheaper than the window; so the ratios below are, if anything, low.
+  Hopper-v5 steps, times the 5 x 1,000 steps of a run's evaluations. Acting is float32 with
+  torch's kernels in every variant (``precision`` and ``kernels`` change the training step
+  only), so this part is the same on all sides and only dilutes the ratio. It is an upper
+  bound: episodes that end early take fewer steps, and the DM/HDM of the study act by their
+  recurrent step, several times cheaper than the window; so the ratios below are, if
+  anything, low.
 
-A run's fixed costs (loading the data, building the environments) are left out of both.
+A run's fixed costs (loading the data, building the environments) are left out of all.
 
-``run = updates x train + evaluations``; the ratio is float32's run over bfloat16's. The sizes:
-``study`` is the v2 studies' (d64, 2 layers per model), ``peer`` the DT paper's and d3rlpy's
-(d128, 3 layers: parity's ``dt-peer-r4``, whose bf16 twin ``dt-peer-r4-bf16`` checks that
-the bf16 DT learns as d3rlpy's does).
+``run = updates x train + evaluations``; the ratio is float32's run over the variant's. The
+sizes: ``study`` is the v2 studies' (d64, 2 layers per model), ``peer`` the DT paper's and
+d3rlpy's (d128, 3 layers: parity's ``dt-peer-r4``, whose bf16 twin ``dt-peer-r4-bf16`` checks
+that the bf16 DT learns as d3rlpy's does).
 
-Measured here (2026-11-28, 2-core AMD EPYC with AVX-512 BF16, beside a running two-process
-study; 50 updates x 3 repeats, the DM and HDM 30 x 3):
+Measured here on two days (2-core AMD EPYC with AVX-512 BF16), ms per update:
+
+2026-11-28, beside a running two-process study, 50 updates x 3 repeats (DM and HDM 30 x 3),
+float32 against bf16 only:
 
     method   size   fp32 ms/update  bf16 ms/update  eval s/run  runs/CPU-h fp32   bf16  ratio
     DT       study            50.4            31.9          14             6.95  10.80   1.55
@@ -34,17 +39,31 @@ study; 50 updates x 3 repeats, the DM and HDM 30 x 3):
     DT       peer            202.4            96.2          50             1.74   3.56   2.05
     HDT      peer            330.1           154.9          85             1.06   2.20   2.07
 
-Whole runs show as much or more: parity's ``dt-peer-r4-bf16`` (the DT at the peer's size, 10k
-updates and a 10-episode evaluation, three seeds) took 967 to 1,000 CPU-seconds a run, its
-float32 twin ``dt-peer-r4`` 2,646 to 2,960 (another day, beside other work), and scored the
-same (40.9 both, at parity with d3rlpy's float32 DT).
+2026-11-29, the machine otherwise idle (the running study paused), 50 updates x 3 repeats:
 
-So bf16 doubles the runs per CPU-hour at the peer's size (d128, 3 layers; the matrix
-products, which bf16 speeds up, grow as d^2, so larger models should gain more), and gives
-about 1.5x at the v2 studies' d64: there a step is bound by what bf16 does not speed up (the
-dropout masks, about a quarter of a bf16 step; the normalisations; the Mamba's scan, which
-runs in float32). The other levers of issue #36 add little on this CPU (``bench_ensemble.py``:
-stacking seeds at most 8%, ``torch.compile`` slower).
+    method   size   fp32  bf16  bf16+fast  eval s/run   x bf16  x bf16+fast
+    DT       study  71.3  59.1       47.8          21     1.20         1.47
+    HDT      study 110.4  83.7       73.9          30     1.31         1.48
+    DM-noRTG study  90.8  72.2       69.8          37     1.25         1.29
+    HDM      study 226.1 170.6      170.1          75     1.31         1.32
+    DT       peer  264.5 169.9      152.9          64     1.54         1.70
+    HDT      peer  430.1 275.8      261.3         103     1.54         1.62
+
+and again for the DT, 50 x 5: study 70.0, 53.8, 48.7 ms (x 1.29 and 1.42), peer 258.5,
+165.9, 150.0 (x 1.54 and 1.69).
+
+So the gain depends on the day's machine: float32 steps took 1.3-1.4x longer on the second
+day and bfloat16 steps 1.5-1.8x longer, which no code change explains (the same venv and
+code; a float32 [3840, 64] x [64, 256] product takes 2.0 ms, bfloat16 0.6 ms). bf16 doubled the
+runs per CPU-hour at the peer's size on the first day and gave 1.5x on the second; at the v2
+studies' d64 it gives 1.2-1.55x, since there a step is bound by what bfloat16 does not speed
+up (dropout masks, the casts autocast adds, normalisations, the Mamba's scan in float32). The
+fast kernels take a tenth to a fifth off a transformer's bf16 step (its dropout masks, a fifth
+of the step, cost a quarter as much; AdamW's dozen small ops per parameter become one) and
+nothing measurable off the DM/HDM, which have no dropout. Issue #36's 2x at equal config is
+met only at the peer's size, and only on the first day; with both levers the v2 studies' d64
+reaches 1.4-1.5x. The other levers of issue #36 add little on this CPU
+(``bench_ensemble.py``: stacking seeds at most 8%, ``torch.compile`` slower).
 
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50
@@ -63,7 +82,7 @@ from bench_seq import make_data
 
 from thesis_lib.seq import ArchSpec
 from thesis_lib.seq.registry import METHODS, build_model
-from thesis_lib.seq.trainer import PRECISIONS, TrainConfig, Trainer, batch_to_torch
+from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
 
 SIZES = {"study": (64, 2), "peer": (128, 3)}
 """``name: (d_model, n_layers)``."""
@@ -85,14 +104,23 @@ def parse_args() -> argparse.Namespace:
     return p.parse_args()
 
 
-def make_trainer(method: str, size: str, precision: str) -> Trainer:
+VARIANTS = {"fp32": ("fp32", "torch"), "bf16": ("bf16", "torch"), "bf16+fast": ("bf16", "fast")}
+"""``name: (precision, kernels)``; ``fp32`` is the v1 code's training step."""
+
+
+def make_trainer(method: str, size: str, precision: str, kernels: str = "torch") -> Trainer:
     d, n_layers = SIZES[size]
     seq = make_data(20, 11, 3)  # Hopper's state and action sizes
     torch.manual_seed(0)
     arch = ArchSpec(d_model=d, n_layers=n_layers, n_heads=1, K=20, dropout=0.1)
     model = build_model(method, seq, arch)
     cfg = TrainConfig(
-        iterations=10**9, batch_size=64, warmup_steps=5000, progress=False, precision=precision
+        iterations=10**9,
+        batch_size=64,
+        warmup_steps=5000,
+        progress=False,
+        precision=precision,
+        kernels=kernels,
     )
     return Trainer(model, seq, cfg)
 
@@ -131,28 +159,35 @@ def time_evaluation_step(trainer: Trainer, n: int) -> float:
 def main() -> None:
     args = parse_args()
     torch.set_num_threads(1)
+    names = list(VARIANTS)
     print(
-        f"{'method':7} {'size':6} {'fp32 ms/update':>14} {'bf16 ms/update':>14} "
-        f"{'eval s/run':>10} {'runs/CPU-h fp32':>15} {'bf16':>6} {'ratio':>6}"
+        f"{'method':8} {'size':5} "
+        + " ".join(f"{n + ' ms':>12}" for n in names)
+        + f" {'eval s/run':>10} "
+        + " ".join(f"{'runs/h ' + n:>14}" for n in names)
+        + " "
+        + " ".join(f"{'x ' + n:>11}" for n in names[1:])
     )
     for size in args.sizes:
         for method in args.methods:
-            trainers = {p: make_trainer(method, size, p) for p in PRECISIONS}
+            trainers = {n: make_trainer(method, size, *VARIANTS[n]) for n in names}
             for t in trainers.values():
                 time_steps(t, 3)  # warm-up
-            times: dict[str, list[float]] = {p: [] for p in PRECISIONS}
-            for r in range(args.repeats):  # in turns, each precision first every other time
-                for p in PRECISIONS[:: 1 if r % 2 == 0 else -1]:
-                    times[p].append(time_steps(trainers[p], args.updates))
-            step = {p: statistics.median(v) for p, v in times.items()}
-            # acting is float32 on both sides: one measurement serves both
+            times: dict[str, list[float]] = {n: [] for n in names}
+            for r in range(args.repeats):  # in turns, the order reversed every other time
+                for n in names[:: 1 if r % 2 == 0 else -1]:
+                    times[n].append(time_steps(trainers[n], args.updates))
+            step = {n: statistics.median(v) for n, v in times.items()}
+            # acting is float32 with torch's kernels on every side: one measurement serves all
             eval_s = RUN_EVAL_STEPS * time_evaluation_step(trainers["fp32"], args.acts)
-            run_s = {p: RUN_UPDATES * step[p] + eval_s for p in PRECISIONS}
-            per_hour = {p: 3600.0 / s for p, s in run_s.items()}
+            per_hour = {n: 3600.0 / (RUN_UPDATES * step[n] + eval_s) for n in names}
             print(
-                f"{method:7} {size:6} {1e3 * step['fp32']:14.1f} {1e3 * step['bf16']:14.1f} "
-                f"{eval_s:10.0f} {per_hour['fp32']:15.2f} {per_hour['bf16']:6.2f} "
-                f"{per_hour['bf16'] / per_hour['fp32']:6.2f}"
+                f"{method:8} {size:5} "
+                + " ".join(f"{1e3 * step[n]:12.1f}" for n in names)
+                + f" {eval_s:10.0f} "
+                + " ".join(f"{per_hour[n]:14.2f}" for n in names)
+                + " "
+                + " ".join(f"{per_hour[n] / per_hour['fp32']:11.2f}" for n in names[1:])
             )
 
 

@@ -351,13 +351,16 @@ def test_the_committed_parity_file_parses_and_peer_runs_are_shared():
     assert mr[1] < mr[0] == mr[2] and len(mr[0]) == 5  # torch: three of the five seeds
     # bfloat16 training is ours to vary: dt-peer-r4-bf16 reads dt-peer-r4's peer runs, and its
     # own side is new runs, which train in bf16
-    bf = {n: tasks[n] for n in ("dt-peer-r4", "dt-peer-r4-bf16")}
-    assert [t.key for t in bf["dt-peer-r4"]["peer"]] == [
-        t.key for t in bf["dt-peer-r4-bf16"]["peer"]
-    ]
-    assert not {t.key for t in bf["dt-peer-r4"]["ours"]} & {
-        t.key for t in bf["dt-peer-r4-bf16"]["ours"]
-    }
+    # (and so are the fast kernels: dt-peer-r4-bf16-fast too)
+    names = ("dt-peer-r4", "dt-peer-r4-bf16", "dt-peer-r4-bf16-fast")
+    bf = {n: tasks[n] for n in names}
+    assert len({tuple(t.key for t in bf[n]["peer"]) for n in names}) == 1
+    ours = [{t.key for t in bf[n]["ours"]} for n in names]
+    assert all(len(o) == 3 for o in ours) and len(set().union(*ours)) == 9
+    assert [t.config["train"].get("kernels") for t in bf["dt-peer-r4-bf16-fast"]["ours"]] == [
+        "fast"
+    ] * 3
+    assert all("kernels" not in t.config["train"] for t in bf["dt-peer-r4-bf16"]["ours"])
     assert all(t.config["train"]["precision"] == "bf16" for t in bf["dt-peer-r4-bf16"]["ours"])
     assert all("precision" not in t.config["train"] for t in bf["dt-peer-r4-bf16"]["peer"])
     # an explicit fp32 is the default: the same runs

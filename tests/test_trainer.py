@@ -12,6 +12,7 @@ import torch
 import torch.nn as nn
 
 from thesis_lib.data import Episode, SequenceDataset
+from thesis_lib.seq.dropout import lane_dropout_enabled
 from thesis_lib.seq.evaluation import evaluate
 from thesis_lib.seq.models import (
     BC,
@@ -156,6 +157,64 @@ def test_bf16_trains_in_bfloat16_and_learns_as_float32_does(kind):
     assert not np.array_equal(loss16, loss32)
 
 
+def test_fast_kernels_without_dropout_are_torchs_numbers_up_to_rounding():
+    """With no dropout, ``kernels="fast"`` differs from ``"torch"`` only by fused AdamW's
+    rounding: the same run."""
+
+    def run(kernels):
+        torch.manual_seed(0)
+        model = DecisionTransformer(DTConfig(SD, AD, **{**SMALL, "dropout": 0.0}))
+        trainer = Trainer(model, _dataset(), _cfg(iterations=30, kernels=kernels))
+        loss = trainer.train()["loss"].to_numpy()
+        return trainer, loss, nn.utils.parameters_to_vector(model.parameters()).detach()
+
+    t_torch, l_torch, p_torch = run("torch")
+    t_fast, l_fast, p_fast = run("fast")
+    assert t_fast.optimizer.defaults["fused"] and not t_torch.optimizer.defaults["fused"]
+    np.testing.assert_allclose(l_fast, l_torch, rtol=1e-4)
+    torch.testing.assert_close(p_fast, p_torch, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize("kind", ["bc", "dt", "hdt"])
+def test_fast_kernels_draw_lane_masks_and_learn_as_torchs_do(kind):
+    """With dropout, ``kernels="fast"`` trains with lane masks (other draws: not the same
+    numbers) and learns as the torch run does; evaluation is outside the lane context."""
+    seen: list[bool] = []
+
+    def run(kernels):
+        trainer = Trainer(_model(kind), _dataset(), _cfg(iterations=80, kernels=kernels))
+        trainer.model.register_forward_hook(lambda m, i, o: seen.append(lane_dropout_enabled()))
+        return trainer, trainer.train()["loss"].to_numpy()
+
+    _, loss_torch = run("torch")
+    assert set(seen) == {False}
+    seen.clear()
+    t_fast, loss_fast = run("fast")
+    assert set(seen) == {True}
+    during_eval: list[bool] = []
+    t_fast.eval_fn = lambda m: during_eval.append(lane_dropout_enabled()) or 0.0
+    t_fast.config.eval_every = 40
+    t_fast.train(iterations=120)
+    assert during_eval == [False]
+    assert not np.array_equal(loss_fast, loss_torch)
+    assert loss_fast[0] == pytest.approx(loss_torch[0], rel=0.1)
+    assert loss_fast[-10:].mean() < 0.5 * loss_fast[:10].mean()
+    assert loss_fast[-20:].mean() == pytest.approx(loss_torch[-20:].mean(), rel=0.25)
+
+
+def test_an_unknown_kernels_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"Unknown kernels 'triton'\. Valid: torch, fast"):
+        TrainConfig(kernels="triton")
+    from thesis_lib.seq.runner import TrainSpec
+
+    with pytest.raises(ValueError, match=r"Unknown kernels 'triton'"):
+        TrainSpec(kernels="triton")
+    # left out of a task's key at its default, as every task stored before it ran
+    assert "kernels" not in TrainSpec().task_dict()
+    assert TrainSpec(kernels="fast").task_dict()["kernels"] == "fast"
+    assert TrainSpec.from_task(TrainSpec().task_dict()).kernels == "torch"
+
+
 def test_an_unknown_precision_is_a_clear_error():
     with pytest.raises(ValueError, match=r"Unknown precision 'fp16'\. Valid: fp32, bf16"):
         TrainConfig(precision="fp16")
@@ -163,7 +222,7 @@ def test_an_unknown_precision_is_a_clear_error():
 
 @pytest.mark.parametrize("chapter", ["hdt", "decision_mamba", "ur3"])
 def test_a_chapters_precision_reaches_the_trainer(chapter, monkeypatch):
-    """``-p precision bf16`` of a chapter goes to its runs' TrainSpec, and run_offline hands it
+    """``-p precision bf16`` (and ``-p kernels fast``) of a chapter goes to its runs' TrainSpec, and run_offline hands it
     to the Trainer."""
     import importlib
 
@@ -171,17 +230,18 @@ def test_a_chapters_precision_reaches_the_trainer(chapter, monkeypatch):
 
     mod = importlib.import_module(f"thesis_lib.chapters.{chapter}")
     assert mod.Config().train_spec(0).precision == "fp32"
-    spec = mod.Config(precision="bf16").train_spec(0)
-    assert spec.precision == "bf16"
+    assert mod.Config().train_spec(0).kernels == "torch"
+    spec = mod.Config(precision="bf16", kernels="fast").train_spec(0)
+    assert spec.precision == "bf16" and spec.kernels == "fast"
 
     class Stop(Exception):
         pass
 
     def capture(model, seq, config, eval_fn=None):
-        raise Stop(config.precision)
+        raise Stop(f"{config.precision} {config.kernels}")
 
     monkeypatch.setattr(runner, "Trainer", capture)
-    with pytest.raises(Stop, match="bf16"):
+    with pytest.raises(Stop, match="bf16 fast"):
         runner.run_offline("DT", _episodes(), runner.ArchSpec(K=K, d_model=16, n_layers=1), spec,
                            runner.EvalSpec(episodes=1), task="hopper")  # fmt: skip
 
@@ -203,6 +263,7 @@ def _checkpointed(path):
         (dict(batch_size=4), "batch_size: 8 -> 4"),
         (dict(grad_clip=1.0), "grad_clip: 0.25 -> 1.0"),
         (dict(precision="bf16"), "precision: (absent) -> 'bf16'"),
+        (dict(kernels="fast"), "kernels: (absent) -> 'fast'"),
     ],
 )
 def test_a_checkpoint_is_not_resumed_by_another_training_config(tmp_path, change, differs):

@@ -424,16 +424,17 @@ def peer_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
-#: The ``train`` keys of a comparison that only our side reads (the peer trains in float32).
-OURS_ONLY = ("precision",)
+#: The ``train`` keys of a comparison that only our side reads (the peer trains in float32, with
+#: torch's kernels).
+OURS_ONLY = ("precision", "kernels")
 
 
 def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]]]:
     """Each comparison's tasks, one per side and seed: ``{name: {"ours": [...], "peer": [...]}}``.
 
-    A peer run's config holds no ``init``, ``sampling`` or training ``precision`` (they are
-    ours to vary; d3rlpy trains in float32), so comparisons that differ only there share their
-    peer runs (the same task keys: run and stored once).
+    A peer run's config holds no ``init``, ``sampling``, training ``precision`` or ``kernels``
+    (they are ours to vary; d3rlpy trains in float32), so comparisons that differ only there
+    share their peer runs (the same task keys: run and stored once).
     """
     out: dict[str, dict[str, list[Any]]] = {}
     for c in comparisons:
@@ -452,8 +453,11 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
             if recipe is not None and recipe != LEGACY_DATA_RECIPE:  # old runs keep their keys
                 config["data_recipe"] = recipe
             ours = {**config, "init": c.init}
-            if train.get("precision") == "fp32":  # as TrainSpec.task_dict: the runs before it
-                ours["train"] = {k: v for k, v in train.items() if k != "precision"}
+            default = {"precision": "fp32", "kernels": "torch"}  # as TrainSpec.task_dict: the
+            if any(train.get(k) == v for k, v in default.items()):  # runs before them
+                ours["train"] = {
+                    k: v for k, v in train.items() if not (k in default and default[k] == v)
+                }
             if c.sampling is not None:  # runs from before the option keep their keys
                 ours["sampling"] = c.sampling
             sides["ours"].append(Task(ours_run, ours))
@@ -542,7 +546,12 @@ def parity_table(
             "method": c.method,
             "init": c.init if c.method != "BC" else "",
             "sampling": c.sampling or LEGACY_SAMPLING,
-            "precision": c.train.get("precision", "fp32"),
+            "precision": c.train.get("precision", "fp32")
+            + (
+                ""
+                if c.train.get("kernels", "torch") == "torch"
+                else f" ({c.train['kernels']} kernels)"
+            ),
             "dataset": f"{c.dataset} ({c.dataset_size})",
             "arch": f"d{size['d_model']} L{size['n_layers']}" if c.method != "BC" else "MLP",
             "updates": c.train.get("iterations"),

@@ -28,6 +28,8 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from thesis_lib.seq.dropout import Dropout, dropout, lane_dropout_enabled
+
 # ----------------------------------------------------------------------------------------------
 # Positional encoding (Eq. 2.1-2.2)
 
@@ -399,6 +401,26 @@ def _check_key_padding_mask(key_padding_mask: torch.Tensor, B: int, T: int) -> N
         )
 
 
+def _attend_lane_dropout(
+    q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, mask: torch.Tensor | None, p: float
+) -> torch.Tensor:
+    """``F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=p)`` written out, so
+    that the attention weights' dropout is :func:`~thesis_lib.seq.dropout.dropout`'s (lane
+    masks inside :func:`~thesis_lib.seq.dropout.lane_dropout`). On a CPU with dropout, SDPA
+    runs this same math path (no fused kernel), so it costs no more. ``mask``: bool, ``True`` =
+    may attend, every query row with at least one key (:func:`combine_masks`).
+
+    In float32 throughout, as SDPA's CPU math path computes bfloat16 inputs (under
+    ``TrainConfig(precision="bf16")``'s autocast too); the result has ``q``'s dtype."""
+    dtype = q.dtype
+    with torch.autocast(q.device.type, enabled=False):
+        q, k, v = q.float(), k.float(), v.float()
+        scores = (q @ k.transpose(-2, -1)) * (1.0 / math.sqrt(q.shape[-1]))
+        if mask is not None:
+            scores = scores.masked_fill(~mask, float("-inf"))
+        return (dropout(torch.softmax(scores, dim=-1), p) @ v).to(dtype)
+
+
 class CausalSelfAttention(nn.Module):
     """Multi-head self-attention (Eq. 2.3 per head) on ``F.scaled_dot_product_attention``.
 
@@ -415,7 +437,7 @@ class CausalSelfAttention(nn.Module):
             config.d_model, 3 * config.d_model, bias=config.bias
         )  # q, k, v for all heads
         self.c_proj = nn.Linear(config.d_model, config.d_model, bias=config.bias)
-        self.resid_dropout = nn.Dropout(config.dropout)
+        self.resid_dropout = Dropout(config.dropout)
 
     def _qkv(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         if x.ndim != 3 or x.shape[-1] != self.config.d_model:
@@ -453,7 +475,9 @@ class CausalSelfAttention(nn.Module):
         q, k, v = self._qkv(x)  # (B, nh, T, hs) each; checks x
         B, T, C = x.shape
         dropout_p = self.config.dropout if self.training else 0.0
-        if key_padding_mask is None:
+        if dropout_p > 0.0 and lane_dropout_enabled():  # TrainConfig(kernels="fast")
+            y = _attend_lane_dropout(q, k, v, self._mask(x, key_padding_mask), dropout_p)
+        elif key_padding_mask is None:
             # The fused kernel builds the causal mask itself.
             y = F.scaled_dot_product_attention(
                 q, k, v, dropout_p=dropout_p, is_causal=self.config.causal
@@ -494,7 +518,7 @@ class MLP(nn.Module):
         self.c_fc = nn.Linear(config.d_model, hidden, bias=config.bias)
         self.act = _make_activation(config.activation)
         self.c_proj = nn.Linear(hidden, config.d_model, bias=config.bias)
-        self.dropout = nn.Dropout(config.dropout)
+        self.dropout = Dropout(config.dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``(B, T, d_model) -> (B, T, d_model)``."""

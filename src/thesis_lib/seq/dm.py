@@ -42,6 +42,7 @@ from typing import Literal
 import torch
 import torch.nn as nn
 
+from thesis_lib.seq.dropout import Dropout
 from thesis_lib.seq.mamba import Mamba, MambaConfig, MambaState
 from thesis_lib.seq.models import (
     ModelConfig,
@@ -169,7 +170,7 @@ class TokenMamba(nn.Module):
     def __init__(self, config: _MambaModelConfig) -> None:
         super().__init__()
         self.embed_ln = nn.LayerNorm(config.d_model)
-        self.drop = nn.Dropout(config.dropout)
+        self.drop = Dropout(config.dropout)
         self.mamba = Mamba(config.mamba_config())
 
     def forward(self, tokens: list[torch.Tensor]) -> tuple[torch.Tensor, ...]:

@@ -49,6 +49,7 @@ import torch
 import torch.nn as nn
 
 from thesis_lib.seq.attention_ops import ACTIVATIONS, Block, GPTBlockConfig
+from thesis_lib.seq.dropout import Dropout
 from thesis_lib.seq.tokens import deinterleave_embeddings, interleave_embeddings
 
 __all__ = [
@@ -463,7 +464,7 @@ class TokenTransformer(nn.Module):
         super().__init__()
         self.embed_timestep = nn.Embedding(config.max_timestep, config.d_model)
         self.embed_ln = nn.LayerNorm(config.d_model)
-        self.drop = nn.Dropout(config.dropout)
+        self.drop = Dropout(config.dropout)
         self.blocks = nn.ModuleList([Block(config.block_config()) for _ in range(config.n_layers)])
         self.ln_f = nn.LayerNorm(config.d_model)
 
@@ -509,8 +510,8 @@ class BC(nn.Module):
         self.config = config
         h = config.hidden_dim
         self.net = nn.Sequential(
-            nn.Linear(config.state_dim, h), nn.ReLU(), nn.Dropout(config.dropout),
-            nn.Linear(h, h), nn.ReLU(), nn.Dropout(config.dropout),
+            nn.Linear(config.state_dim, h), nn.ReLU(), Dropout(config.dropout),
+            nn.Linear(h, h), nn.ReLU(), Dropout(config.dropout),
             nn.Linear(h, config.act_dim), nn.Tanh(),
         )  # fmt: skip
 

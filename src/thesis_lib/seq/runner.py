@@ -43,7 +43,7 @@ from thesis_lib.seq.registry import (
     check_methods,
 )
 from thesis_lib.seq.subgoals import subgoal_fn
-from thesis_lib.seq.trainer import TrainConfig, Trainer, check_precision
+from thesis_lib.seq.trainer import TrainConfig, Trainer, check_kernels, check_precision
 from thesis_lib.sweep import note_resumed_cpu
 
 __all__ = ["TARGETS", "EvalSpec", "TrainSpec", "VectorEnvPool", "run_offline"]
@@ -83,6 +83,9 @@ class TrainSpec:
     precision: str = "fp32"
     """Training precision, :attr:`~thesis_lib.seq.trainer.TrainConfig.precision` (``"fp32"`` or
     ``"bf16"``, mixed precision)."""
+    kernels: str = "torch"
+    """Training kernels, :attr:`~thesis_lib.seq.trainer.TrainConfig.kernels` (``"torch"`` or
+    ``"fast"``: lane dropout masks and fused AdamW)."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size"):
@@ -92,11 +95,13 @@ class TrainSpec:
             raise ValueError(f"Expect `eval_every` >= 0, actually: {self.eval_every!r}.")
         resolve_sampling(self.sampling)  # validates
         check_precision(self.precision)
+        check_kernels(self.kernels)
 
     def task_dict(self) -> dict[str, Any]:
         """The spec as a sweep task's JSON: every field, ``sampling`` left out where it is
-        ``start`` and ``precision`` where it is ``fp32``, as every task stored before the
-        field existed ran (so their keys stay valid; :meth:`from_task` reads them back so).
+        ``start``, ``precision`` where it is ``fp32`` and ``kernels`` where it is ``torch``, as
+        every task stored before the fields existed ran (so their keys stay valid;
+        :meth:`from_task` reads them back so).
 
         Example:
             >>> "sampling" in TrainSpec(sampling="start").task_dict(), TrainSpec().task_dict()["sampling"]
@@ -109,13 +114,15 @@ class TrainSpec:
             del d["sampling"]
         if d["precision"] == "fp32":
             del d["precision"]
+        if d["kernels"] == "torch":
+            del d["kernels"]
         return d
 
     @classmethod
     def from_task(cls, d: Mapping[str, Any]) -> TrainSpec:
         """The spec of a task's ``train`` dict (:meth:`task_dict`); a missing ``sampling`` is
-        ``start`` and a missing ``precision`` ``fp32``, as every task stored before the field
-        existed ran.
+        ``start``, a missing ``precision`` ``fp32`` and missing ``kernels`` ``torch``, as every task
+        stored before the fields existed ran.
 
         Example:
             >>> TrainSpec.from_task({"seed": 1}).sampling
@@ -316,6 +323,7 @@ def run_offline(
             device=train.device,
             progress=train.progress,
             precision=train.precision,
+            kernels=train.kernels,
             checkpoint_path=None if checkpoint is None else os.fspath(checkpoint),
             checkpoint_every=checkpoint_every,
         )

@@ -45,13 +45,16 @@ import torch.nn as nn
 from tqdm.auto import tqdm
 
 from thesis_lib._io import atomic_write, hash_arrays
+from thesis_lib.seq.dropout import lane_dropout
 
 __all__ = [
+    "KERNELS",
     "PRECISIONS",
     "RESULT_FIELDS",
     "TrainConfig",
     "Trainer",
     "batch_to_torch",
+    "check_kernels",
     "check_precision",
     "data_fingerprint",
 ]
@@ -63,6 +66,18 @@ RESULT_FIELDS = ("seed", "lr", "weight_decay", "warmup_steps", "batch_size", "gr
 #: :attr:`TrainConfig.precision`'s values. ``precision`` changes a run's numbers too; a checkpoint
 #: records it only where it is not ``fp32`` (so the checkpoints made before the field still match).
 PRECISIONS = ("fp32", "bf16")
+
+
+#: :attr:`TrainConfig.kernels`' values. ``"fast"`` changes a run's numbers too (other dropout draws,
+#: another AdamW rounding); a checkpoint records it only where it is not ``torch``.
+KERNELS = ("torch", "fast")
+
+
+def check_kernels(kernels: str) -> None:
+    """Raise a ValueError naming the valid values if ``kernels`` is not one of :data:`KERNELS`
+    (:class:`TrainConfig` and :class:`~thesis_lib.seq.runner.TrainSpec`)."""
+    if kernels not in KERNELS:
+        raise ValueError(f"Unknown kernels {kernels!r}. Valid: {', '.join(KERNELS)}.")
 
 
 def check_precision(precision: str) -> None:
@@ -109,10 +124,20 @@ class TrainConfig:
     """``"fp32"``: every op in float32. ``"bf16"``: the training step's forward (and so its
     backward) under ``torch.autocast`` to bfloat16: matrix products and attention in bfloat16;
     parameters, gradients, the loss and AdamW in float32 (mixed precision). On a CPU with
-    AVX-512 BF16 it trains the v2 studies' d64 DT about 1.5x and the d128 3-layer DT about 2x
-    as fast per update (``benchmarks/bench_throughput.py``); its numbers differ from float32's
-    by rounding, so a run is not the float32 run, and a checkpoint is resumed only in its own
-    precision. Evaluation (``eval_fn``) runs in float32 either way."""
+    AVX-512 BF16 it trains the v2 studies' d64 DT 1.2-1.55x and the d128 3-layer DT 1.5-2x as
+    fast per update, by the day's machine (``benchmarks/bench_throughput.py``); its numbers
+    differ from float32's by rounding, so a run is not the float32 run, and a checkpoint is
+    resumed only in its own precision. Evaluation (``eval_fn``) runs in float32 either way."""
+    kernels: str = "torch"
+    """``"torch"``: PyTorch's dropout and AdamW. ``"fast"``: on a CPU, dropout masks drawn as
+    32-bit lanes of the generator's 64-bit integers (:mod:`thesis_lib.seq.dropout`, a quarter of
+    ``bernoulli_``'s cost; the attention weights' too), and AdamW's fused kernel (one pass over
+    each parameter instead of a dozen small ops; also on CUDA). Identical in distribution to
+    ``"torch"`` (each element is kept with probability ``1 - p`` up to ``2^-32``; AdamW's update
+    up to rounding), but other draws, so not the same run; a checkpoint is resumed only with its
+    own kernels. It takes a tenth to a fifth off a transformer's bf16 step on a CPU; with
+    ``precision="bf16"`` the v2 studies' d64 DT trains about 1.4-1.5x as fast as the float32
+    torch step (``benchmarks/bench_throughput.py``). Evaluation uses torch's kernels either way."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size", "warmup_steps"):
@@ -131,6 +156,7 @@ class TrainConfig:
         if self.device not in ("cpu", "cuda", "auto") and not self.device.startswith("cuda:"):
             raise ValueError(f"Unknown device {self.device!r}. Valid: cpu, cuda, cuda:N, auto.")
         check_precision(self.precision)
+        check_kernels(self.kernels)
 
 
 def _warmup(step: int, warmup_steps: int) -> float:
@@ -234,7 +260,10 @@ class Trainer:
             self.device = torch.device(config.device)
         self.model.to(self.device)
         self.optimizer = torch.optim.AdamW(
-            model.parameters(), lr=config.lr, weight_decay=config.weight_decay
+            model.parameters(),
+            lr=config.lr,
+            weight_decay=config.weight_decay,
+            fused=True if config.kernels == "fast" else None,
         )
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
             self.optimizer, functools.partial(_warmup, warmup_steps=config.warmup_steps)
@@ -267,10 +296,13 @@ class Trainer:
         self.model.train()
         with torch.random.fork_rng(devices=[]):  # our own dropout stream; global RNG untouched
             torch.set_rng_state(self._rng_state)
-            with torch.autocast(
-                self.device.type,
-                dtype=torch.bfloat16,
-                enabled=self.config.precision == "bf16",
+            with (
+                torch.autocast(
+                    self.device.type,
+                    dtype=torch.bfloat16,
+                    enabled=self.config.precision == "bf16",
+                ),
+                lane_dropout(self.config.kernels == "fast" and self.device.type == "cpu"),
             ):
                 out = self.model(batch, targets=batch)
             self.optimizer.zero_grad(set_to_none=True)
@@ -378,7 +410,8 @@ class Trainer:
     def made_by(self) -> dict[str, Any]:
         """What this trainer's numbers depend on, as a checkpoint records it (flat, JSON-like).
 
-        The :data:`RESULT_FIELDS` of the config, and ``precision`` where it is not ``fp32``;
+        The :data:`RESULT_FIELDS` of the config, ``precision`` where it is not ``fp32`` and
+        ``kernels`` where it is not ``torch``;
         ``model_class`` and ``model.<field>`` for each
         field of the model's ``config`` dataclass; ``data.size`` and ``data.sha256`` of the
         data set (:func:`data_fingerprint`, computed once per trainer).
@@ -386,6 +419,8 @@ class Trainer:
         made: dict[str, Any] = {k: getattr(self.config, k) for k in RESULT_FIELDS}
         if self.config.precision != "fp32":
             made["precision"] = self.config.precision
+        if self.config.kernels != "torch":
+            made["kernels"] = self.config.kernels
         made["model_class"] = type(self.model).__name__
         model_cfg = getattr(self.model, "config", None)
         if model_cfg is not None and is_dataclass(model_cfg) and not isinstance(model_cfg, type):

@@ -298,6 +298,7 @@ def run_table_5_6(cfg: Config, data: Mapping[tuple[str, str], Any] | None = None
                     progress=False,
                     device=cfg.device,
                     precision=cfg.precision,
+                    kernels=cfg.kernels,
                 ),
             )
             times = []

@@ -99,9 +99,13 @@ class Config:
     """Training device."""
     precision: Literal["fp32", "bf16"] = "fp32"
     """Training precision (:attr:`~thesis_lib.seq.trainer.TrainConfig.precision`): ``fp32``, or
-    ``bf16`` mixed precision (matrix products in bfloat16; about 1.5x the updates per CPU-second
-    at d64 and 2x at d128 with 3 layers on a CPU with AVX-512 BF16;
+    ``bf16`` mixed precision (matrix products in bfloat16; 1.2-1.55x the updates per CPU-second
+    at d64 and 1.5-2x at d128 with 3 layers on a CPU with AVX-512 BF16, by the day's machine;
     the numbers differ from float32's by rounding). Every study so far ran in ``fp32``."""
+    kernels: Literal["torch", "fast"] = "torch"
+    """Training kernels (:attr:`~thesis_lib.seq.trainer.TrainConfig.kernels`): ``torch``, or
+    ``fast`` (cheaper dropout masks on a CPU and fused AdamW; identical in distribution, other
+    draws). Every study so far ran with ``torch``."""
     progress: bool = False
     """Progress bars."""
 
