@@ -35,6 +35,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
+from thesis_lib.seq.dropout import Dropout
 from thesis_lib.seq.mamba import Mamba, MambaConfig, ScanBackend
 from thesis_lib.seq.models import SeqOutput, masked_mse
 
@@ -440,7 +441,7 @@ class MDLTMamba(nn.Module):
         self.config = c = config
         self.audio_emb = nn.Linear(c.state_dim, c.d_model)
         self.pose_emb = nn.Linear(c.act_dim, c.d_model) if c.pose_input else None
-        self.drop = nn.Dropout(c.dropout)
+        self.drop = Dropout(c.dropout)
         self.backbone = Mamba(
             MambaConfig(
                 d_model=c.d_model,

@@ -19,7 +19,7 @@ Trainer enters it for ``kernels="fast"`` on a CPU); everywhere else :class:`Drop
 Why by hand: no library offers a cheaper CPU dropout mask; ``torch.compile`` made the step
 slower (``benchmarks/bench_ensemble.py``).
 
-Used in: the sequence models' training (HDT, Decision Mamba and UR3 chapters).
+Used in: the sequence models' training (HDT, Decision Mamba, MDLT and UR3 chapters).
 """
 
 from __future__ import annotations
