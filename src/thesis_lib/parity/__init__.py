@@ -51,7 +51,7 @@ from thesis_lib.seq import ArchSpec, EvalSpec, TrainSpec, run_offline
 from thesis_lib.seq.evaluation import target_returns
 from thesis_lib.seq.models import resolve_init
 from thesis_lib.seq.registry import LEGACY_SAMPLING, check_methods
-from thesis_lib.seq.trainer import TrainConfig
+from thesis_lib.seq.trainer import LEFT_OUT_AT, TrainConfig
 from thesis_lib.sweep import Task, resumed_cpu_s, scratch_file
 
 __all__ = [
@@ -453,11 +453,10 @@ def parity_tasks(comparisons: list[Comparison]) -> dict[str, dict[str, list[Any]
             if recipe is not None and recipe != LEGACY_DATA_RECIPE:  # old runs keep their keys
                 config["data_recipe"] = recipe
             ours = {**config, "init": c.init}
-            default = {"precision": "fp32", "kernels": "torch"}  # as TrainSpec.task_dict: the
-            if any(train.get(k) == v for k, v in default.items()):  # runs before them
-                ours["train"] = {
-                    k: v for k, v in train.items() if not (k in default and default[k] == v)
-                }
+            # as TrainSpec.task_dict: the runs before these options keep their keys
+            ours["train"] = {
+                k: v for k, v in train.items() if not (k in LEFT_OUT_AT and LEFT_OUT_AT[k] == v)
+            }
             if c.sampling is not None:  # runs from before the option keep their keys
                 ours["sampling"] = c.sampling
             sides["ours"].append(Task(ours_run, ours))

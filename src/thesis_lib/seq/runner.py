@@ -43,7 +43,13 @@ from thesis_lib.seq.registry import (
     check_methods,
 )
 from thesis_lib.seq.subgoals import subgoal_fn
-from thesis_lib.seq.trainer import TrainConfig, Trainer, check_kernels, check_precision
+from thesis_lib.seq.trainer import (
+    LEFT_OUT_AT,
+    TrainConfig,
+    Trainer,
+    check_kernels,
+    check_precision,
+)
 from thesis_lib.sweep import note_resumed_cpu
 
 __all__ = ["TARGETS", "EvalSpec", "TrainSpec", "VectorEnvPool", "run_offline"]
@@ -112,10 +118,9 @@ class TrainSpec:
         d = asdict(self)
         if d["sampling"] == LEGACY_SAMPLING:
             del d["sampling"]
-        if d["precision"] == "fp32":
-            del d["precision"]
-        if d["kernels"] == "torch":
-            del d["kernels"]
+        for k, default in LEFT_OUT_AT.items():
+            if d[k] == default:
+                del d[k]
         return d
 
     @classmethod

@@ -49,6 +49,7 @@ from thesis_lib.seq.dropout import lane_dropout
 
 __all__ = [
     "KERNELS",
+    "LEFT_OUT_AT",
     "PRECISIONS",
     "RESULT_FIELDS",
     "TrainConfig",
@@ -71,6 +72,10 @@ PRECISIONS = ("fp32", "bf16")
 #: :attr:`TrainConfig.kernels`' values. ``"fast"`` changes a run's numbers too (other dropout draws,
 #: another AdamW rounding); a checkpoint records it only where it is not ``torch``.
 KERNELS = ("torch", "fast")
+
+#: Options left out of a checkpoint's record and a task's key at these values, as every run
+#: before the option existed ran (:meth:`Trainer.made_by`, ``TrainSpec.task_dict``, parity).
+LEFT_OUT_AT = {"precision": "fp32", "kernels": "torch"}
 
 
 def check_kernels(kernels: str) -> None:
@@ -417,10 +422,9 @@ class Trainer:
         data set (:func:`data_fingerprint`, computed once per trainer).
         """
         made: dict[str, Any] = {k: getattr(self.config, k) for k in RESULT_FIELDS}
-        if self.config.precision != "fp32":
-            made["precision"] = self.config.precision
-        if self.config.kernels != "torch":
-            made["kernels"] = self.config.kernels
+        for k, default in LEFT_OUT_AT.items():
+            if getattr(self.config, k) != default:
+                made[k] = getattr(self.config, k)
         made["model_class"] = type(self.model).__name__
         model_cfg = getattr(self.model, "config", None)
         if model_cfg is not None and is_dataclass(model_cfg) and not isinstance(model_cfg, type):
