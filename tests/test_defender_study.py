@@ -136,7 +136,16 @@ def test_study_tasks_grid_keys_and_labels():
     # one demonstration recipe per task: every filtered run of a task shares the SAC run
     assert len({json.dumps(c["demos"], sort_keys=True) for c in filt}) == 1
     assert all(c["demos"]["n_demos"] == 3 and c["demos"]["seed"] == 0 for c in filt)
-    assert [t.config["seed"] for t in tasks[:13]] == [0] * 13  # seeds are the outer loop
+    # the level gates' runs (plain SAC, every seed) first, then seeds as the outer loop
+    assert [(t.config["label"], t.config["seed"]) for t in tasks[:4]] == [
+        ("SAC", 0),
+        ("SAC", 0),
+        ("SAC", 1),
+        ("SAC", 1),
+    ]
+    assert not any(t.config["label"] == "SAC" for t in tasks[4:])
+    assert [t.config["seed"] for t in tasks[4:15]] == [0] * 11
+    assert [t.config["seed"] for t in tasks[15:]] == [1] * 11
 
 
 def test_study_config_errors():

@@ -346,8 +346,13 @@ def study_tasks(cfg: Config) -> list[Task]:
     all with ``n_demos`` demonstrations per group, and with the first state strategy and each
     other count of ``n_demos_list`` (Table 4.5); on ``no_topup_tasks`` also with the first
     state strategy on the SAC roll-outs alone. The other algorithms (TD3) run plain and with
-    the first state strategy, on their ``algo_tasks``. Seeds are the outer loop, so a study
-    stopped part-way has whole seeds.
+    the first state strategy, on their ``algo_tasks``.
+
+    Order: the plain runs of the first algorithm for every seed come first, since the study's
+    level gates read them alone (plain SAC's return): a gate that fails is then known before
+    the filtered runs are paid for. The other runs follow with seeds as the outer loop, so a
+    study stopped part-way has whole seeds (each beside its plain run). The order changes no
+    task's key.
 
     Used in: ``thesis study 03_defender``.
     """
@@ -373,4 +378,5 @@ def study_tasks(cfg: Config) -> list[Task]:
                             tasks.append(study_task(cfg, task, algo, seed, first, n_demos=n))
                     if task in cfg.no_topup_tasks:
                         tasks.append(study_task(cfg, task, algo, seed, first, top_up=False))
-    return tasks
+    gated = [t.config["algo"] == main and not t.config["strategy"] for t in tasks]
+    return [t for t, g in zip(tasks, gated) if g] + [t for t, g in zip(tasks, gated) if not g]
