@@ -341,3 +341,27 @@ def test_a_defender_study_task_resumes_from_its_scratch_folder(tmp_path, monkeyp
     assert strip == [{k: v for k, v in r.items() if k not in timing} for r in again["rows"]]
     assert 0 < again["resumed_cpu_s"] < again["cpu_s"]
     assert again["rows"][0]["train_cpu_s"] > again["resumed_cpu_s"]
+
+
+def test_check_resumable_refuses_a_model_that_a_checkpoint_could_not_continue():
+    """``check_resumable`` is public: a model built elsewhere is checked on its own."""
+    from stable_baselines3 import SAC
+    from stable_baselines3.common.env_util import make_vec_env
+
+    def sac(n_envs=1, **kw):
+        env = make_vec_env("Pendulum-v1", n_envs=n_envs, seed=0)
+        return SAC("MlpPolicy", env, policy_kwargs={"net_arch": [8]}, seed=0, **kw)
+
+    resume.check_resumable(sac())  # the checkpointed set-up passes
+    with pytest.raises(ValueError, match="one env copy, got 2"):
+        resume.check_resumable(sac(n_envs=2))
+    unbound = sac()
+    unbound.env = None  # as SAC.load leaves a model given no env
+    with pytest.raises(ValueError, match="one env copy, got 0"):
+        resume.check_resumable(unbound)
+    with pytest.raises(ValueError, match="train_freq 1"):
+        resume.check_resumable(sac(train_freq=(1, "episode")))
+    other = sac()
+    other.replay_buffer.__class__ = type("Sub", (type(other.replay_buffer),), {})
+    with pytest.raises(ValueError, match="a plain ReplayBuffer, got Sub"):
+        resume.check_resumable(other)
