@@ -715,3 +715,125 @@ def test_counterfactual_step_leaves_a_mujoco_env_bit_for_bit():
     u.set_state(u.init_qpos.copy(), u.init_qvel.copy())
     assert counterfactual_terminates(a, np.zeros(3, np.float32)) is False
     a.close(), b.close()
+
+
+def test_counterfactual_crash_step_looks_ahead_with_the_policy_and_leaves_the_env_alone():
+    """From x = 1 a step of +1 lands on 2 (no crash); a policy that keeps walking +1 crosses 3
+    at the 3rd step (x = 4). A policy that steps towards 0 never crashes; one that walks back
+    for good crosses -3 at the 7th step (x = -4)."""
+    from thesis_lib.defender.wrapper import counterfactual_crash_step
+
+    env = gym.wrappers.TimeLimit(CountingEnv(), 50)
+    env.reset()
+    env.step(np.array([1.0], np.float32))  # x = 1
+    inner, fwd = env.unwrapped, np.array([1.0], np.float32)
+    onward = lambda obs: fwd
+    home = lambda obs: -fwd if obs[0] > 0 else fwd
+    back = lambda obs: -fwd
+    assert counterfactual_crash_step(env, fwd) is None  # the one-step look: x = 2
+    assert counterfactual_crash_step(env, fwd, onward, max_steps=2) is None  # x = 3
+    assert counterfactual_crash_step(env, fwd, onward, max_steps=3) == 3  # x = 4 > 3
+    assert counterfactual_crash_step(env, fwd, onward, max_steps=100) == 3
+    assert counterfactual_crash_step(env, fwd, home, max_steps=100) is None
+    assert counterfactual_crash_step(env, fwd, back, max_steps=100) == 7
+    assert counterfactual_crash_step(env, 3 * fwd) == 1  # x = 4 at once
+    assert inner.x == 1.0 and env._elapsed_steps == 1  # never moved, no TimeLimit step spent
+    seen = []
+    counterfactual_crash_step(env, fwd, lambda obs: seen.append(obs[0]) or fwd, max_steps=5)
+    assert seen == [2.0, 3.0]  # the policy is given the copy's states, in order
+    with pytest.raises(ValueError, match="max_steps must be >= 1"):
+        counterfactual_crash_step(env, fwd, onward, max_steps=0)
+    with pytest.raises(ValueError, match="needs the agent's policy"):
+        counterfactual_crash_step(env, fwd, max_steps=2)
+    scaled = gym.wrappers.TransformObservation(env, lambda o: 2 * o, env.observation_space)
+    with pytest.raises(ValueError, match="TransformObservation changes observations"):
+        counterfactual_crash_step(scaled, fwd, onward, max_steps=2)
+
+
+def test_counterfactual_crash_step_on_hopper_is_the_one_step_counterfactual_and_restores_it():
+    from thesis_lib.defender.wrapper import counterfactual_crash_step, counterfactual_terminates
+
+    a, b = gym.make("Hopper-v5"), gym.make("Hopper-v5")
+    a.reset(seed=1), b.reset(seed=1)
+    rng = np.random.default_rng(1)
+    acts = rng.uniform(-1, 1, (30, 3)).astype(np.float32)
+    for act in acts[:10]:
+        a.step(act), b.step(act)
+    u = a.unwrapped
+    qpos, qvel = u.data.qpos.copy(), u.data.qvel.copy()
+    low = qpos.copy()
+    low[1] = 0.5  # below the healthy height: the next step terminates
+    u.set_state(low, qvel)
+    zero = np.zeros(3, np.float32)
+    assert counterfactual_crash_step(a, zero) == 1 == int(counterfactual_terminates(a, zero))
+    u.set_state(qpos, qvel)
+    # a policy that pushes hard with every joint topples the hopper within 200 steps
+    k = counterfactual_crash_step(a, zero, lambda o: np.ones(3, np.float32), max_steps=200)
+    assert k is not None and 1 < k <= 200
+    for act in acts[10:]:  # a, probed for k steps, continues exactly as b, never probed
+        oa, ra, *_ = a.step(act)
+        ob, rb, *_ = b.step(act)
+        assert np.array_equal(oa, ob) and ra == rb
+    a.close(), b.close()
+
+
+def test_filter_lookahead_on_a_walk_with_known_answers(walk_demos):
+    """A policy of +0.5 a step crashes every episode at its 7th step (x = 3.5 > 3, horizon 12).
+    Every firing at step j is then 7 - j steps from its crash; the control run's states are
+    followed by a crash within k steps at min(k, 7) / 7."""
+    from thesis_lib.chapters.defender.lookahead import filter_lookahead
+    from thesis_lib.defender import DemoSet
+
+    safe, unsafe = walk_demos
+    half = np.array([0.5], np.float32)
+    out = filter_lookahead(
+        lambda obs: half,
+        lambda: gym.wrappers.TimeLimit(CountingEnv(), 12),
+        DemoSet(safe, unsafe, "walk"),
+        "MinDemoW5/MinDemoW5",
+        steps=70,
+        lookahead=(1, 3, 7, 100),
+    )
+    f = out.firings
+    assert len(f) > 0 and (f.filter_step + f.crash_in == 7).all()
+    assert out.summary["firings"] == len(f) and out.summary["control_episodes"] == 10
+    assert out.summary["control_crashes_per_1k_steps"] == 1000 * 10 / 70
+    t = out.table.set_index("k")
+    j = int(f.filter_step.iloc[0])
+    assert (f.filter_step == j).all()  # the same walk every episode: it fires at the same step
+    for k in (1, 3, 7, 100):
+        assert t.loc[k, "filter"] == float(7 - j <= k)
+        assert t.loc[k, "control_any"] == pytest.approx(min(k, 7) / 7)
+        assert t.loc[k, "control_same_step"] == float(7 - j <= k)
+    assert t.loc[100, "lift_any"] == 1.0  # everything crashes: no filter can beat the clock
+    with pytest.raises(ValueError, match="positive step counts"):
+        filter_lookahead(lambda o: half, CountingEnv, DemoSet(safe, unsafe, "w"), lookahead=[0])
+    with pytest.raises(ValueError, match="'<safe>/<unsafe>'"):
+        filter_lookahead(lambda o: half, CountingEnv, DemoSet(safe, unsafe, "w"), "MinDemoW5")
+
+
+def test_lookahead_table_by_hand():
+    """Control: one crash at length 4, one episode to the horizon (length 6, no crash): 10
+    states, of which 1 (k = 1), 2 (k = 2) and 4 (k >= 4) are within k of a crash. Firings at
+    step 1 (crash in 2) and step 5 (no crash)."""
+    from thesis_lib.chapters.defender.lookahead import lookahead_table
+
+    eps = pd.DataFrame({"length": [4, 6], "crashed": [True, False]})
+    fire = pd.DataFrame({"filter_step": [1, 5], "crash_in": [2.0, np.nan]})
+    t = lookahead_table(fire, eps, (1, 2, 4)).set_index("k")
+    assert t["filter"].tolist() == [0.0, 0.5, 0.5]
+    assert t["control_any"].tolist() == pytest.approx([0.1, 0.2, 0.4])
+    # step 1: both episodes reached it, the crash is 3 steps on: 0, 0, 1/2; step 5: only the
+    # uncrashed one reached it: 0
+    assert t["control_same_step"].tolist() == pytest.approx([0.0, 0.0, 0.25])
+    assert np.isnan(t.loc[1, "lift_same_step"]) and t.loc[4, "lift_same_step"] == 2.0
+
+
+def test_cli_lookahead_says_what_is_wrong(tmp_path, capsys):
+    from thesis_lib.cli import main
+
+    assert main(["defender", "lookahead", str(tmp_path / "none.zip"), "-q"]) == 1
+    assert "No saved model" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["defender", "lookahead", "m.zip", "--lookahead", "0,5"])
+    assert "expect positive step counts" in capsys.readouterr().err

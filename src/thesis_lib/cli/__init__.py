@@ -302,6 +302,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
         "our DT and BC against d3rlpy's at equal config (params/parity.yml)",
     ),
     "ladder": ("thesis_lib.cli.ladder", "the sequence models' scale ladder (params/ladder.v2.yml)"),
+    "defender": ("thesis_lib.cli.defender", "DEFENDER diagnostics (thesis 4.3)"),
 }
 
 

@@ -13,7 +13,9 @@ Used in: DEFENDER (thesis 4.3).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import contextlib
+import copy
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, Literal, SupportsFloat, cast
 
 import gymnasium as gym
@@ -37,6 +39,7 @@ __all__ = [
     "EPISODE_LOG_COLUMNS",
     "PAPER_MAX_TRAJECTORY",
     "DefenderWrapper",
+    "counterfactual_crash_step",
     "counterfactual_terminates",
 ]
 
@@ -57,9 +60,9 @@ EPISODE_LOG_COLUMNS: tuple[str, ...] = (
 """Columns of :attr:`DefenderWrapper.episodes`."""
 
 
-def counterfactual_terminates(env: gym.Env, action: Any) -> bool:
-    """Whether stepping ``env`` with ``action`` would end the episode (``terminated``), found
-    on a copy of its state: ``env`` is left exactly as it was.
+@contextlib.contextmanager
+def _state_kept(env: gym.Env) -> Iterator[gym.Env]:
+    """The unwrapped core of ``env``, to step freely: its state is put back exactly afterwards.
 
     A MuJoCo environment (``env.unwrapped.model``/``.data``) is stepped in place and its whole
     ``MjData`` restored bit for bit (``mujoco.mj_copyData``: positions, velocities, controls,
@@ -76,15 +79,71 @@ def counterfactual_terminates(env: gym.Env, action: Any) -> bool:
         saved = mujoco.MjData(model)
         mujoco.mj_copyData(saved, model, data)
         try:
-            _, _, terminated, _, _ = u.step(action)
+            yield u
         finally:
             mujoco.mj_copyData(data, model, saved)
-        return bool(terminated)
-    import copy
+    else:
+        yield copy.deepcopy(u)
 
-    twin = copy.deepcopy(u)
-    _, _, terminated, _, _ = twin.step(action)
+
+def counterfactual_terminates(env: gym.Env, action: Any) -> bool:
+    """Whether stepping ``env`` with ``action`` would end the episode (``terminated``), found
+    on a copy of its state: ``env`` is left exactly as it was (:func:`_state_kept`).
+    """
+    with _state_kept(env) as core:
+        _, _, terminated, _, _ = core.step(action)
     return bool(terminated)
+
+
+def counterfactual_crash_step(
+    env: gym.Env,
+    action: Any,
+    policy: Callable[[np.ndarray], Any] | None = None,
+    max_steps: int = 1,
+) -> int | None:
+    """After how many steps the episode would have terminated had ``action`` been taken and
+    ``policy`` acted after it: 1 where ``action`` itself terminates, ``k`` where the ``k``-th
+    step does, None where none of the first ``max_steps`` does. Found on a copy of the state:
+    ``env`` is left exactly as it was.
+
+    With ``max_steps=1`` it is :func:`counterfactual_terminates` (the study's one-step
+    counterfactual). A longer look asks whether a filtered episode was about to crash a few
+    steps later: the agent's policy keeps acting on the copy. The caller bounds ``max_steps``
+    by the steps left before the horizon (the copy has no ``TimeLimit``).
+
+    Args:
+        env: the environment the action was meant for (any wrappers; none may change
+            observations, since ``policy`` is given the unwrapped core's).
+        action: the action the filter held back.
+        policy: observation -> action, e.g. ``lambda o: model.predict(o)[0]``; needed for
+            ``max_steps > 1``.
+        max_steps: how many steps to look at, >= 1.
+
+    Raises:
+        ValueError: ``max_steps < 1``; ``max_steps > 1`` without a policy; an observation
+            wrapper in ``env``.
+    """
+    if int(max_steps) < 1:
+        raise ValueError(f"max_steps must be >= 1, got {max_steps}.")
+    if max_steps > 1:
+        if policy is None:
+            raise ValueError(f"Looking {max_steps} steps ahead needs the agent's policy.")
+        e: Any = env
+        while isinstance(e, gym.Wrapper):
+            if isinstance(e, gym.ObservationWrapper):
+                raise ValueError(
+                    f"{type(e).__name__} changes observations; the policy would be given the "
+                    "unwrapped environment's. Look ahead on an environment without one."
+                )
+            e = e.env
+    with _state_kept(env) as core:
+        obs, _, terminated, _, _ = core.step(action)
+        k = 1
+        while not terminated and k < max_steps:
+            assert policy is not None
+            obs, _, terminated, _, _ = core.step(policy(np.asarray(obs)))
+            k += 1
+    return k if terminated else None
 
 
 class DefenderWrapper(gym.Wrapper):
@@ -114,10 +173,12 @@ class DefenderWrapper(gym.Wrapper):
             :data:`DYNAMICS_TRAIN_EVERY` (4), or 1 (every step, Algorithm 2) with ``paper_compat``.
         seed: seed of the dynamics model.
         counterfactual: before each filtered action, step a copy of the environment's state with
-            it (:func:`counterfactual_terminates`) and record whether it would have crashed
-            (``info["would_crash"]``, the episode log's ``would_crash``): what the filter saved
-            and what it blocked for nothing (:meth:`filter_confusion`). It measures the claim
-            ("fewer crashes") rather than the filter's own firing rate.
+            it (:func:`counterfactual_terminates`) and record whether it would have crashed on
+            that very step (``info["would_crash"]``, the episode log's ``would_crash``): what
+            the filter saved and what it blocked for nothing (:meth:`filter_confusion`). It
+            measures the claim ("fewer crashes") rather than the filter's own firing rate. One
+            step only: a firing a few steps before a fall counts as a false alarm here;
+            :func:`counterfactual_crash_step` looks further with the agent's policy.
 
     Each step's ``info`` has ``"filtered"`` (bool); a filtered step also has ``"filter_step"``
     (how many real steps the episode had taken), ``"cost_safe"`` and ``"cost_unsafe"``.
@@ -352,8 +413,9 @@ class DefenderWrapper(gym.Wrapper):
     def filter_confusion(self) -> dict[str, float | int]:
         """The filter judged against what would have happened (needs ``counterfactual=True``).
 
-        Per finished episode: a filtered step whose action would have crashed is a saved crash
-        (``tp``); one that would not is a false alarm (``fp``); a real crash the filter let
+        Per finished episode: a filtered step whose action would have crashed on that step is a
+        saved crash (``tp``); one that would not is a false alarm (``fp``: it may still precede
+        a crash a few steps on, :func:`counterfactual_crash_step`); a real crash the filter let
         through is a miss (``fn``). ``precision = tp / (tp + fp)``, ``recall = tp / (tp + fn)``
         (NaN where undefined), ``crashes_without_filter = tp + fn``: the crashes the episodes
         would have had, against the ``fn`` they had.

@@ -134,7 +134,8 @@ def _counterfactual_numbers(
 ) -> dict[str, float]:
     """What the filter saved, from the episode log's ``would_crash`` (a filtered action stepped
     on a copy of the state, :class:`~thesis_lib.defender.DefenderWrapper`'s counterfactual):
-    ``saved_crashes`` (it would have crashed), ``false_alarms`` (it would not),
+    ``saved_crashes`` (it would have crashed on that step), ``false_alarms`` (it would not; it
+    may have crashed a few steps on: ``thesis defender lookahead`` measures how many),
     ``filter_precision`` = saved / filtered, ``filter_recall`` = saved / (saved + real
     crashes), and ``crash_rate_without_filter`` = (saved + real crashes) / episodes. A filter
     that never fired saved nothing and raised no false alarm (precision NaN). NaN without a

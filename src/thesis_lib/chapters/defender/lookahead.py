@@ -1,0 +1,279 @@
+"""How far ahead of a crash does DEFENDER fire? A diagnostic of one trained policy.
+
+The second study (``defender-c7c9-v2``) steps every filtered action once on a copy of the
+state: a *saved crash* is an action that would have ended the episode on that very step, any
+other firing a *false alarm*. A filter that fires a few steps before a fall, as a filter of
+state trajectories may, counts as a false alarm there. This diagnostic lets the agent's own
+policy go on acting on the copy (:func:`~thesis_lib.defender.wrapper.counterfactual_crash_step`)
+and asks, for several look-ahead lengths ``k``, what share of the firings would have crashed
+within ``k`` steps.
+
+It answers beside a blind control: the same policy without the filter, whose visited states
+are followed by a crash within ``k`` steps at a base rate. A filter that fired at random states
+would have that share (``control_any``); one that fired at random at the same step of the
+episode as DEFENDER did, ``control_same_step`` (does the filter know more than the clock?).
+
+It is exploratory (not a registered study): it reads a checkpointed policy, does not train, and
+says nothing of the learning the filter changes.
+
+Used in: ``thesis defender lookahead`` (the DEFENDER chapter's second study, its reading).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal, cast
+
+import gymnasium as gym
+import numpy as np
+import pandas as pd
+
+from thesis_lib.chapters.defender.demos import make_env, study_demonstrations
+from thesis_lib.chapters.defender.study import study_task
+from thesis_lib.defender import DefenderWrapper, DemoSet
+from thesis_lib.defender.wrapper import counterfactual_crash_step
+from thesis_lib.rl.callbacks import find_horizon, is_crash
+
+LOOKAHEAD_STEPS: tuple[int, ...] = (1, 5, 10, 20, 50, 100)
+"""The look-ahead lengths ``k`` of :func:`filter_lookahead` by default (1: the study's own
+one-step counterfactual)."""
+
+Policy = Callable[[np.ndarray], Any]
+
+
+@dataclass
+class Lookahead:
+    """What :func:`filter_lookahead` found.
+
+    ``table``: one row per look-ahead length ``k``: ``filter`` (the share of firings whose
+    held-back action, with the policy acting after it, would have crashed within ``k`` steps),
+    ``control_any`` and ``control_same_step`` (the blind controls, module docstring),
+    ``lift_any`` / ``lift_same_step`` (``filter`` over each). ``firings``: one row per firing
+    (``filter_step``, the real steps taken before it; ``crash_in``, steps to the crash or NaN).
+    ``episodes``: the control run's finished episodes (``length``, ``crashed``). ``summary``:
+    the counts and rates per 1,000 steps of both runs, the median firing step and steps to
+    the crash, the control's median episode length and its share of crashed episodes.
+    """
+
+    table: pd.DataFrame
+    firings: pd.DataFrame
+    episodes: pd.DataFrame
+    summary: dict[str, float]
+
+
+def sb3_policy(
+    path: str | Path, algo: str = "SAC", deterministic: bool = False, seed: int = 0
+) -> Policy:
+    """The policy of a saved stable-baselines3 model (``model.zip``, e.g. a study checkpoint's):
+    observation -> action, sampled as in training unless ``deterministic``; torch's generator
+    is seeded with ``seed``.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: an algorithm stable-baselines3 does not have.
+    """
+    import stable_baselines3 as sb3
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"No saved model {path}: give a stable-baselines3 model.zip (a study checkpoint's "
+            "studies/<chapter>/<tag>/tasks/partial/<key>/step-*/model.zip)."
+        )
+    cls = getattr(sb3, algo, None)
+    if cls is None:
+        raise ValueError(f"Unknown algorithm {algo!r}; stable-baselines3 has SAC, TD3, DDPG, ...")
+    torch.manual_seed(seed)
+    model = cls.load(path, device="cpu")
+    return lambda obs: model.predict(obs, deterministic=deterministic)[0]
+
+
+def _check(steps: int, lookahead: Sequence[int]) -> list[int]:
+    ks = sorted({int(k) for k in lookahead})
+    if not ks or ks[0] < 1:
+        raise ValueError(f"lookahead must be positive step counts, got {list(lookahead)}.")
+    if int(steps) < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}.")
+    return ks
+
+
+def filter_lookahead(
+    policy: Policy,
+    env_fn: Callable[[], gym.Env],
+    demos: DemoSet,
+    strategy: str = "MeanDemoW5/MeanDemoW10",
+    trajectory: Literal["state", "state_action"] = "state",
+    steps: int = 20_000,
+    lookahead: Sequence[int] = LOOKAHEAD_STEPS,
+    seed: int = 0,
+    progress: bool = False,
+) -> Lookahead:
+    """Run ``policy`` for ``steps`` steps with DEFENDER (``strategy`` on ``trajectory``, the
+    ``demos``) and ``steps`` without it; for every firing, look up to ``max(lookahead)`` steps
+    ahead on a copy of the state (:func:`counterfactual_crash_step`, bounded by the horizon:
+    a termination at the horizon is no crash); compare with the blind controls (module
+    docstring). Nothing learns: the dynamics model of the filter is never updated.
+
+    Args:
+        policy: observation -> action (:func:`sb3_policy`).
+        env_fn: makes a new environment (with its ``TimeLimit``), e.g. the study's ``make_env``.
+        demos: the safe and unsafe demonstrations (the study's pinned ones).
+        strategy: ``"<safe method>/<unsafe method>"``.
+        trajectory: ``state`` or ``state_action``.
+        steps: environment steps of each run (a filtered step counts as one, as in training).
+        lookahead: the look-ahead lengths ``k`` of the table.
+        seed: the first reset's seed of each run.
+        progress: a progress bar per run.
+
+    Raises:
+        ValueError: a look-ahead length below 1, ``steps`` below 1, a strategy without ``/``.
+    """
+    from tqdm.auto import tqdm
+
+    ks = _check(steps, lookahead)
+    if strategy.count("/") != 1:
+        raise ValueError(
+            f"strategy must be '<safe>/<unsafe>', e.g. MeanDemoW5/MeanDemoW10; got {strategy!r}."
+        )
+    safe_m, unsafe_m = strategy.split("/")
+    env = DefenderWrapper(
+        env_fn(),
+        demos.safe,
+        demos.unsafe,
+        safe_method=safe_m,
+        unsafe_method=unsafe_m,
+        trajectory=trajectory,
+        dynamics_train_every=2**62,  # nothing learns here
+    )
+    horizon = env.horizon
+    firings: list[dict[str, Any]] = []
+    obs, _ = env.reset(seed=seed)
+    for _ in tqdm(range(int(steps)), desc="with the filter", disable=not progress):
+        action = policy(np.asarray(obs))
+        obs, _, term, trunc, info = env.step(action)
+        if info["filtered"]:
+            j = int(info["filter_step"])
+            left = ks[-1] if horizon is None else min(ks[-1], horizon - j)
+            k = counterfactual_crash_step(env.env, action, policy, max_steps=max(left, 1))
+            crash_in = float(k) if k is not None and is_crash(True, j + k, horizon) else np.nan
+            firings.append({"filter_step": j, "crash_in": crash_in})
+        if term or trunc:
+            obs, _ = env.reset()
+    filtered_eps = len(env.episodes)
+    env.close()
+
+    plain = env_fn()
+    horizon_plain = find_horizon(plain)
+    episodes: list[dict[str, Any]] = []
+    obs, _ = plain.reset(seed=seed)
+    length = 0
+    for _ in tqdm(range(int(steps)), desc="without it", disable=not progress):
+        obs, _, term, trunc, _ = plain.step(policy(np.asarray(obs)))
+        length += 1
+        if term or trunc:
+            episodes.append({"length": length, "crashed": is_crash(term, length, horizon_plain)})
+            obs, _ = plain.reset()
+            length = 0
+    plain.close()
+    fire = pd.DataFrame(firings, columns=["filter_step", "crash_in"])
+    eps = pd.DataFrame(episodes, columns=["length", "crashed"])
+    table = lookahead_table(fire, eps, ks)
+    summary = {
+        "steps": float(steps),
+        "firings": float(len(fire)),
+        "firings_per_1k_steps": 1000 * len(fire) / steps,
+        "filtered_run_episodes": float(filtered_eps),
+        "control_episodes": float(len(eps)),
+        "control_crashes_per_1k_steps": 1000 * float(eps["crashed"].sum()) / steps,
+        # where the filter fires and the plain episodes end (NaN where there is none)
+        "filter_step_median": float(fire["filter_step"].median()),
+        "crash_in_median": float(fire["crash_in"].median()),
+        "control_length_median": float(eps["length"].median()),
+        "control_crashed_share": float(eps["crashed"].mean()),
+    }
+    return Lookahead(table, fire, eps, summary)
+
+
+def lookahead_table(
+    firings: pd.DataFrame, episodes: pd.DataFrame, lookahead: Sequence[int] = LOOKAHEAD_STEPS
+) -> pd.DataFrame:
+    """The table of :class:`Lookahead` from its ``firings`` and the control's ``episodes``.
+
+    ``control_any``: of all states the control run visited (finished episodes; ``j`` real
+    steps taken, ``0 <= j < length``), the share followed by a crash within ``k`` steps
+    (``crashed`` and ``length - j <= k``). ``control_same_step``: for each firing at step
+    ``j``, that share among the control episodes that reached step ``j``, averaged over the
+    firings (firings at a step no control episode reached are left out).
+    """
+    ks = _check(1, lookahead)
+    lengths = episodes["length"].to_numpy(int)
+    crashed = episodes["crashed"].to_numpy(bool)
+    visited = int(lengths.sum())
+    crash_in = firings["crash_in"].to_numpy(float)
+    at = firings["filter_step"].to_numpy(int)
+    rows = []
+    for k in ks:
+        filt = float(np.mean(crash_in <= k)) if len(crash_in) else np.nan  # NaN <= k is False
+        any_ = float(np.minimum(lengths[crashed], k).sum() / visited) if visited else np.nan
+        same = []
+        for j in at:
+            reached = lengths > j
+            if reached.any():
+                same.append(float(np.mean(crashed[reached] & (lengths[reached] - j <= k))))
+        same_step = float(np.mean(same)) if same else np.nan
+        rows.append(
+            {
+                "k": k,
+                "filter": filt,
+                "control_any": any_,
+                "control_same_step": same_step,
+                "lift_any": filt / any_ if any_ else np.nan,
+                "lift_same_step": filt / same_step if same_step else np.nan,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def study_lookahead(
+    model: str | Path,
+    study: str = "03_defender:v2",
+    strategy: str | None = None,
+    trajectory: str = "state",
+    n_demos: int | None = None,
+    steps: int = 20_000,
+    lookahead: Sequence[int] = LOOKAHEAD_STEPS,
+    seed: int = 0,
+    progress: bool = False,
+) -> Lookahead:
+    """:func:`filter_lookahead` of a saved SAC model on a DEFENDER study's first task, with the
+    study's pinned demonstrations (``n_demos`` per group; default the study's) and its first
+    state strategy (default).
+
+    Raises:
+        FileNotFoundError: no such model or study file.
+    """
+    from thesis_lib.book import study as st  # cycle: the book reads the chapters
+    from thesis_lib.chapters import get_chapter  # cycle: the registry imports this chapter
+
+    s = st.load_study(st.study_chapter(study))
+    cfg = st.study_config(s, get_chapter(s.chapter))
+    policy = sb3_policy(model, cfg.algos[0], seed=seed)  # a wrong path fails before the demos
+    strategy = strategy or cfg.state_strategies[0]
+    count = int(n_demos or cfg.n_demos)
+    task = cfg.tasks[0]
+    recipe = study_task(cfg, task, cfg.algos[0], cfg.seed, strategy, trajectory, count)
+    demos, _ = study_demonstrations(task, recipe.config["demos"], count)
+    return filter_lookahead(
+        policy,
+        lambda: make_env(task, cfg.max_episode_steps),
+        demos,
+        strategy,
+        cast(Literal["state", "state_action"], trajectory),
+        steps,
+        lookahead,
+        seed,
+        progress,
+    )
