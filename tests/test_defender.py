@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import gymnasium as gym
 import numpy as np
 import pandas as pd
@@ -837,3 +839,23 @@ def test_cli_lookahead_says_what_is_wrong(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["defender", "lookahead", "m.zip", "--lookahead", "0,5"])
     assert "expect positive step counts" in capsys.readouterr().err
+
+
+def test_lookahead_results_reads_the_committed_diagnostics(tmp_path):
+    from thesis_lib.chapters.defender.lookahead import lookahead_results
+
+    assert lookahead_results(tmp_path / "none").empty
+    table = pd.DataFrame({"k": [1, 20], "filter": [0.0, 0.9], "control_any": [0.01, 0.2]})
+    table = table.assign(control_same_step=[0.0, 0.85], lift_any=[0.0, 4.5], lift_same_step=1.0)
+    for step, label in ((40000, "SAC+F"), (20000, "SAC")):
+        table.to_csv(tmp_path / f"{label}-{step}.csv", index=False)
+        summary = {"run_label": label, "run_seed": 2, "run_scale": "check", "run_step": step}
+        (tmp_path / f"{label}-{step}.json").write_text(
+            json.dumps({"summary": {**summary, "firings_per_1k_steps": 11.0}})
+        )
+    out = lookahead_results(tmp_path)
+    assert out[["run_label", "run_step", "k"]].values.tolist() == [
+        ["SAC", 20000, 1], ["SAC", 20000, 20], ["SAC+F", 40000, 1], ["SAC+F", 40000, 20]
+    ]  # fmt: skip
+    assert out["filter"].tolist() == [0.0, 0.9] * 2 and (out.firings_per_1k_steps == 11.0).all()
+    assert out["control_length_median"].isna().all()  # not in these summaries

@@ -48,6 +48,10 @@ def _cmd_lookahead(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     s = out.summary
+    if "run_label" in s:
+        print(
+            f"{s['run_label']}, seed {s['run_seed']} ({s['run_scale']}), at step {s['run_step']}:"
+        )
     print(
         f"{int(s['firings'])} firings in {int(s['steps'])} steps ({s['firings_per_1k_steps']:.1f} "
         f"per 1,000); without the filter {s['control_crashes_per_1k_steps']:.1f} crashes per "

@@ -21,6 +21,7 @@ Used in: ``thesis defender lookahead`` (the DEFENDER chapter's second study, its
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,13 +55,14 @@ class Lookahead:
     (``filter_step``, the real steps taken before it; ``crash_in``, steps to the crash or NaN).
     ``episodes``: the control run's finished episodes (``length``, ``crashed``). ``summary``:
     the counts and rates per 1,000 steps of both runs, the median firing step and steps to
-    the crash, the control's median episode length and its share of crashed episodes.
+    the crash, the control's median episode length and its share of crashed episodes (and,
+    from :func:`study_lookahead`, the study, the filter and the run a checkpoint was taken of).
     """
 
     table: pd.DataFrame
     firings: pd.DataFrame
     episodes: pd.DataFrame
-    summary: dict[str, float]
+    summary: dict[str, Any]
 
 
 def sb3_policy(
@@ -266,7 +268,7 @@ def study_lookahead(
     task = cfg.tasks[0]
     recipe = study_task(cfg, task, cfg.algos[0], cfg.seed, strategy, trajectory, count)
     demos, _ = study_demonstrations(task, recipe.config["demos"], count)
-    return filter_lookahead(
+    out = filter_lookahead(
         policy,
         lambda: make_env(task, cfg.max_episode_steps),
         demos,
@@ -276,4 +278,60 @@ def study_lookahead(
         lookahead,
         seed,
         progress,
+    )
+    out.summary.update(
+        {"study": s.study, "strategy": strategy, "trajectory": trajectory, "n_demos": count}
+    )
+    found = re.search(r"([0-9a-f]{16})/step-(\d+)", Path(model).as_posix())
+    if found:  # a study checkpoint: name the run it was taken of
+        key, step = found.group(1), int(found.group(2))
+        runs = {t.key: t.config for t in st.study_tasks(s, get_chapter(s.chapter))}
+        if key in runs:
+            c = runs[key]
+            out.summary.update(
+                {
+                    "run_key": key,
+                    "run_label": c["label"],
+                    "run_seed": int(c["seed"]),
+                    "run_scale": c.get("scale", "study"),
+                    "run_step": step,
+                }
+            )
+    return out
+
+
+#: Where the lookahead diagnostics of the study runs' checkpoints are kept (CSV + JSON each).
+LOOKAHEAD_DIR = Path("studies") / "03_defender" / "diagnostics" / "lookahead"
+
+
+def lookahead_results(folder: str | Path | None = None) -> pd.DataFrame:
+    """The committed lookahead diagnostics (``thesis defender lookahead --out``) in ``folder``
+    (default :data:`LOOKAHEAD_DIR` of the project): one row per file and look-ahead length,
+    the table's columns beside the run it was taken of (``run_label``, ``run_seed``,
+    ``run_scale``, ``run_step``) and the summary's rates. Empty where there are none.
+    """
+    import json
+
+    from thesis_lib.paths import project_root
+
+    root = Path(folder) if folder is not None else project_root() / LOOKAHEAD_DIR
+    keep = (
+        "run_label", "run_seed", "run_scale", "run_step", "firings_per_1k_steps",
+        "control_crashes_per_1k_steps", "control_crashed_share", "filter_step_median",
+        "control_length_median",
+    )  # fmt: skip
+    frames = []
+    for csv in sorted(root.glob("*.csv")) if root.is_dir() else []:
+        meta = json.loads(csv.with_suffix(".json").read_text())
+        summary = meta.get("summary", {})
+        t = pd.read_csv(csv)
+        for k in reversed(keep):
+            t.insert(0, k, summary.get(k))
+        frames.append(t)
+    cols = [*keep, "k", "filter", "control_any", "control_same_step", "lift_any", "lift_same_step"]
+    if not frames:
+        return pd.DataFrame(columns=cols)
+    out = pd.concat(frames, ignore_index=True)[cols]
+    return out.sort_values(["run_label", "run_scale", "run_seed", "run_step", "k"]).reset_index(
+        drop=True
     )
