@@ -859,3 +859,22 @@ def test_lookahead_results_reads_the_committed_diagnostics(tmp_path):
     ]  # fmt: skip
     assert out["filter"].tolist() == [0.0, 0.9] * 2 and (out.firings_per_1k_steps == 11.0).all()
     assert out["control_length_median"].isna().all()  # not in these summaries
+
+
+def test_summarize_lookahead_one_row_per_checkpoint():
+    from thesis_lib.chapters.defender.lookahead import summarize_lookahead
+
+    assert summarize_lookahead(pd.DataFrame()).empty
+    long = pd.DataFrame(
+        {
+            "run_label": "SAC", "run_scale": "study", "run_seed": [0, 0, 1, 1],
+            "run_step": 100000, "firings_per_1k_steps": [9.0, 9.0, 7.0, 7.0],
+            "filter_step_median": 80.0, "control_length_median": 95.0,
+            "control_crashed_share": 1.0, "k": [1, 20] * 2, "filter": [0.0, 0.8, 0.1, 0.9],
+            "control_same_step": [0.0, 0.7, 0.0, 0.6],
+        }
+    )  # fmt: skip
+    wide = summarize_lookahead(long, lookahead=(1, 20))
+    assert wide["seed"].tolist() == [0, 1] and wide["firings per 1k steps"].tolist() == [9, 7]
+    assert wide["filter k=20"].tolist() == [0.8, 0.9]
+    assert wide["same step k=20"].tolist() == [0.7, 0.6]

@@ -34,6 +34,8 @@ Modules:
 - :mod:`~thesis_lib.chapters.defender.demos` the environments and the demonstrations;
 - :mod:`~thesis_lib.chapters.defender.tasks` the ablation and the training runs (Tables 4.3-4.5);
 - :mod:`~thesis_lib.chapters.defender.study` the study's grid and its per-run row;
+- :mod:`~thesis_lib.chapters.defender.lookahead` how far ahead of a crash the filter fires, for
+  a checkpointed policy, beside a blind filter (``thesis defender lookahead``; exploratory);
 - :mod:`~thesis_lib.chapters.defender.tables` summaries and comparisons with the thesis;
 - :mod:`~thesis_lib.chapters.defender.figures` the plots.
 
@@ -65,6 +67,14 @@ from thesis_lib.chapters.defender.figures import (
     plot_curves,
     plot_curves_table_4_5,
     plot_study_curves,
+)
+from thesis_lib.chapters.defender.lookahead import (
+    LOOKAHEAD_DIR,
+    LOOKAHEAD_STEPS,
+    filter_lookahead,
+    lookahead_results,
+    study_lookahead,
+    summarize_lookahead,
 )
 from thesis_lib.chapters.defender.study import (
     CRASH_DEFINITION,
@@ -119,6 +129,8 @@ from thesis_lib.defender import THESIS_STATE_ACTION_STRATEGIES, THESIS_STATE_STR
 __all__ = [
     "CHAPTER",
     "CRASH_DEFINITION",
+    "LOOKAHEAD_DIR",
+    "LOOKAHEAD_STEPS",
     "DEMO_FIELDS",
     "DEMO_SOURCES",
     "DEMO_INFO",
@@ -148,7 +160,9 @@ __all__ = [
     "describe_demonstrations",
     "describe_effects",
     "episode_limit",
+    "filter_lookahead",
     "load_demos_file",
+    "lookahead_results",
     "make_demonstrations",
     "make_env",
     "methods_table",
@@ -166,11 +180,13 @@ __all__ = [
     "scale_note",
     "study_demonstrations",
     "study_label",
+    "study_lookahead",
     "study_row",
     "study_run",
     "study_task",
     "study_tasks",
     "summarize_demonstrations",
+    "summarize_lookahead",
     "summarize_paper_compat_effect",
     "summarize_runs",
     "summarize_study",

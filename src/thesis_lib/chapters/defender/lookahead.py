@@ -21,6 +21,7 @@ Used in: ``thesis defender lookahead`` (the DEFENDER chapter's second study, its
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from thesis_lib.chapters.defender.demos import make_env, study_demonstrations
 from thesis_lib.chapters.defender.study import study_task
 from thesis_lib.defender import DefenderWrapper, DemoSet
 from thesis_lib.defender.wrapper import counterfactual_crash_step
+from thesis_lib.paths import project_root
 from thesis_lib.rl.callbacks import find_horizon, is_crash
 
 LOOKAHEAD_STEPS: tuple[int, ...] = (1, 5, 10, 20, 50, 100)
@@ -310,10 +312,6 @@ def lookahead_results(folder: str | Path | None = None) -> pd.DataFrame:
     the table's columns beside the run it was taken of (``run_label``, ``run_seed``,
     ``run_scale``, ``run_step``) and the summary's rates. Empty where there are none.
     """
-    import json
-
-    from thesis_lib.paths import project_root
-
     root = Path(folder) if folder is not None else project_root() / LOOKAHEAD_DIR
     keep = (
         "run_label", "run_seed", "run_scale", "run_step", "firings_per_1k_steps",
@@ -335,3 +333,37 @@ def lookahead_results(folder: str | Path | None = None) -> pd.DataFrame:
     return out.sort_values(["run_label", "run_scale", "run_seed", "run_step", "k"]).reset_index(
         drop=True
     )
+
+
+def summarize_lookahead(
+    results: pd.DataFrame, lookahead: Sequence[int] = (1, 10, 20, 50)
+) -> pd.DataFrame:
+    """:func:`lookahead_results` wide: one row per checkpoint (run, seed, step) with its firing
+    rate, median firing step, the control's median episode length and crashed share, and for
+    each ``k`` of ``lookahead`` the filter's share of firings that would have crashed within
+    ``k`` steps beside the blind filter at the same step (``same step``). Empty where
+    ``results`` is.
+
+    Used in: DEFENDER chapter (the second study, "How far ahead ...").
+    """
+    index = ["run_label", "run_scale", "run_seed", "run_step"]
+    fixed = [
+        "firings_per_1k_steps", "filter_step_median", "control_length_median",
+        "control_crashed_share",
+    ]  # fmt: skip
+    names = {
+        "run_label": "run", "run_scale": "scale", "run_seed": "seed", "run_step": "step",
+        "firings_per_1k_steps": "firings per 1k steps", "filter_step_median": "fires at step",
+        "control_length_median": "episode length without", "control_crashed_share": "crashed without",
+    }  # fmt: skip
+    cols = [names[c] for c in index + fixed] + [
+        f"{w} k={k}" for k in lookahead for w in ("filter", "same step")
+    ]
+    if results.empty:
+        return pd.DataFrame(columns=cols)
+    base = results.drop_duplicates(index)[index + fixed].set_index(index)
+    for k in lookahead:
+        at = results[results["k"] == k].set_index(index)
+        base[f"filter k={k}"] = at["filter"]
+        base[f"same step k={k}"] = at["control_same_step"]
+    return base.reset_index().rename(columns=names)[cols]
