@@ -878,3 +878,67 @@ def test_summarize_lookahead_one_row_per_checkpoint():
     assert wide["seed"].tolist() == [0, 1] and wide["firings per 1k steps"].tolist() == [9, 7]
     assert wide["filter k=20"].tolist() == [0.8, 0.9]
     assert wide["same step k=20"].tolist() == [0.7, 0.6]
+
+
+# --- the control: a filter firing at random (CLAIMS.md, C7) ----------------------------------
+
+
+def test_random_filter_fires_at_its_rate_and_acts_as_the_filter_does(walk_demos):
+    from thesis_lib.defender import RandomFilter
+
+    safe, unsafe = walk_demos
+
+    def run(seed, steps=4000):
+        env = RandomFilter(
+            gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe, rate=0.1, seed=seed
+        )
+        env.reset(seed=0)
+        fired = []
+        for _ in range(steps):
+            x = env.unwrapped.x
+            before = env.unwrapped.n_steps
+            obs, reward, term, trunc, info = env.step(
+                np.array([1.0 if x < 0 else -1.0], np.float32)
+            )
+            fired.append(info["filtered"])
+            if info["filtered"]:  # the filter's contract: no real step, lowest reward, the end
+                assert env.unwrapped.n_steps == before and term and reward == env.filter_reward
+            if term or trunc:
+                env.reset()
+        return np.array(fired), env
+
+    fired, env = run(0)
+    # 4000 Bernoulli(0.1) draws: 400 +- 19; a 5-sigma band
+    assert abs(fired.sum() - 400) < 5 * np.sqrt(4000 * 0.1 * 0.9)
+    assert env.n_filtered_steps == fired.sum() and env.filter_reward == -5.0
+    assert np.array_equal(run(0)[0], fired) and not np.array_equal(run(1)[0], fired)
+    log = env.episodes  # the walk never crashes: every episode is filtered or truncated
+    assert (log.filtered | log.truncated).all() and log.filtered.sum() == fired.sum()
+    for rate in (0.0, 1.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="rate must be a probability"):
+            RandomFilter(CountingEnv(), safe, unsafe, rate=rate)
+
+
+def test_random_filter_state_dict_continues_the_same_draws(walk_demos):
+    from thesis_lib.defender import RandomFilter
+
+    safe, unsafe = walk_demos
+    step = np.array([0.0], np.float32)
+
+    def draws(env, n):
+        out = []
+        for _ in range(n):
+            *_, term, trunc, info = env.step(step)
+            out.append(info["filtered"])
+            if term or trunc:
+                env.reset()
+        return out
+
+    a = RandomFilter(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe, rate=0.3, seed=4)
+    b = RandomFilter(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe, rate=0.3, seed=9)
+    a.reset(seed=0), b.reset(seed=0)
+    draws(a, 7)
+    b.load_state_dict(a.state_dict())  # b now draws what a draws next
+    a.reset(), b.reset()
+    assert draws(a, 60) == draws(b, 60)
+    assert len(b.episodes) == len(a.episodes) and b.n_filtered_steps == a.n_filtered_steps

@@ -148,6 +148,20 @@ def test_study_tasks_grid_keys_and_labels():
     assert [t.config["seed"] for t in tasks[15:]] == [1] * 11
 
 
+def test_random_filter_control_arms_add_tasks_and_change_no_other_key():
+    base = ex.study_tasks(ex.Config(**TINY))
+    with_control = ex.study_tasks(ex.Config(**{**TINY, "random_filter_rates": [0.01]}))
+    added = [t for t in with_control if t.key not in {b.key for b in base}]
+    assert [b.key for b in base] == [t.key for t in with_control if t not in added]
+    assert [(t.config["label"], t.config["seed"]) for t in added] == [
+        ("SAC+random:0.01", 0), ("SAC+random:0.01", 0), ("SAC+random:0.01", 1),
+        ("SAC+random:0.01", 1),
+    ]  # fmt: skip
+    assert {t.config["task"] for t in added} == set(TINY["tasks"])  # SAC on every task
+    assert all(t.config["n_demos"] == TINY["n_demos"] and t.config["demos"] for t in added)
+    assert ex.random_filter_rate(added[0].config["strategy"]) == 0.01
+
+
 def test_study_config_errors():
     with pytest.raises(ValueError, match="algo_tasks\\['TD3'\\] lists 'Ant-v5'"):
         ex.Config(algo_tasks={"TD3": ["Ant-v5"]})
@@ -157,16 +171,26 @@ def test_study_config_errors():
         ex.Config(no_topup_tasks=["Ant-v5"])
     with pytest.raises(ValueError, match="eval_episodes must be >= 1"):
         ex.Config(eval_episodes=0)
+    with pytest.raises(ValueError, match="random_filter_rates must be probabilities"):
+        ex.Config(random_filter_rates=[0.01, 1.5])
 
 
 def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
     monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))  # the pinned demos
-    cfg = ex.Config(**{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {}})
+    cfg = ex.Config(
+        **{
+            **TINY,
+            "tasks": ["InvertedDoublePendulum-v5"],
+            "algo_tasks": {},
+            "random_filter_rates": [0.05],
+        }
+    )
     tasks = {t.config["label"]: t for t in ex.study_tasks(cfg) if t.config["seed"] == 0}
     plain = ex.study_run(tasks["SAC"].config)[0]
     filt = ex.study_run(tasks["SAC+MeanDemoW5/MeanDemoW10"].config)[0]
-    for row in (plain, filt):
+    control = ex.study_run(tasks["SAC+random:0.05"].config)[0]
+    for row in (plain, filt, control):
         assert (row["setting"], row["seed"], row["scale"]) == ("InvertedDoublePendulum", 0, "study")
         assert row["crash_rate"] + row["crash_free_rate"] == pytest.approx(1.0)
         assert row["crash_pct"] == pytest.approx(100 * row["crash_rate"])
@@ -177,6 +201,11 @@ def test_study_run_gives_one_row_with_every_measure(tmp_path, monkeypatch):
     assert plain["method"] == "SAC" and plain["filtered_rate"] == 0.0
     assert np.isnan(plain["saved_crashes"]) and np.isfinite(filt["saved_crashes"])
     assert "demos_file" not in plain
+    # the control fires at random, about once in 20 steps, as the filter does when it fires
+    assert control["safe_strategy"] is None and control["strategy"] == "random:0.05"
+    fired = control["saved_crashes"] + control["false_alarms"]
+    assert 0 < fired <= control["n_episodes"] and control["filtered_rate"] > 0
+    assert control["demos_safe"] == 3  # its reward comes from the demonstrations
     assert filt["demos_safe"] == filt["demos_unsafe"] == 3
     # 300 SAC steps on a 20-step pendulum: no roll-out balanced, so the safe group is the expert's
     assert filt["sac_rollouts_safe"] == 0 and filt["demos_safe_expert"] == 3

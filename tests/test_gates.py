@@ -130,6 +130,27 @@ def test_a_control_gate_needs_the_control_beaten():
     assert _evaluate(rows, [gate]).iloc[0].verdict == "holds"
 
 
+def test_a_control_gate_on_a_metric_where_less_is_better():
+    """Crashes: the filter (5) must crash less than the random filter; the claim's comparison
+    (HDT vs DT here) holds either way, and the gate decides whether it counts."""
+    gate = {
+        "claim": "C3",
+        "kind": "control",
+        "method": "HDT",
+        "control": "random",
+        "better": "lower",
+        "why": "a filter firing at random at the same rate",
+    }
+    rows = _rows({("HDT", "s"): 5.0, ("DT", "s"): 0.0, ("random", "s"): 9.0})
+    res = _evaluate(rows, [gate]).iloc[0]
+    assert res.verdict == "holds" and "passed control: random - HDT on score = 3" in res.gates
+    assert "(lower is better)" in res.gates
+    rows = _rows({("HDT", "s"): 5.0, ("DT", "s"): 0.0, ("random", "s"): 1.0})
+    assert _evaluate(rows, [gate]).iloc[0].verdict == "untestable"  # the control crashes less
+    with pytest.raises(ValueError, match="`better` to be 'higher' or 'lower'"):
+        check_gate({**gate, "better": "less"})
+
+
 def test_a_fidelity_gate_reads_the_parity_table():
     rows = _rows({("HDT", "s"): 5.0, ("DT", "s"): 0.0})
     parity = pd.DataFrame(

@@ -10,7 +10,7 @@ import pytest
 import torch
 from stable_baselines3.common.callbacks import BaseCallback, StopTrainingOnMaxEpisodes
 
-from thesis_lib.defender import DefenderWrapper, Demonstration
+from thesis_lib.defender import DefenderWrapper, Demonstration, RandomFilter
 from thesis_lib.rl import RLConfig, config_from_params, resume, train
 
 EPISODE_KEYS = ["episode", "timestep", "return", "length", "terminated", "crashed"]
@@ -165,20 +165,28 @@ def _hopper_demos(n: int, seed: int) -> list[Demonstration]:
     return demos
 
 
-def _defended_hopper() -> DefenderWrapper:
+def _defended_hopper(kind: str = "defender") -> DefenderWrapper:
+    common = {
+        "counterfactual": True,
+        "dynamics_kwargs": {"hidden": [16, 16], "batch_size": 32},
+        "seed": 2,
+    }
+    if kind == "random":  # the control: its firing draws must resume too
+        return RandomFilter(
+            gym.make("Hopper-v5"), _hopper_demos(3, 0), _hopper_demos(3, 10), rate=0.02, **common
+        )
     return DefenderWrapper(
         gym.make("Hopper-v5"),
         _hopper_demos(3, 0),
         _hopper_demos(3, 10),
         safe_method="MeanDemoW5",
         unsafe_method="MeanDemoW10",
-        counterfactual=True,
-        dynamics_kwargs={"hidden": [16, 16], "batch_size": 32},
-        seed=2,
+        **common,
     )
 
 
-def test_defenders_filter_resumes_with_its_dynamics_model_and_log(tmp_path):
+@pytest.mark.parametrize("kind", ["defender", "random"])
+def test_defenders_filter_resumes_with_its_dynamics_model_and_log(tmp_path, kind):
     cfg = config_from_params(
         {
             "algo": "SAC",
@@ -191,12 +199,12 @@ def test_defenders_filter_resumes_with_its_dynamics_model_and_log(tmp_path):
         }
     )
     keys = [*EPISODE_KEYS, "filtered", "would_crash"]
-    a_env = _defended_hopper()
+    a_env = _defended_hopper(kind)
     plain = train(cfg, env=a_env, progress=False, info_keys=["filtered", "would_crash"])
     with pytest.raises(Interrupt):
         train(
             cfg,
-            env=_defended_hopper(),
+            env=_defended_hopper(kind),
             progress=False,
             info_keys=["filtered", "would_crash"],
             checkpoint=tmp_path,
@@ -204,7 +212,7 @@ def test_defenders_filter_resumes_with_its_dynamics_model_and_log(tmp_path):
             callbacks=[StopAt(400)],
         )
     assert resume.latest_checkpoint(tmp_path) is not None
-    b_env = _defended_hopper()
+    b_env = _defended_hopper(kind)
     resumed = train(
         cfg,
         env=b_env,

@@ -199,6 +199,25 @@ def test_a_later_study_runs_beside_the_first_and_takes_over_its_claims_once_comp
     assert evi.load_evidence(CHAPTERS["04_hdt"], reps=200).study.study == "fake-v1"
 
 
+def test_a_study_replaced_before_it_completed_says_where_it_stopped(project):
+    """v2 registered, then v3 (a control added) replaces it before v2 completed: v2 is
+    listed as superseded with its progress, never as pending again; v1 answers until v3 is
+    complete, and the Claims page's later study is v3."""
+    (project / "params" / "04_hdt.v2.study.yml").write_text(yaml.safe_dump(V2))
+    v3 = {**V2, "study": "fake-v3", "supersedes": "fake-v2"}
+    (project / "params" / "04_hdt.v3.study.yml").write_text(yaml.safe_dump(v3))
+    st.run_study(CHAPTERS["04_hdt"], progress=False)
+    claims = st.write_claims(CHAPTERS, reps=200).set_index("claim")
+    assert claims.loc["C3", "history"] == (
+        "fake-v1: holds; fake-v2: superseded by fake-v3 at 0/12 tasks; fake-v3: pending, 0/12 tasks"
+    )
+    assert claims.loc["C3", ["study", "verdict"]].tolist() == ["fake-v1", "holds"]
+    from thesis_lib.chapters.claims import studies_table
+
+    side = studies_table(claims.reset_index()).set_index("claim")
+    assert side.loc["C3", ["v2 study", "v2"]].tolist() == ["fake-v3", "pending, 0/12 tasks"]
+
+
 def test_a_study_read_beside_another_is_listed_in_the_history_and_decides_nothing(project):
     """`beside:` (C6's GPU timings beside the CPU study): its verdicts go to ``history``, with
     ", beside <id>", never to the claim's verdict, also while the study it is beside is the

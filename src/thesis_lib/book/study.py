@@ -877,23 +877,31 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
     Where several studies of a chapter pre-register a claim (a later study that supersedes an
     earlier one), the verdict is the last complete one's, and ``history`` lists every study of
     the claim, first to last, with its verdict or its progress (``hdt-c1c3-v1: untestable;
-    hdt-c1c3-v2: pending, 12/450 tasks``). A study read ``beside`` another is listed in
-    ``history`` (``dm-c6-gpu-v1: fails, beside dm-c4c6-v2``) and decides nothing."""
+    hdt-c1c3-v2: pending, 12/450 tasks``); a study replaced before it completed, with where it
+    stopped (``defender-c7c9-v2: superseded by defender-c7c9-v3 at 5/26 tasks``). A study read
+    ``beside`` another is listed in ``history`` (``dm-c6-gpu-v1: fails, beside dm-c4c6-v2``) and
+    decides nothing."""
     rows: dict[str, dict[str, Any]] = {}
     history: dict[str, list[str]] = {}
-    for p in study_files():
-        study = load_study(p)
+    studies = [load_study(p) for p in study_files()]
+    replaced_by = {s.supersedes: s.study for s in studies if s.supersedes}
+    for study in studies:
         info = read_run_info(study)
         claims = dict.fromkeys(c["claim"] for c in study.comparisons)
         aside = f", beside {study.beside}" if study.beside else ""
         if not is_complete(study, info):
             done = info.get("tasks_done", 0) if info.get("study_hash") == study.hash else 0
             total = len(study_tasks(study, chapters[study.chapter]))
+            later = replaced_by.get(study.study)
             for cl in claims:
                 history.setdefault(cl, []).append(
-                    f"{study.study}: pending, {done}/{total} tasks{aside}"
+                    f"{study.study}: superseded by {later} at {done}/{total} tasks"
+                    if later
+                    else f"{study.study}: pending, {done}/{total} tasks{aside}"
                 )
-                if study.beside or rows.get(cl, {}).get("verdict", "pending") != "pending":
+                if later or study.beside:
+                    continue  # the study that replaces it, or the one it is read beside, answers
+                if rows.get(cl, {}).get("verdict", "pending") != "pending":
                     continue  # an earlier complete study answers it until this one completes
                 rows[cl] = {
                     "claim": cl,

@@ -82,6 +82,7 @@ from thesis_lib.defender.wrapper import (
     EPISODE_LOG_COLUMNS,
     PAPER_MAX_TRAJECTORY,
     DefenderWrapper,
+    RandomFilter,
 )
 
 __all__ = [
@@ -98,6 +99,7 @@ __all__ = [
     "TRAJECTORIES",
     "WINDOWINGS",
     "DefenderWrapper",
+    "RandomFilter",
     "DemoRun",
     "EpisodeRecorder",
     "DemoSet",

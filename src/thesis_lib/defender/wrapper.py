@@ -38,7 +38,9 @@ __all__ = [
     "DYNAMICS_TRAIN_EVERY",
     "EPISODE_LOG_COLUMNS",
     "PAPER_MAX_TRAJECTORY",
+    "RANDOM_FILTER_STREAM",
     "DefenderWrapper",
+    "RandomFilter",
     "counterfactual_crash_step",
     "counterfactual_terminates",
 ]
@@ -331,13 +333,7 @@ class DefenderWrapper(gym.Wrapper):
                 "DefenderWrapper.step called before reset() or after the episode ended; call reset()."
             )
         action_arr = np.asarray(action, dtype=np.float64).reshape(-1)
-        self._step[: self.obs_dim] = self._obs.reshape(-1)
-        if self.trajectory == "state_action":
-            self._step[self.obs_dim :] = action_arr
-        cost_safe = self._safe.append(self._step)
-        cost_unsafe = self._unsafe.append(self._step)
-        # Algorithm 2: step only if Safe(tau) < Unsafe(tau); the authors' code filtered only on ">".
-        fire = cost_safe > cost_unsafe if self.paper_compat else not cost_safe < cost_unsafe
+        fire, costs = self._decide(action_arr)
         reward: SupportsFloat
         if fire:
             would = (
@@ -354,8 +350,7 @@ class DefenderWrapper(gym.Wrapper):
             info: dict[str, Any] = {
                 "filtered": True,
                 "filter_step": self._length,
-                "cost_safe": cost_safe,
-                "cost_unsafe": cost_unsafe,
+                **costs,
                 "would_crash": would,
             }
             self._would_crash = would
@@ -373,6 +368,18 @@ class DefenderWrapper(gym.Wrapper):
             self._ended = True
             self._log(bool(terminated), bool(truncated), fire)
         return next_obs, reward, terminated, truncated, info
+
+    def _decide(self, action: np.ndarray) -> tuple[bool, dict[str, float]]:
+        """Whether the filter fires before ``action``, and what it measured: the trajectory
+        (with ``action`` on state-action trajectories) against both groups."""
+        self._step[: self.obs_dim] = np.asarray(self._obs).reshape(-1)
+        if self.trajectory == "state_action":
+            self._step[self.obs_dim :] = action
+        cost_safe = self._safe.append(self._step)
+        cost_unsafe = self._unsafe.append(self._step)
+        # Algorithm 2: step only if Safe(tau) < Unsafe(tau); the authors' code filtered only on ">".
+        fire = cost_safe > cost_unsafe if self.paper_compat else not cost_safe < cost_unsafe
+        return bool(fire), {"cost_safe": cost_safe, "cost_unsafe": cost_unsafe}
 
     # ------------------------------------------------------------------ episode log
     def _log(self, terminated: bool, truncated: bool, filtered: bool) -> None:
@@ -461,3 +468,81 @@ class DefenderWrapper(gym.Wrapper):
             f"unsafe={self.n_unsafe}x{self.unsafe_method}, trajectory={self.trajectory!r}, "
             f"max_trajectory={self.max_trajectory}, paper_compat={self.paper_compat})"
         )
+
+
+class RandomFilter(DefenderWrapper):
+    """A filter that fires at random: the control of CLAIMS.md for DEFENDER ("a filter firing
+    at random at the same rate").
+
+    Before each step it fires with probability ``rate``, drawn from its own seeded generator,
+    whatever the trajectory; otherwise it is :class:`DefenderWrapper` to the letter: a firing
+    does not step the environment, ends the episode with the lowest single-step reward of the
+    demonstrations and a dynamics-model next state, and with ``counterfactual=True`` records
+    whether the held-back action would have crashed. Its firings per step are ``rate`` in
+    expectation, whatever the policy does, so ``rate`` is matched to DEFENDER's measured
+    firings per training step. A crash cut that DEFENDER shares with this filter comes from
+    ending episodes, not from the demonstrations.
+
+    Args:
+        env, safe_demos, unsafe_demos: as :class:`DefenderWrapper` (the demonstrations give the
+            filtered step's reward and check the spaces; no DTW is computed).
+        rate: the probability of firing before each step, in (0, 1).
+        seed: seeds the firing draws and the dynamics model.
+        counterfactual, filter_reward, dynamics, dynamics_kwargs, dynamics_train_every: as
+            :class:`DefenderWrapper`.
+
+    Raises:
+        ValueError: ``rate`` outside (0, 1), and :class:`DefenderWrapper`'s errors.
+
+    Used in: DEFENDER chapter, the control arm of the C7 study.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        safe_demos: Sequence[Any],
+        unsafe_demos: Sequence[Any],
+        *,
+        rate: float,
+        seed: int = 0,
+        counterfactual: bool = False,
+        filter_reward: float | None = None,
+        dynamics: DynamicsModel | None = None,
+        dynamics_kwargs: Mapping[str, Any] | None = None,
+        dynamics_train_every: int | None = None,
+    ) -> None:
+        rate = float(rate)
+        if not 0.0 < rate < 1.0:
+            raise ValueError(f"rate must be a probability in (0, 1), got {rate}.")
+        super().__init__(
+            env,
+            safe_demos,
+            unsafe_demos,
+            seed=seed,
+            counterfactual=counterfactual,
+            filter_reward=filter_reward,
+            dynamics=dynamics,
+            dynamics_kwargs=dynamics_kwargs,
+            dynamics_train_every=dynamics_train_every,
+        )
+        self.rate = rate
+        # its own stream: the dynamics model's torch generator is seeded with `seed` too
+        self._rng = np.random.default_rng([int(seed), RANDOM_FILTER_STREAM])
+
+    def _decide(self, action: np.ndarray) -> tuple[bool, dict[str, float]]:
+        return bool(self._rng.random() < self.rate), {}
+
+    def state_dict(self) -> dict[str, Any]:
+        """:meth:`DefenderWrapper.state_dict` and the firing draws' generator."""
+        return {**super().state_dict(), "rng": self._rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        self._rng.bit_generator.state = state["rng"]
+
+    def __repr__(self) -> str:
+        return f"RandomFilter({self.env}, rate={self.rate})"
+
+
+RANDOM_FILTER_STREAM = 0x5EED
+"""The second word of :class:`RandomFilter`'s generator seed, ``[seed, RANDOM_FILTER_STREAM]``."""

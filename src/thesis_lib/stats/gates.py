@@ -20,7 +20,8 @@ Gate kinds (every gate has ``kind``, ``claim`` and ``why``; ``x``, ``y``, ``labe
   of a claim that one method learns and the other does not: with ``each`` the claim's own
   predicted outcome (the other method at the floor) would withhold its verdict.
 - ``control``: ``method`` must beat ``control`` on ``metric`` (its interval above 0; e.g. an
-  untrained encoder, a shuffled-audio control).
+  untrained encoder, a shuffled-audio control). ``better: lower`` for a metric where less is
+  better (crashes: the interval of ``control - method`` above 0).
 - ``fidelity``: ``method``'s row ``parity`` in ``studies/parity/parity.csv`` is at parity with a
   peer implementation.
 - ``untestable``: the set-up cannot answer the claim at all (e.g. synthetic data whose rule is
@@ -50,7 +51,7 @@ LEVEL_REQUIRE = ("each", "either")
 _SELECT = ("claim", "x", "y", "label", "setting", "comparison_metric")
 _KEYS = {
     "level": {"method", "metric", "low", "high", "relative_to", "slack", "require"},
-    "control": {"method", "control", "metric", "control_setting"},
+    "control": {"method", "control", "metric", "control_setting", "better"},
     "fidelity": {"method", "parity"},
     "untestable": set(),
     "none": set(),
@@ -92,6 +93,11 @@ def check_gate(gate: Mapping[str, Any]) -> None:
                 )
     if kind == "control" and not (gate.get("method") and gate.get("control")):
         raise ValueError("a control gate needs `method` and `control`")
+    if kind == "control" and gate.get("better", "higher") not in ("higher", "lower"):
+        raise ValueError(
+            f"Expect a control gate's `better` to be 'higher' or 'lower', actually: "
+            f"{gate.get('better')!r}"
+        )
     if kind == "fidelity" and not (gate.get("method") and gate.get("parity")):
         raise ValueError("a fidelity gate needs `method` and `parity` (a row of parity.csv)")
 
@@ -207,10 +213,14 @@ def evaluate_gate(
                 raise ValueError(f"no rows of {control!r} in {gate['control_setting']!r}")
             control = f"{control} ({gate['control_setting']})"
             data = pd.concat([rows, twin.assign(**{m: control, st: settings[0]})])
-        c = compare(data, gate["method"], control, metric, settings=list(settings))
+        better, worse = str(gate["method"]), control
+        if gate.get("better", "higher") == "lower":  # less is better: control - method > 0
+            better, worse = worse, better
+        c = compare(data, better, worse, metric, settings=list(settings))
         figure = (
-            f"control: {gate['method']} - {control} on {metric} = {c.effect:.3g} "
+            f"control: {better} - {worse} on {metric} = {c.effect:.3g} "
             f"[{c.ci_low:.3g}, {c.ci_high:.3g}]"
+            + (" (lower is better)" if gate.get("better") == "lower" else "")
         )
         return bool(c.ci_low > 0), figure
     # fidelity

@@ -92,6 +92,11 @@ class Config:
     no_topup_tasks: list[str] = field(default_factory=list)
     """Study: tasks where SAC with the first state strategy also runs on the SAC roll-outs alone
     (no expert top-up), to measure what the top-up changes."""
+    random_filter_rates: list[float] = field(default_factory=list)
+    """Study: control arms, the first of ``algos`` with a filter that fires at random with each
+    of these probabilities per step (:class:`~thesis_lib.defender.RandomFilter`, CLAIMS.md's
+    control for C7), its reward from ``n_demos`` demonstrations per group. Empty: none (the
+    v1 and v2 studies)."""
 
     def __post_init__(self) -> None:
         from thesis_lib.defender import parse_strategy  # lazy: torch
@@ -117,6 +122,11 @@ class Config:
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
             raise ValueError(f"Unknown algo {bad[0]!r} in Config.algos. Valid: {', '.join(ALGOS)}.")
+        bad_rates = [r for r in self.random_filter_rates if not 0.0 < float(r) < 1.0]
+        if bad_rates:
+            raise ValueError(
+                f"random_filter_rates must be probabilities in (0, 1), got {bad_rates[0]!r}."
+            )
         if not self.n_demos_list or any(int(n) < 1 for n in self.n_demos_list):
             raise ValueError(f"n_demos_list must list positive counts, got {self.n_demos_list!r}.")
         for s in [*self.state_strategies, *self.state_action_strategies]:

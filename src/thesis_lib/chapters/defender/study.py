@@ -26,6 +26,7 @@ from thesis_lib.chapters.defender.demos import (
 from thesis_lib.chapters.defender.tasks import (
     RUN_COLUMNS,
     TRAIN_FIELDS,
+    random_strategy,
     runs_from_episodes,
     train_task,
 )
@@ -346,8 +347,9 @@ def study_tasks(cfg: Config) -> list[Task]:
     ``state_strategies`` (state trajectories) and ``state_action_strategies`` (state-action),
     all with ``n_demos`` demonstrations per group, and with the first state strategy and each
     other count of ``n_demos_list`` (Table 4.5); on ``no_topup_tasks`` also with the first
-    state strategy on the SAC roll-outs alone. The other algorithms (TD3) run plain and with
-    the first state strategy, on their ``algo_tasks``.
+    state strategy on the SAC roll-outs alone; and with a filter firing at random at each of
+    ``random_filter_rates`` (the control, :func:`random_strategy`). The other algorithms (TD3)
+    run plain and with the first state strategy, on their ``algo_tasks``.
 
     Order: the plain runs of the first algorithm for every seed come first, since the study's
     level gates read them alone (plain SAC's return): a gate that fails is then known before
@@ -379,5 +381,7 @@ def study_tasks(cfg: Config) -> list[Task]:
                             tasks.append(study_task(cfg, task, algo, seed, first, n_demos=n))
                     if task in cfg.no_topup_tasks:
                         tasks.append(study_task(cfg, task, algo, seed, first, top_up=False))
+                for rate in cfg.random_filter_rates:  # the control arms
+                    tasks.append(study_task(cfg, task, algo, seed, random_strategy(rate)))
     gated = [t.config["algo"] == main and not t.config["strategy"] for t in tasks]
     return [t for t, g in zip(tasks, gated) if g] + [t for t, g in zip(tasks, gated) if not g]

@@ -39,7 +39,7 @@ from thesis_lib.chapters.defender.demos import (
     study_demonstrations,
     thesis_env_name,
 )
-from thesis_lib.defender import DefenderWrapper, DemoRun, DemoSet
+from thesis_lib.defender import DefenderWrapper, DemoRun, DemoSet, RandomFilter
 from thesis_lib.defender.ablation import strategy_ablation
 from thesis_lib.rl import config_from_params, evaluate, train
 from thesis_lib.sweep import Task, note_resumed_cpu, run_tasks, task_id, task_scratch
@@ -155,7 +155,23 @@ def train_run(
     """
     env = make_env(task, cfg.max_episode_steps)
     safe_s = unsafe_s = None
-    if demos is not None and strategy is not None:
+    rate = random_filter_rate(strategy)
+    if demos is not None and rate is not None:  # the control: a filter firing at random
+        env = RandomFilter(
+            env,
+            demos.safe,
+            demos.unsafe,
+            rate=rate,
+            seed=seed,
+            counterfactual=True,
+            dynamics_train_every=cfg.dynamics_train_every,
+            dynamics_kwargs={
+                "hidden": list(cfg.net_arch),
+                "learning_rate": cfg.learning_rate,
+                "batch_size": cfg.batch_size,
+            },
+        )
+    elif demos is not None and strategy is not None:
         safe_s, unsafe_s = strategy.split("/")
         env = DefenderWrapper(
             env,
@@ -223,6 +239,31 @@ def train_run(
         ep.insert(0, k, v)
     ep["wall_time_s"] = res.wall_time_s
     return TrainedRun(row, ep, res)
+
+
+RANDOM_STRATEGY = "random:"
+"""The prefix of a control arm's ``strategy``: ``"random:0.01"`` is a filter that fires at
+random with probability 0.01 per step (:class:`~thesis_lib.defender.RandomFilter`)."""
+
+
+def random_strategy(rate: float) -> str:
+    """The ``strategy`` of the random-filter control firing with probability ``rate``.
+
+    >>> random_strategy(0.01)
+    'random:0.01'
+    """
+    return f"{RANDOM_STRATEGY}{float(rate):g}"
+
+
+def random_filter_rate(strategy: str | None) -> float | None:
+    """The firing probability of a :func:`random_strategy`, None for any other strategy.
+
+    >>> random_filter_rate("random:0.01"), random_filter_rate("MeanDemoW5/MeanDemoW10")
+    (0.01, None)
+    """
+    if not strategy or not strategy.startswith(RANDOM_STRATEGY):
+        return None
+    return float(strategy[len(RANDOM_STRATEGY) :])
 
 
 def _run_numbers(ep: pd.DataFrame) -> dict[str, Any]:
