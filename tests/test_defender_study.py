@@ -505,7 +505,7 @@ def test_a_study_row_is_a_reduction_of_the_chapters_training_task(tmp_path, monk
 def test_counterfactual_summary_means_over_seeds_per_method():
     """The second study's table: the filter's saved crashes, false alarms and precision per
     method, averaged over seeds; NaN for the unfiltered agent; an error for v1's rows."""
-    base = {"setting": "Hopper", "crash_rate": 0.5, "eval_score": 50.0}
+    base = {"setting": "Hopper", "crash_rate": 0.5, "eval_score": 50.0, "steps": 10_000}
     nan = float("nan")
     rows = pd.DataFrame(
         [
@@ -534,6 +534,9 @@ def test_counterfactual_summary_means_over_seeds_per_method():
         0.625,
     ]
     assert out.loc["SAC+F", "crash_rate_without_filter"] == pytest.approx(0.5)
+    # (40 + 20 firings) / 2 seeds over 10,000 steps each: 3 per 1,000
+    assert out.loc["SAC+F", "firings_per_1k_steps"] == pytest.approx(3.0)
+    assert np.isnan(out.loc["SAC", "firings_per_1k_steps"])
     empty = ex.summarize_study_counterfactual(pd.DataFrame())
     assert empty.empty and "filter_precision" in empty
     with pytest.raises(ValueError, match="saved_crashes"):

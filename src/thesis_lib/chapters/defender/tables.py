@@ -468,24 +468,32 @@ def summarize_study_counterfactual(rows: pd.DataFrame) -> pd.DataFrame:
     setting and method, the mean over seeds of the real crashes per 1,000 training steps, the
     filtered episodes whose action would have crashed (``saved_crashes``) and would not
     (``false_alarms``), the filter's precision and recall, the crash rate the run would have
-    had without the filter, and the final policy's score without the filter. Runs without a
-    filter have NaN counterfactuals. Empty before the study ran.
+    had without the filter, and the final policy's score without the filter; and how often the
+    filter fired (``firings_per_1k_steps``: saved crashes and false alarms per 1,000 training
+    steps, which a random-filter control is matched to). Runs without a filter have NaN
+    counterfactuals. Empty before the study ran.
 
     Used in: DEFENDER chapter ("The second study").
     """
     cols = [
-        "setting", "method", "seeds", "crashes_per_1k_steps", "saved_crashes", "false_alarms",
-        "filter_precision", "filter_recall", "crash_rate", "crash_rate_without_filter",
-        "eval_score",
+        "setting", "method", "seeds", "crashes_per_1k_steps", "firings_per_1k_steps",
+        "saved_crashes", "false_alarms", "filter_precision", "filter_recall", "crash_rate",
+        "crash_rate_without_filter", "eval_score",
     ]  # fmt: skip
     if rows.empty:
         return pd.DataFrame(columns=cols)
-    missing = sorted(set(cols) - {"seeds"} - set(rows.columns))
+    missing = sorted(set(cols) - {"seeds", "firings_per_1k_steps"} - set(rows.columns))
+    if "steps" not in rows:
+        missing.append("steps")
     if missing:
         raise ValueError(
             f"Study rows lack {missing}: runs made before the counterfactual was recorded "
             "(the first study's) cannot be summarised this way."
         )
+    # every firing is a saved crash or a false alarm: the filter's firings per training step,
+    # which the random-filter control is matched to
+    fired = rows["saved_crashes"] + rows["false_alarms"]
+    rows = rows.assign(firings_per_1k_steps=1000 * fired / rows["steps"])
     g = rows.groupby(["setting", "method"], sort=False)
     out = g[cols[3:]].mean()
     out.insert(0, "seeds", g["seed"].nunique())
