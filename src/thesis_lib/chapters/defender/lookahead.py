@@ -1,7 +1,7 @@
 """How far ahead of a crash does DEFENDER fire? A diagnostic of one trained policy.
 
-The second study (``defender-c7c9-v2``) steps every filtered action once on a copy of the
-state: a *saved crash* is an action that would have ended the episode on that very step, any
+The DEFENDER studies since ``defender-c7c9-v2`` step every filtered action once on a copy of
+the state: a *saved crash* is an action that would have ended the episode on that very step, any
 other firing a *false alarm*. A filter that fires a few steps before a fall, as a filter of
 state trajectories may, counts as a false alarm there. This diagnostic lets the agent's own
 policy go on acting on the copy (:func:`~thesis_lib.defender.wrapper.counterfactual_crash_step`)
@@ -16,7 +16,7 @@ episode as DEFENDER did, ``control_same_step`` (does the filter know more than t
 It is exploratory (not a registered study): it reads a checkpointed policy, does not train, and
 says nothing of the learning the filter changes.
 
-Used in: ``thesis defender lookahead`` (the DEFENDER chapter's second study, its reading).
+Used in: ``thesis defender lookahead``; the DEFENDER chapter (its second and third studies).
 """
 
 from __future__ import annotations
