@@ -800,6 +800,7 @@ def test_filter_lookahead_on_a_walk_with_known_answers(walk_demos):
     assert len(f) > 0 and (f.filter_step + f.crash_in == 7).all()
     assert out.summary["firings"] == len(f) and out.summary["control_episodes"] == 10
     assert out.summary["control_crashes_per_1k_steps"] == 1000 * 10 / 70
+    assert out.summary["control_length_p10"] == out.summary["control_length_p90"] == 7
     t = out.table.set_index("k")
     j = int(f.filter_step.iloc[0])
     assert (f.filter_step == j).all()  # the same walk every episode: it fires at the same step
@@ -876,6 +877,7 @@ def test_summarize_lookahead_one_row_per_checkpoint():
     )  # fmt: skip
     wide = summarize_lookahead(long, lookahead=(1, 20))
     assert wide["seed"].tolist() == [0, 1] and wide["firings per 1k steps"].tolist() == [9, 7]
+    assert wide["fires at"].tolist() == [80.0, 80.0] and wide["fires at p90"].isna().all()
     assert wide["filter k=20"].tolist() == [0.8, 0.9]
     assert wide["same step k=20"].tolist() == [0.7, 0.6]
 

@@ -58,10 +58,12 @@ def _cmd_lookahead(args: argparse.Namespace) -> int:
         f"1,000 steps in {int(s['control_episodes'])} episodes."
     )
     print(
-        f"The filter fires after {s['filter_step_median']:.0f} real steps (median), "
+        f"The filter fires after {s['filter_step_median']:.0f} real steps (median; 10-90%: "
+        f"{s['filter_step_p10']:.0f}-{s['filter_step_p90']:.0f}), "
         f"{s['crash_in_median']:.0f} steps before the crash the policy was heading for (median "
         f"of those that would crash); without it episodes last {s['control_length_median']:.0f} "
-        f"steps (median), {100 * s['control_crashed_share']:.0f}% of them crash."
+        f"steps (median; 10-90%: {s['control_length_p10']:.0f}-{s['control_length_p90']:.0f}), "
+        f"{100 * s['control_crashed_share']:.0f}% of them crash."
     )
     with pd.option_context("display.width", 120):
         print(out.table.round(3).to_string(index=False))

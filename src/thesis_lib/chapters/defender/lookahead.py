@@ -56,8 +56,9 @@ class Lookahead:
     ``lift_any`` / ``lift_same_step`` (``filter`` over each). ``firings``: one row per firing
     (``filter_step``, the real steps taken before it; ``crash_in``, steps to the crash or NaN).
     ``episodes``: the control run's finished episodes (``length``, ``crashed``). ``summary``:
-    the counts and rates per 1,000 steps of both runs, the median firing step and steps to
-    the crash, the control's median episode length and its share of crashed episodes (and,
+    the counts and rates per 1,000 steps of both runs, the firing step (median, 10th and 90th
+    percentiles) and the median steps to the crash, the control's episode length (the same
+    three) and its share of crashed episodes (and,
     from :func:`study_lookahead`, the study, the filter and the run a checkpoint was taken of).
     """
 
@@ -194,8 +195,12 @@ def filter_lookahead(
         "control_crashes_per_1k_steps": 1000 * float(eps["crashed"].sum()) / steps,
         # where the filter fires and the plain episodes end (NaN where there is none)
         "filter_step_median": float(fire["filter_step"].median()),
+        "filter_step_p10": float(fire["filter_step"].quantile(0.1)),
+        "filter_step_p90": float(fire["filter_step"].quantile(0.9)),
         "crash_in_median": float(fire["crash_in"].median()),
         "control_length_median": float(eps["length"].median()),
+        "control_length_p10": float(eps["length"].quantile(0.1)),
+        "control_length_p90": float(eps["length"].quantile(0.9)),
         "control_crashed_share": float(eps["crashed"].mean()),
     }
     return Lookahead(table, fire, eps, summary)
@@ -316,7 +321,8 @@ def lookahead_results(folder: str | Path | None = None) -> pd.DataFrame:
     keep = (
         "run_label", "run_seed", "run_scale", "run_step", "firings_per_1k_steps",
         "control_crashes_per_1k_steps", "control_crashed_share", "filter_step_median",
-        "control_length_median",
+        "filter_step_p10", "filter_step_p90", "control_length_median", "control_length_p10",
+        "control_length_p90",
     )  # fmt: skip
     frames = []
     for csv in sorted(root.glob("*.csv")) if root.is_dir() else []:
@@ -339,7 +345,8 @@ def summarize_lookahead(
     results: pd.DataFrame, lookahead: Sequence[int] = (1, 10, 20, 50)
 ) -> pd.DataFrame:
     """:func:`lookahead_results` wide: one row per checkpoint (run, seed, step) with its firing
-    rate, median firing step, the control's median episode length and crashed share, and for
+    rate, the step it fires at and the control's episode length (10th percentile, median, 90th
+    percentile) and crashed share, and for
     each ``k`` of ``lookahead`` the filter's share of firings that would have crashed within
     ``k`` steps beside the blind filter at the same step (``same step``). Empty where
     ``results`` is.
@@ -348,19 +355,24 @@ def summarize_lookahead(
     """
     index = ["run_label", "run_scale", "run_seed", "run_step"]
     fixed = [
-        "firings_per_1k_steps", "filter_step_median", "control_length_median",
+        "firings_per_1k_steps", "filter_step_p10", "filter_step_median", "filter_step_p90",
+        "control_length_p10", "control_length_median", "control_length_p90",
         "control_crashed_share",
     ]  # fmt: skip
     names = {
         "run_label": "run", "run_scale": "scale", "run_seed": "seed", "run_step": "step",
-        "firings_per_1k_steps": "firings per 1k steps", "filter_step_median": "fires at step",
-        "control_length_median": "episode length without", "control_crashed_share": "crashed without",
+        "firings_per_1k_steps": "firings per 1k steps", "filter_step_p10": "fires at p10",
+        "filter_step_median": "fires at", "filter_step_p90": "fires at p90",
+        "control_length_p10": "length without p10", "control_length_median": "length without",
+        "control_length_p90": "length without p90", "control_crashed_share": "crashed without",
     }  # fmt: skip
     cols = [names[c] for c in index + fixed] + [
         f"{w} k={k}" for k in lookahead for w in ("filter", "same step")
     ]
     if results.empty:
         return pd.DataFrame(columns=cols)
+    # a diagnostic written before a summary figure existed shows it as NaN
+    results = results.reindex(columns=[*results.columns, *(c for c in fixed if c not in results)])
     base = results.drop_duplicates(index)[index + fixed].set_index(index)
     for k in lookahead:
         at = results[results["k"] == k].set_index(index)
