@@ -809,6 +809,15 @@ def test_filter_lookahead_on_a_walk_with_known_answers(walk_demos):
         assert t.loc[k, "control_any"] == pytest.approx(min(k, 7) / 7)
         assert t.loc[k, "control_same_step"] == float(7 - j <= k)
     assert t.loc[100, "lift_any"] == 1.0  # everything crashes: no filter can beat the clock
+    capped = filter_lookahead(
+        lambda obs: half,
+        lambda: gym.wrappers.TimeLimit(CountingEnv(), 12),
+        DemoSet(safe, unsafe, "walk"),
+        "MinDemoW5/MinDemoW5",
+        steps=70,
+        max_trajectory=2,  # the authors' cap, shortened: the filter sees the last 2 steps
+    )
+    assert (capped.firings.filter_step + capped.firings.crash_in == 7).all()
     with pytest.raises(ValueError, match="positive step counts"):
         filter_lookahead(lambda o: half, CountingEnv, DemoSet(safe, unsafe, "w"), lookahead=[0])
     with pytest.raises(ValueError, match="'<safe>/<unsafe>'"):

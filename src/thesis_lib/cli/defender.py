@@ -46,6 +46,8 @@ def _cmd_lookahead(args: argparse.Namespace) -> int:
         lookahead=args.lookahead,
         seed=args.seed,
         progress=not args.quiet,
+        max_trajectory=args.max_trajectory,
+        paper_compat=args.paper_compat,
     )
     s = out.summary
     if "run_label" in s:
@@ -104,6 +106,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=_steps_list,
         default=[1, 5, 10, 20, 50, 100],
         help="look-ahead lengths k (default 1,5,10,20,50,100)",
+    )
+    la.add_argument(
+        "--max-trajectory",
+        type=int,
+        help="compare only the trajectory's last N steps (the authors' code: 20); default the "
+        "study's (the thesis's text: the whole episode)",
+    )
+    la.add_argument(
+        "--paper-compat",
+        action="store_true",
+        help="the authors' filter: FastDTW radius 1, the 20-step cap, fire only on > (slow)",
     )
     la.add_argument("--seed", type=int, default=0)
     la.add_argument("--out", help="CSV of the table (a .json of the run beside it)")

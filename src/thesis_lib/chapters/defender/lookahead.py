@@ -115,6 +115,8 @@ def filter_lookahead(
     lookahead: Sequence[int] = LOOKAHEAD_STEPS,
     seed: int = 0,
     progress: bool = False,
+    max_trajectory: int | None = None,
+    paper_compat: bool = False,
 ) -> Lookahead:
     """Run ``policy`` for ``steps`` steps with DEFENDER (``strategy`` on ``trajectory``, the
     ``demos``) and ``steps`` without it; for every firing, look up to ``max(lookahead)`` steps
@@ -132,6 +134,10 @@ def filter_lookahead(
         lookahead: the look-ahead lengths ``k`` of the table.
         seed: the first reset's seed of each run.
         progress: a progress bar per run.
+        max_trajectory: compare only the trajectory's last this-many steps (the authors' code:
+            20); None, the thesis's text: the whole episode so far.
+        paper_compat: the authors' filter (:class:`DefenderWrapper`'s ``paper_compat``:
+            FastDTW, the 20-step cap, fire only on ``>``); slow.
 
     Raises:
         ValueError: a look-ahead length below 1, ``steps`` below 1, a strategy without ``/``.
@@ -151,6 +157,8 @@ def filter_lookahead(
         safe_method=safe_m,
         unsafe_method=unsafe_m,
         trajectory=trajectory,
+        max_trajectory=max_trajectory,
+        paper_compat=paper_compat,
         dynamics_train_every=2**62,  # nothing learns here
     )
     horizon = env.horizon
@@ -256,10 +264,13 @@ def study_lookahead(
     lookahead: Sequence[int] = LOOKAHEAD_STEPS,
     seed: int = 0,
     progress: bool = False,
+    max_trajectory: int | None = None,
+    paper_compat: bool = False,
 ) -> Lookahead:
     """:func:`filter_lookahead` of a saved SAC model on a DEFENDER study's first task, with the
     study's pinned demonstrations (``n_demos`` per group; default the study's) and its first
-    state strategy (default).
+    state strategy (default); ``max_trajectory`` None is the study's own (``paper_compat``
+    sets 20).
 
     Raises:
         FileNotFoundError: no such model or study file.
@@ -285,9 +296,18 @@ def study_lookahead(
         lookahead,
         seed,
         progress,
+        max_trajectory=max_trajectory if max_trajectory is not None else cfg.max_trajectory,
+        paper_compat=paper_compat,
     )
     out.summary.update(
-        {"study": s.study, "strategy": strategy, "trajectory": trajectory, "n_demos": count}
+        {
+            "study": s.study,
+            "strategy": strategy,
+            "trajectory": trajectory,
+            "n_demos": count,
+            "max_trajectory": max_trajectory if max_trajectory is not None else cfg.max_trajectory,
+            "paper_compat": paper_compat,
+        }
     )
     found = re.search(r"([0-9a-f]{16})/step-(\d+)", Path(model).as_posix())
     if found:  # a study checkpoint: name the run it was taken of
