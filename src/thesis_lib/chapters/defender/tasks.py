@@ -156,21 +156,21 @@ def train_run(
     env = make_env(task, cfg.max_episode_steps)
     safe_s = unsafe_s = None
     rate = random_filter_rate(strategy)
+    # both filters alike: the seed, and what each filtered action would have done (a copy of the
+    # state is stepped and restored bit for bit: training is unchanged): saved crashes vs false
+    # alarms; a dynamics model with "2 hidden layers" of the agent's size (4.3.3)
+    filter_kwargs: dict[str, Any] = {
+        "seed": seed,
+        "counterfactual": True,
+        "dynamics_train_every": cfg.dynamics_train_every,
+        "dynamics_kwargs": {
+            "hidden": list(cfg.net_arch),
+            "learning_rate": cfg.learning_rate,
+            "batch_size": cfg.batch_size,
+        },
+    }
     if demos is not None and rate is not None:  # the control: a filter firing at random
-        env = RandomFilter(
-            env,
-            demos.safe,
-            demos.unsafe,
-            rate=rate,
-            seed=seed,
-            counterfactual=True,
-            dynamics_train_every=cfg.dynamics_train_every,
-            dynamics_kwargs={
-                "hidden": list(cfg.net_arch),
-                "learning_rate": cfg.learning_rate,
-                "batch_size": cfg.batch_size,
-            },
-        )
+        env = RandomFilter(env, demos.safe, demos.unsafe, rate=rate, **filter_kwargs)
     elif demos is not None and strategy is not None:
         safe_s, unsafe_s = strategy.split("/")
         env = DefenderWrapper(
@@ -182,17 +182,7 @@ def train_run(
             trajectory=cast(Literal["state", "state_action"], trajectory),
             max_trajectory=cfg.max_trajectory,
             paper_compat=paper_compat,
-            seed=seed,
-            # what each filtered action would have done (a copy of the state is stepped and
-            # restored bit for bit: training is unchanged): saved crashes vs false alarms
-            counterfactual=True,
-            dynamics_train_every=cfg.dynamics_train_every,
-            # "all the networks have 2 hidden layers" of the agent's size (4.3.3)
-            dynamics_kwargs={
-                "hidden": list(cfg.net_arch),
-                "learning_rate": cfg.learning_rate,
-                "batch_size": cfg.batch_size,
-            },
+            **filter_kwargs,
         )
     callbacks = []
     steps = cfg.train_timesteps
