@@ -694,20 +694,31 @@ def test_filter_confusion_on_a_walk_with_known_answers(walk_demos):
         plain.filter_confusion()
 
 
-def test_counterfactual_step_leaves_a_mujoco_env_bit_for_bit():
-    from thesis_lib.defender.wrapper import counterfactual_terminates
-
+def _twin_hoppers(seed: int, n_after: int):
+    """Two Hoppers reset and stepped alike for 10 random actions, and ``n_after`` more actions
+    for :func:`_continue_alike`."""
     a, b = gym.make("Hopper-v5"), gym.make("Hopper-v5")
-    a.reset(seed=0), b.reset(seed=0)
-    rng = np.random.default_rng(0)
-    acts = rng.uniform(-1, 1, (20, 3)).astype(np.float32)
+    a.reset(seed=seed), b.reset(seed=seed)
+    acts = np.random.default_rng(seed).uniform(-1, 1, (10 + n_after, 3)).astype(np.float32)
     for act in acts[:10]:
         a.step(act), b.step(act)
-    assert counterfactual_terminates(a, np.ones(3, np.float32)) in (True, False)
-    for act in acts[10:]:  # a, probed, continues exactly as b, never probed
+    return a, b, acts[10:]
+
+
+def _continue_alike(a, b, acts) -> None:
+    """``a`` (probed) continues exactly as ``b`` (never probed)."""
+    for act in acts:
         oa, ra, *_ = a.step(act)
         ob, rb, *_ = b.step(act)
         assert np.array_equal(oa, ob) and ra == rb
+
+
+def test_counterfactual_step_leaves_a_mujoco_env_bit_for_bit():
+    from thesis_lib.defender.wrapper import counterfactual_terminates
+
+    a, b, after = _twin_hoppers(0, 10)
+    assert counterfactual_terminates(a, np.ones(3, np.float32)) in (True, False)
+    _continue_alike(a, b, after)
     u = a.unwrapped  # a known answer: the torso below Hopper's healthy height ends the episode
     qpos, qvel = u.data.qpos.copy(), u.data.qvel.copy()
     low = qpos.copy()
@@ -755,12 +766,7 @@ def test_counterfactual_crash_step_looks_ahead_with_the_policy_and_leaves_the_en
 def test_counterfactual_crash_step_on_hopper_is_the_one_step_counterfactual_and_restores_it():
     from thesis_lib.defender.wrapper import counterfactual_crash_step, counterfactual_terminates
 
-    a, b = gym.make("Hopper-v5"), gym.make("Hopper-v5")
-    a.reset(seed=1), b.reset(seed=1)
-    rng = np.random.default_rng(1)
-    acts = rng.uniform(-1, 1, (30, 3)).astype(np.float32)
-    for act in acts[:10]:
-        a.step(act), b.step(act)
+    a, b, after = _twin_hoppers(1, 20)
     u = a.unwrapped
     qpos, qvel = u.data.qpos.copy(), u.data.qvel.copy()
     low = qpos.copy()
@@ -772,10 +778,7 @@ def test_counterfactual_crash_step_on_hopper_is_the_one_step_counterfactual_and_
     # a policy that pushes hard with every joint topples the hopper within 200 steps
     k = counterfactual_crash_step(a, zero, lambda o: np.ones(3, np.float32), max_steps=200)
     assert k is not None and 1 < k <= 200
-    for act in acts[10:]:  # a, probed for k steps, continues exactly as b, never probed
-        oa, ra, *_ = a.step(act)
-        ob, rb, *_ = b.step(act)
-        assert np.array_equal(oa, ob) and ra == rb
+    _continue_alike(a, b, after)  # probed for k steps, yet as b
     a.close(), b.close()
 
 

@@ -90,11 +90,10 @@ def _state_kept(env: gym.Env) -> Iterator[gym.Env]:
 
 def counterfactual_terminates(env: gym.Env, action: Any) -> bool:
     """Whether stepping ``env`` with ``action`` would end the episode (``terminated``), found
-    on a copy of its state: ``env`` is left exactly as it was (:func:`_state_kept`).
+    on a copy of its state: ``env`` is left exactly as it was (:func:`_state_kept`); the
+    one-step :func:`counterfactual_crash_step`.
     """
-    with _state_kept(env) as core:
-        _, _, terminated, _, _ = core.step(action)
-    return bool(terminated)
+    return counterfactual_crash_step(env, action) is not None
 
 
 def counterfactual_crash_step(

@@ -279,13 +279,15 @@ def study_lookahead(
     from thesis_lib.chapters import get_chapter  # cycle: the registry imports this chapter
 
     s = st.load_study(st.study_chapter(study))
-    cfg = st.study_config(s, get_chapter(s.chapter))
+    chapter = get_chapter(s.chapter)
+    cfg = st.study_config(s, chapter)
     policy = sb3_policy(model, cfg.algos[0], seed=seed)  # a wrong path fails before the demos
     strategy = strategy or cfg.state_strategies[0]
     count = int(n_demos or cfg.n_demos)
     task = cfg.tasks[0]
     recipe = study_task(cfg, task, cfg.algos[0], cfg.seed, strategy, trajectory, count)
     demos, _ = study_demonstrations(task, recipe.config["demos"], count)
+    cap = max_trajectory if max_trajectory is not None else cfg.max_trajectory
     out = filter_lookahead(
         policy,
         lambda: make_env(task, cfg.max_episode_steps),
@@ -296,7 +298,7 @@ def study_lookahead(
         lookahead,
         seed,
         progress,
-        max_trajectory=max_trajectory if max_trajectory is not None else cfg.max_trajectory,
+        max_trajectory=cap,
         paper_compat=paper_compat,
     )
     out.summary.update(
@@ -305,14 +307,14 @@ def study_lookahead(
             "strategy": strategy,
             "trajectory": trajectory,
             "n_demos": count,
-            "max_trajectory": max_trajectory if max_trajectory is not None else cfg.max_trajectory,
+            "max_trajectory": cap,
             "paper_compat": paper_compat,
         }
     )
     found = re.search(r"([0-9a-f]{16})/step-(\d+)", Path(model).as_posix())
     if found:  # a study checkpoint: name the run it was taken of
         key, step = found.group(1), int(found.group(2))
-        runs = {t.key: t.config for t in st.study_tasks(s, get_chapter(s.chapter))}
+        runs = {t.key: t.config for t in st.study_tasks(s, chapter)}
         if key in runs:
             c = runs[key]
             out.summary.update(
