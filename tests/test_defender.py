@@ -928,9 +928,17 @@ def test_random_filter_fires_at_its_rate_and_acts_as_the_filter_does(walk_demos)
     assert np.array_equal(run(0)[0], fired) and not np.array_equal(run(1)[0], fired)
     log = env.episodes  # the walk never crashes: every episode is filtered or truncated
     assert (log.filtered | log.truncated).all() and log.filtered.sum() == fired.sum()
-    for rate in (0.0, 1.0, -0.1, float("nan")):
+    for rate in (1.0, -0.1, float("nan")):
         with pytest.raises(ValueError, match="rate must be a probability"):
             RandomFilter(CountingEnv(), safe, unsafe, rate=rate)
+    # rate 0: the control of a filter that never fired never fires
+    never = RandomFilter(gym.wrappers.TimeLimit(CountingEnv(), 12), safe, unsafe, rate=0.0, seed=0)
+    never.reset(seed=0)
+    for _ in range(500):
+        *_, term, trunc, _ = never.step(np.array([0.0], np.float32))
+        if term or trunc:
+            never.reset()
+    assert never.n_filtered_steps == 0
 
 
 def test_random_filter_state_dict_continues_the_same_draws(walk_demos):

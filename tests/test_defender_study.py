@@ -162,6 +162,59 @@ def test_random_filter_control_arms_add_tasks_and_change_no_other_key():
     assert ex.random_filter_rate(added[0].config["strategy"]) == 0.01
 
 
+def test_matched_controls_come_last_and_name_the_run_they_match():
+    base = ex.study_tasks(ex.Config(**TINY))
+    tasks = ex.study_tasks(ex.Config(**{**TINY, "random_filter_matched": True}))
+    added = tasks[len(base) :]
+    assert [t.key for t in tasks[: len(base)]] == [b.key for b in base]  # no other key changes
+    assert [(t.config["label"], t.config["seed"]) for t in added] == [
+        ("SAC+random:matched", 0), ("SAC+random:matched", 0), ("SAC+random:matched", 1),
+        ("SAC+random:matched", 1),
+    ]  # fmt: skip
+    by_key = {t.key: t for t in base}
+    for t in added:
+        m = by_key[t.config["match"]].config
+        assert (m["label"], m["task"], m["seed"]) == (
+            "SAC+" + TINY["state_strategies"][0],
+            t.config["task"],
+            t.config["seed"],
+        )
+        assert m["n_demos"] == t.config["n_demos"] and m["demos"] == t.config["demos"]
+    with pytest.raises(ValueError, match="no rate of its own"):
+        ex.random_filter_rate(ex.MATCHED_RANDOM_STRATEGY)
+
+
+def test_a_matched_control_fires_at_the_rate_its_run_fired(tmp_path, monkeypatch):
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))
+    cfg = ex.Config(
+        **{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {},
+           "random_filter_matched": True}
+    )  # fmt: skip
+    control = ex.study_tasks(cfg)[-2]  # seed 0's
+    assert control.config["seed"] == 0 and control.config["label"] == "SAC+random:matched"
+    key = control.config["match"]
+    with pytest.raises(RuntimeError, match=f"needs the finished run {key}"):
+        ex.study_run(control.config)
+    store = tmp_path / "project" / "studies" / "03_defender" / "v9" / "tasks"
+    store.mkdir(parents=True)
+    (store / "partial").mkdir()
+    (store / "partial" / f"{key}.json").write_text("{}")  # not a finished record
+    with pytest.raises(RuntimeError, match="has not finished"):
+        ex.matched_rate(key)
+    # the filter it matches ended 7 episodes in 200 steps: 0.035 firings per step
+    (store / f"{key}.json").write_text(json.dumps({"rows": [{"filtered": 7, "steps": 200}]}))
+    assert ex.matched_rate(key) == pytest.approx(0.035)
+    (row,) = ex.study_run(control.config)
+    assert row["random_rate"] == pytest.approx(0.035) and row["matched_to"] == key
+    assert row["method"] == "SAC+random:matched" and row["strategy"] == "random:matched"
+    assert row["filtered"] > 0 and row["safe_strategy"] is None
+    assert {"random_rate", "matched_to"} <= set(ex.STUDY_COLUMNS)
+    # a filter that never fired is matched by a control that never fires
+    (store / f"{key}.json").write_text(json.dumps({"rows": [{"filtered": 0, "steps": 200}]}))
+    assert ex.matched_rate(key) == 0.0
+
+
 def test_study_config_errors():
     with pytest.raises(ValueError, match="algo_tasks\\['TD3'\\] lists 'Ant-v5'"):
         ex.Config(algo_tasks={"TD3": ["Ant-v5"]})
@@ -234,6 +287,14 @@ def test_pinned_demonstrations_are_kept_with_the_study_and_read_back(tmp_path, m
     (pool_file,) = pinned.glob("*.npz")
     assert json.loads(record.read_text())["rows"][0]["pool"] == pool_file.name
     assert json.loads(record.read_text())["config"]["cfg"]["demo_timesteps"] == 300
+    row = json.loads(record.read_text())["rows"][0]
+    assert row["trimmed"] and pool_file.name.startswith("InvertedDoublePendulum-pinned-")
+    made = ex.demos.load_demos_file(  # the whole pool, as the SAC run made it (results/)
+        json.loads((tmp_path / "results" / "03_defender" / "tasks" / record.name).read_text())[
+            "rows"
+        ][0]["pool"]
+    )
+    assert (row["pool_safe"], row["pool_unsafe"]) == (len(made.safe), len(made.unsafe))
 
     # a new machine: nothing in results/, and making them again is not allowed
     import shutil
@@ -255,6 +316,49 @@ def test_pinned_demonstrations_are_kept_with_the_study_and_read_back(tmp_path, m
     # another recipe is another pin: it is made, not read from the first one's files
     with pytest.raises(AssertionError, match="made the demonstrations again"):
         ex.pinned_demonstrations(task, {**recipe, "seed": 1})
+
+
+def _walk(rng, length, safe):
+    from thesis_lib.defender import Demonstration
+
+    obs = np.cumsum(rng.normal(size=(length + 1, 3)), axis=0)
+    return Demonstration(obs, rng.normal(size=(length, 2)), rng.normal(size=length), not safe, safe)
+
+
+def test_trim_pool_keeps_every_subset_a_study_can_pick():
+    """A pinned pool keeps only what select_diverse can pick with n or fewer per group, from the
+    whole pool and from its SAC roll-outs alone: each m <= n picks the same demonstrations from
+    the trimmed pool as from the whole one, on both paths (the pool has 12 SAC roll-outs and 18
+    top-up ones per group)."""
+    from thesis_lib.defender import DemoRun, DemoSet, select_diverse
+
+    rng = np.random.default_rng(0)
+    groups = {
+        g: [_walk(rng, int(rng.integers(5, 40)), g == "safe") for _ in range(30)]
+        for g in ("safe", "unsafe")
+    }
+    pool = DemoSet(groups["safe"], groups["unsafe"], "Toy-v0")
+    full = DemoRun(pool, pool, [], None, {"safe": 12, "unsafe": 12})
+    n = 6
+    trimmed, counts = ex.trim_pool(full, n)
+    assert counts == {"pool_safe": 30, "pool_unsafe": 30, "sac_rollouts_safe": 12,
+                      "sac_rollouts_unsafe": 12}  # fmt: skip
+    for g in ("safe", "unsafe"):
+        kept = getattr(trimmed.pool, g)
+        assert n < len(kept) <= 2 * n  # the two paths pick partly different ones here
+        # pool order, and the SAC roll-outs first, as n_sac says
+        order = [next(i for i, d in enumerate(groups[g]) if d is k) for k in kept]
+        assert order == sorted(order)
+        assert sum(i < 12 for i in order) == trimmed.n_sac[g]
+    for m in range(1, n + 1):
+        assert ex.demos_file(ex.demos_subset(trimmed, m)) == ex.demos_file(ex.demos_subset(full, m))
+        for g in ("safe", "unsafe"):
+            k_full, k_trim = full.n_sac[g], trimmed.n_sac[g]
+            a = select_diverse(getattr(full.pool, g)[:k_full], m)
+            b = select_diverse(getattr(trimmed.pool, g)[:k_trim], m)
+            assert [id(d) for d in a] == [id(d) for d in b]
+    # more than the trim was made for can differ: the trim is for n, not beyond
+    assert len(ex.demos_subset(trimmed, 2 * n + 1).safe) == len(trimmed.pool.safe)
 
 
 def test_study_file_parses_and_names_methods_study_tasks_makes(monkeypatch):

@@ -485,13 +485,14 @@ class RandomFilter(DefenderWrapper):
     Args:
         env, safe_demos, unsafe_demos: as :class:`DefenderWrapper` (the demonstrations give the
             filtered step's reward and check the spaces; no DTW is computed).
-        rate: the probability of firing before each step, in (0, 1).
+        rate: the probability of firing before each step, in [0, 1) (0: it never fires, the
+            control of a filter that never fired).
         seed: seeds the firing draws and the dynamics model.
         counterfactual, filter_reward, dynamics, dynamics_kwargs, dynamics_train_every: as
             :class:`DefenderWrapper`.
 
     Raises:
-        ValueError: ``rate`` outside (0, 1), and :class:`DefenderWrapper`'s errors.
+        ValueError: ``rate`` outside [0, 1), and :class:`DefenderWrapper`'s errors.
 
     Used in: DEFENDER chapter, the control arm of the C7 study.
     """
@@ -511,8 +512,8 @@ class RandomFilter(DefenderWrapper):
         dynamics_train_every: int | None = None,
     ) -> None:
         rate = float(rate)
-        if not 0.0 < rate < 1.0:
-            raise ValueError(f"rate must be a probability in (0, 1), got {rate}.")
+        if not 0.0 <= rate < 1.0:
+            raise ValueError(f"rate must be a probability in [0, 1), got {rate}.")
         super().__init__(
             env,
             safe_demos,

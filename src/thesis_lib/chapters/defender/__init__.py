@@ -60,6 +60,7 @@ from thesis_lib.chapters.defender.demos import (
     save_demonstration_files,
     study_demonstrations,
     thesis_env_name,
+    trim_pool,
 )
 from thesis_lib.chapters.defender.figures import (
     crash_curves,
@@ -82,6 +83,7 @@ from thesis_lib.chapters.defender.study import (
     STUDY_COLUMNS,
     STUDY_CURVE_BINS,
     THESIS_SAC_RETURN,
+    matched_rate,
     study_label,
     study_row,
     study_run,
@@ -112,6 +114,7 @@ from thesis_lib.chapters.defender.tables import (
 )
 from thesis_lib.chapters.defender.tasks import (
     EVAL_SEED,
+    MATCHED_RANDOM_STRATEGY,
     RANDOM_STRATEGY,
     RUN_COLUMNS,
     TRAIN_FIELDS,
@@ -138,6 +141,7 @@ __all__ = [
     "DEMO_SOURCES",
     "DEMO_INFO",
     "EVAL_SEED",
+    "MATCHED_RANDOM_STRATEGY",
     "RANDOM_STRATEGY",
     "RUN_COLUMNS",
     "STUDY_COLUMNS",
@@ -171,6 +175,7 @@ __all__ = [
     "make_env",
     "methods_table",
     "pinned_demonstrations",
+    "trim_pool",
     "plot_ablation_heatmap",
     "plot_curves",
     "plot_curves_table_4_5",
@@ -185,6 +190,7 @@ __all__ = [
     "save_demonstration_files",
     "scale_note",
     "study_demonstrations",
+    "matched_rate",
     "study_label",
     "study_lookahead",
     "study_row",

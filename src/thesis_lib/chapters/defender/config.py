@@ -97,6 +97,12 @@ class Config:
     of these probabilities per step (:class:`~thesis_lib.defender.RandomFilter`, CLAIMS.md's
     control for C7), its reward from ``n_demos`` demonstrations per group. Empty: none (the
     v1 and v2 studies)."""
+    random_filter_matched: bool = False
+    """Study: a control arm, the first of ``algos`` with a filter that fires at random at the rate
+    the first of ``state_strategies`` fired in the same seed's and task's run (its filtered
+    episodes per training step, read from that run's finished record:
+    :data:`~thesis_lib.chapters.defender.tasks.MATCHED_RANDOM_STRATEGY`). These runs come
+    last in the study's order, after every run they match. False: none (v1-v3)."""
 
     def __post_init__(self) -> None:
         from thesis_lib.defender import parse_strategy  # lazy: torch

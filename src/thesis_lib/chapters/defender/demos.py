@@ -240,6 +240,82 @@ def _demo_lock(task: str) -> Any:
     return file_lock(results_dir(CHAPTER) / "demos" / f".{thesis_env_name(task)}.lock")
 
 
+def trim_pool(run: DemoRun, n: int) -> tuple[DemoRun, dict[str, int]]:
+    """The demonstrations of ``run``'s pool that a study can ever pick with ``n`` or fewer per
+    group: per group, :func:`select_diverse` of ``n`` from the whole pool (the top-up path) and
+    of ``n`` from its SAC roll-outs alone (``top_up=False``), in pool order.
+
+    :func:`select_diverse` is a greedy farthest-point selection from the longest demonstration,
+    so its first ``m`` picks from this subset are its first ``m`` picks from the whole pool, for
+    every ``m <= n`` and either path: :func:`demos_subset` and :func:`study_demonstrations`
+    pick the same demonstrations from the trimmed pool as from the whole one (tested). A SAC run
+    rolled out after every episode yields thousands of roll-outs (tens of MB); the trimmed pool
+    holds at most ``2 n`` per group.
+
+    Returns:
+        ``(trimmed run, counts)``: ``counts`` has ``pool_safe`` / ``pool_unsafe`` (the whole
+        pool's size) and ``sac_rollouts_safe`` / ``sac_rollouts_unsafe`` (its SAC roll-outs),
+        which the trimmed run no longer shows.
+    """
+    groups: dict[str, list[Any]] = {}
+    n_sac: dict[str, int] = {}
+    counts: dict[str, int] = {}
+    for g in ("safe", "unsafe"):
+        pool = getattr(run.pool, g)
+        k = run.n_sac.get(g, len(pool))
+        keep = {id(d) for d in select_diverse(pool, n)} if pool else set()
+        if k:
+            keep |= {id(d) for d in select_diverse(pool[:k], n)}
+        groups[g] = [d for d in pool if id(d) in keep]
+        n_sac[g] = sum(id(d) in keep for d in pool[:k])
+        counts[f"pool_{g}"] = len(pool)
+        counts[f"sac_rollouts_{g}"] = k
+    pool = DemoSet(groups["safe"], groups["unsafe"], run.pool.env_id)
+    demos = DemoSet(
+        select_diverse(pool.safe, n) if pool.safe else [],
+        select_diverse(pool.unsafe, n) if pool.unsafe else [],
+        pool.env_id,
+    )
+    return DemoRun(demos, pool, [], None, n_sac), counts
+
+
+def _pinned_record(
+    task: str, recipe: dict[str, Any], folder: str | Path | None
+) -> tuple[DemoRun, dict[str, Any]]:
+    """:func:`pinned_demonstrations` and the pinned record's row."""
+    pinned = TaskStore(Path(folder) if folder is not None else studies_dir(CHAPTER) / "demos")
+    cfg = Config(**recipe, tasks=[task])
+    (t,) = _demonstrations_tasks(cfg)
+    if not pinned.has(t.key):
+        make_demonstrations(cfg, progress=False)
+        record = TaskStore(results_dir(CHAPTER) / "tasks").read(t.key)
+        row = record["rows"][0]
+        made = _demo_run_from_row(row, results_dir(CHAPTER) / "demos", episodes=False)
+        trimmed, counts = trim_pool(made, max(cfg.n_demos, *cfg.n_demos_list))
+        name = demos_file(trimmed.pool, f"{thesis_env_name(task)}-pinned")
+        data = (results_dir(CHAPTER) / "demos" / name).read_bytes()
+        pinned.root.mkdir(parents=True, exist_ok=True)
+        atomic_write(pinned.root / name, lambda tmp: tmp.write_bytes(data))
+        index = {
+            g: {id(d): i for i, d in enumerate(getattr(trimmed.pool, g))}
+            for g in ("safe", "unsafe")
+        }
+        row = {
+            **row,
+            "pool": name,
+            **{
+                g: ",".join(str(index[g][id(d)]) for d in getattr(trimmed.demos, g))
+                for g in ("safe", "unsafe")
+            },
+            **{f"n_sac_{g}": trimmed.n_sac[g] for g in ("safe", "unsafe")},
+            **counts,
+            "trimmed": True,
+        }
+        pinned.write({**record, "rows": [row]})  # last: a record here means its pool is here
+    row = pinned.read(t.key)["rows"][0]
+    return _demo_run_from_row(row, pinned.root, episodes=False), row
+
+
 def pinned_demonstrations(
     task: str, recipe: dict[str, Any], folder: str | Path | None = None
 ) -> DemoRun:
@@ -252,26 +328,19 @@ def pinned_demonstrations(
     other ones; Hopper's and Walker2d's came out the same, bit for bit). The first pool was made
     from a working tree with uncommitted changes, so whether the machine or those changes made
     the difference cannot be told now. Either way: the first call makes them and copies the
-    sweep record and the pool file into ``folder`` (default ``studies/03_defender/demos/``,
+    sweep record and the pool into ``folder`` (default ``studies/03_defender/demos/``,
     committed with the study's rows); every later call, on any machine, reads them from there.
     The run's training-episode log is not kept (the study does not use it; ``episodes`` is
     empty).
 
+    A pin made since defender-c7c9-v4 keeps only the part of the pool a study can pick from
+    (:func:`trim_pool`; its record's row says ``trimmed``, the whole pool's size and its SAC
+    roll-outs); the earlier pins (v1-v3) hold their whole pools and are read as they are.
+
     Used in: DEFENDER chapter study, through :func:`study_demonstrations` (which holds the
     task's lock).
     """
-    pinned = TaskStore(Path(folder) if folder is not None else studies_dir(CHAPTER) / "demos")
-    (t,) = _demonstrations_tasks(Config(**recipe, tasks=[task]))
-    if not pinned.has(t.key):
-        make_demonstrations(Config(**recipe, tasks=[task]), progress=False)
-        record = TaskStore(results_dir(CHAPTER) / "tasks").read(t.key)
-        name = record["rows"][0]["pool"]
-        pinned.root.mkdir(parents=True, exist_ok=True)
-        data = (results_dir(CHAPTER) / "demos" / name).read_bytes()
-        atomic_write(pinned.root / name, lambda tmp: tmp.write_bytes(data))
-        pinned.write(record)  # last: a record in the folder means its pool is there too
-    row = pinned.read(t.key)["rows"][0]
-    return _demo_run_from_row(row, pinned.root, episodes=False)
+    return _pinned_record(task, recipe, folder)[0]
 
 
 def study_demonstrations(
@@ -294,8 +363,9 @@ def study_demonstrations(
     Used in: DEFENDER chapter study, through :func:`study_run`.
     """
     with _demo_lock(task):
-        run = pinned_demonstrations(task, recipe)
+        run, row = _pinned_record(task, recipe, None)
     seen = {g: run.n_sac.get(g, len(getattr(run.pool, g))) for g in ("safe", "unsafe")}
+    rollouts = {g: int(row.get(f"sac_rollouts_{g}", seen[g])) for g in ("safe", "unsafe")}
     if top_up:
         demos = demos_subset(run, n_demos)
     else:
@@ -317,7 +387,7 @@ def study_demonstrations(
         "demos_unsafe": len(demos.unsafe),
         "demos_safe_expert": src["safe"][1],
         "demos_unsafe_expert": src["unsafe"][1],
-        "sac_rollouts_safe": seen["safe"],
-        "sac_rollouts_unsafe": seen["unsafe"],
+        "sac_rollouts_safe": rollouts["safe"],
+        "sac_rollouts_unsafe": rollouts["unsafe"],
     }
     return demos, info

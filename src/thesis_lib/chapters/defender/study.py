@@ -12,18 +12,21 @@ Used in: DEFENDER chapter study (``thesis study 03_defender``).
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
 import pandas as pd
 import torch
 
-from thesis_lib.chapters.defender.config import Config
+from thesis_lib.book.study import studies_dir
+from thesis_lib.chapters.defender.config import CHAPTER, Config
 from thesis_lib.chapters.defender.demos import (
     DEMO_FIELDS,
     thesis_env_name,
 )
 from thesis_lib.chapters.defender.tasks import (
+    MATCHED_RANDOM_STRATEGY,
     RUN_COLUMNS,
     TRAIN_FIELDS,
     random_strategy,
@@ -180,7 +183,31 @@ STUDY_COLUMNS = [
     # study_demonstrations
     "demos_file", "demos_safe", "demos_unsafe", "demos_safe_expert", "demos_unsafe_expert",
     "sac_rollouts_safe", "sac_rollouts_unsafe",
+    # the matched control (study_run)
+    "random_rate", "matched_to",
 ]  # fmt: skip
+
+
+def matched_rate(key: str) -> float:
+    """The firing rate a matched control (:data:`MATCHED_RANDOM_STRATEGY`) takes from the run
+    it matches: that run's filtered episodes per training step (each firing ends an episode),
+    read from its finished task record, task ``key``, in any store under
+    ``studies/03_defender/`` (a key names one task whichever study ran it).
+
+    Raises:
+        RuntimeError: no store holds a finished record of ``key`` (the control runs after the
+            run it matches: resume the study once that has finished).
+    """
+    root = studies_dir(CHAPTER)
+    found = sorted(p for p in root.glob(f"**/tasks/{key}.json") if p.parent.name == "tasks")
+    if not found:
+        raise RuntimeError(
+            f"the matched control needs the finished run {key} (the filter it matches) under "
+            f"{root}; it has not finished. The study orders the controls last: resume it once "
+            "that run has finished."
+        )
+    (row,) = json.loads(found[0].read_text())["rows"]
+    return float(row["filtered"]) / float(row["steps"])
 
 
 @task_id("thesis_lib.chapters.defender:study_run")
@@ -192,12 +219,24 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     ``task``, ``algo``, ``seed``, ``strategy`` (None: no filter), ``trajectory``, ``n_demos``,
     ``top_up``, ``demos`` (the demonstration recipe, :data:`DEMO_FIELDS`; None without a
     filter), ``train`` (:data:`TRAIN_FIELDS`), ``eval_episodes``, ``bins`` and, for a scale
-    check, ``scale``.
+    check, ``scale``. A matched control (``strategy`` :data:`MATCHED_RANDOM_STRATEGY`) also has
+    ``match``: it fires at :func:`matched_rate` of that run, and its row says the rate
+    (``random_rate``) and the run (``matched_to``).
 
     Used in: DEFENDER chapter study (``thesis study 03_defender``).
     """
     torch.set_num_threads(1)  # small nets: one core per run; the study runs one run per core
     run = {k: config[k] for k in ("task", "algo", "seed", "strategy", "trajectory")}
+    matched: dict[str, Any] = {}
+    if config["strategy"] == MATCHED_RANDOM_STRATEGY:
+        rate = matched_rate(config["match"])
+        run["strategy"] = random_strategy(rate)
+        # the row keeps the method's strategy (one method over seeds), and says the rate apart
+        matched = {
+            "strategy": config["strategy"],
+            "random_rate": rate,
+            "matched_to": config["match"],
+        }
     rows = train_task(
         {
             **run,
@@ -209,7 +248,7 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
             "eval_episodes": config["eval_episodes"],
         }
     )
-    return [study_row(config, rows)]
+    return [{**study_row(config, rows), **matched}]
 
 
 #: What :func:`train_task` says of a run's pinned demonstrations (in a filtered run's rows).
@@ -314,7 +353,10 @@ def study_task(
 
     Its config holds everything the run depends on: the training fields, and for a filtered
     run the demonstration recipe (the same for every run of a task: one SAC run, seed
-    ``cfg.seed``, topped up to ``max(n_demos, n_demos_list)`` per group) and the count.
+    ``cfg.seed``, topped up to ``max(n_demos, n_demos_list)`` per group) and the count; for
+    the matched control (``strategy`` :data:`MATCHED_RANDOM_STRATEGY`) also ``match``, the key
+    of the run whose firing rate it takes (the first state strategy, same task, seed and
+    count).
 
     Used in: DEFENDER chapter study.
     """
@@ -337,6 +379,12 @@ def study_task(
         "eval_episodes": cfg.eval_episodes,
         "bins": STUDY_CURVE_BINS,
     }
+    if strategy == MATCHED_RANDOM_STRATEGY:
+        if not cfg.state_strategies:
+            raise ValueError("the matched control needs a state strategy to match")
+        config["match"] = study_task(
+            cfg, task, algo, seed, cfg.state_strategies[0], n_demos=n_demos, top_up=top_up
+        ).key
     return Task(study_run, config)
 
 
@@ -349,7 +397,9 @@ def study_tasks(cfg: Config) -> list[Task]:
     other count of ``n_demos_list`` (Table 4.5); on ``no_topup_tasks`` also with the first
     state strategy on the SAC roll-outs alone; and with a filter firing at random at each of
     ``random_filter_rates`` (the control, :func:`random_strategy`). The other algorithms (TD3)
-    run plain and with the first state strategy, on their ``algo_tasks``.
+    run plain and with the first state strategy, on their ``algo_tasks``. With
+    ``random_filter_matched``, the matched controls (:data:`MATCHED_RANDOM_STRATEGY`) come
+    last, seed by seed, after every run they match.
 
     Order: the plain runs of the first algorithm for every seed come first, since the study's
     level gates read them alone (plain SAC's return): a gate that fails is then known before
@@ -384,4 +434,12 @@ def study_tasks(cfg: Config) -> list[Task]:
                 for rate in cfg.random_filter_rates:  # the control arms
                     tasks.append(study_task(cfg, task, algo, seed, random_strategy(rate)))
     gated = [t.config["algo"] == main and not t.config["strategy"] for t in tasks]
-    return [t for t, g in zip(tasks, gated) if g] + [t for t, g in zip(tasks, gated) if not g]
+    ordered = [t for t, g in zip(tasks, gated) if g] + [t for t, g in zip(tasks, gated) if not g]
+    if cfg.random_filter_matched:
+        ordered += [
+            study_task(cfg, task, main, seed, MATCHED_RANDOM_STRATEGY)
+            for seed in cfg.seeds
+            for task in cfg.tasks
+            if task in cfg.algo_tasks.get(main, cfg.tasks)
+        ]
+    return ordered

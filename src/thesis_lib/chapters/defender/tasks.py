@@ -236,6 +236,13 @@ RANDOM_STRATEGY = "random:"
 random with probability 0.01 per step (:class:`~thesis_lib.defender.RandomFilter`)."""
 
 
+MATCHED_RANDOM_STRATEGY = "random:matched"
+"""The ``strategy`` of the matched control (``Config.random_filter_matched``): a filter firing
+at random at the rate DEFENDER fired in the run it matches. The study resolves it to a
+:func:`random_strategy` when the run starts
+(:func:`~thesis_lib.chapters.defender.study.matched_rate`); it never reaches :func:`train_run`."""
+
+
 def random_strategy(rate: float) -> str:
     """The ``strategy`` of the random-filter control firing with probability ``rate``.
 
@@ -253,6 +260,11 @@ def random_filter_rate(strategy: str | None) -> float | None:
     """
     if not strategy or not strategy.startswith(RANDOM_STRATEGY):
         return None
+    if strategy == MATCHED_RANDOM_STRATEGY:
+        raise ValueError(
+            f"{strategy!r} has no rate of its own: the study resolves it from the run it "
+            "matches (thesis_lib.chapters.defender.study.matched_rate)."
+        )
     return float(strategy[len(RANDOM_STRATEGY) :])
 
 
