@@ -94,6 +94,7 @@ from thesis_lib.chapters.defender.study import (
 from thesis_lib.chapters.defender.tables import (
     STUDY_DATA_NOTE,
     STUDY_V2_DATA_NOTE,
+    STUDY_V4_DATA_NOTE,
     compare_table_4_5,
     compare_tables_4_3_4_4,
     compare_thesis_strategies,
@@ -148,6 +149,7 @@ __all__ = [
     "STUDY_CURVE_BINS",
     "STUDY_DATA_NOTE",
     "STUDY_V2_DATA_NOTE",
+    "STUDY_V4_DATA_NOTE",
     "THESIS_SAC_RETURN",
     "THESIS_STATE_ACTION_STRATEGIES",
     "THESIS_STATE_STRATEGIES",

@@ -513,3 +513,12 @@ STUDY_V2_DATA_NOTE = (
     "run with those networks, a group with too few roll-outs topped up from the ARS expert)"
 )
 """The same for the second study (``defender-c7c9-v2``)."""
+
+STUDY_V4_DATA_NOTE = (
+    "the setting (SB3's SAC v2 with the thesis's 256-256 networks for 200,000 steps per run on "
+    "Hopper, not the authors' SAC v1 for 5,000 episodes; both demonstration groups from one "
+    "200,000-step SAC run with those networks, rolled out after every episode, as the thesis "
+    "did; the MeanDemoW5/MeanDemoW10 filter that the thesis's ablation chose, not one chosen "
+    "on these runs)"
+)
+"""The same for the fourth study (``defender-c7c9-v4``)."""
