@@ -313,6 +313,9 @@ def test_pinned_demonstrations_are_kept_with_the_study_and_read_back(tmp_path, m
     # study_demonstrations reads them through the pin, top-up or not
     demos, info = ex.study_demonstrations(task, recipe, 3, top_up=True)
     assert info["demos_file"] == ex.demos_file(ex.demos_subset(first, 3))
+    # the rows say how many roll-outs the SAC run gave, not how many the trimmed pool kept
+    for g in ("safe", "unsafe"):
+        assert info[f"sac_rollouts_{g}"] == row[f"sac_rollouts_{g}"] >= first.n_sac.get(g, 0)
     # another recipe is another pin: it is made, not read from the first one's files
     with pytest.raises(AssertionError, match="made the demonstrations again"):
         ex.pinned_demonstrations(task, {**recipe, "seed": 1})
