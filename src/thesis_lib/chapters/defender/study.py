@@ -29,6 +29,7 @@ from thesis_lib.chapters.defender.tasks import (
     MATCHED_RANDOM_STRATEGY,
     RUN_COLUMNS,
     TRAIN_FIELDS,
+    random_filter_rate,
     random_strategy,
     runs_from_episodes,
     train_task,
@@ -229,8 +230,8 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     run = {k: config[k] for k in ("task", "algo", "seed", "strategy", "trajectory")}
     matched: dict[str, Any] = {}
     if config["strategy"] == MATCHED_RANDOM_STRATEGY:
-        rate = matched_rate(config["match"])
-        run["strategy"] = random_strategy(rate)
+        run["strategy"] = random_strategy(matched_rate(config["match"]))
+        rate = random_filter_rate(run["strategy"])  # as the filter reads it (6 digits)
         # the row keeps the method's strategy (one method over seeds), and says the rate apart
         matched = {
             "strategy": config["strategy"],
