@@ -328,13 +328,14 @@ def _walk(rng, length, safe):
     return Demonstration(obs, rng.normal(size=(length, 2)), rng.normal(size=length), not safe, safe)
 
 
-def test_trim_pool_keeps_every_subset_a_study_can_pick():
+def test_trim_pool_keeps_every_subset_a_study_can_pick(tmp_path, monkeypatch):
     """A pinned pool keeps only what select_diverse can pick with n or fewer per group, from the
     whole pool and from its SAC roll-outs alone: each m <= n picks the same demonstrations from
     the trimmed pool as from the whole one, on both paths (the pool has 12 SAC roll-outs and 18
     top-up ones per group)."""
     from thesis_lib.defender import DemoRun, DemoSet, select_diverse
 
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))  # demos_file writes its sets there
     rng = np.random.default_rng(0)
     groups = {
         g: [_walk(rng, int(rng.integers(5, 40)), g == "safe") for _ in range(30)]
