@@ -184,6 +184,23 @@ def test_matched_controls_come_last_and_name_the_run_they_match():
         ex.random_filter_rate(ex.MATCHED_RANDOM_STRATEGY)
 
 
+def test_the_trajectory_cap_changes_only_the_filtered_runs_keys():
+    """max_trajectory is DEFENDER's own setting: plain runs and random filters never read it, so
+    a study that caps the trajectory (v5) reuses an uncapped study's plain runs (v4)."""
+    cfg = {**TINY, "random_filter_rates": [0.01], "random_filter_matched": True}
+    whole = ex.study_tasks(ex.Config(**cfg))
+    capped = ex.study_tasks(ex.Config(**{**cfg, "max_trajectory": 20}))
+    assert [t.config["label"] for t in whole] == [t.config["label"] for t in capped]
+    for a, b in zip(whole, capped):
+        s = a.config["strategy"]
+        blind = not s or s.startswith(ex.RANDOM_STRATEGY)
+        if blind and s != ex.MATCHED_RANDOM_STRATEGY:
+            assert a.key == b.key, a.config["label"]
+        else:  # a filter, or a control matched to a (capped) filter's run
+            assert a.key != b.key, a.config["label"]
+        assert b.config["train"]["max_trajectory"] == (None if blind else 20)
+
+
 def test_a_matched_control_fires_at_the_rate_its_run_fired(tmp_path, monkeypatch):
     monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
     monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))

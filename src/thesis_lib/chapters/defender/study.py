@@ -27,6 +27,7 @@ from thesis_lib.chapters.defender.demos import (
 )
 from thesis_lib.chapters.defender.tasks import (
     MATCHED_RANDOM_STRATEGY,
+    RANDOM_STRATEGY,
     RUN_COLUMNS,
     TRAIN_FIELDS,
     random_filter_rate,
@@ -364,6 +365,11 @@ def study_task(
     n = max(cfg.n_demos, *cfg.n_demos_list)
     recipe = {f: getattr(cfg, f) for f in DEMO_FIELDS} | {"n_demos": n, "n_demos_list": [n]}
     count = cfg.n_demos if n_demos is None else n_demos
+    train = {f: getattr(cfg, f) for f in TRAIN_FIELDS}
+    if not strategy or strategy.startswith(RANDOM_STRATEGY):
+        # the trajectory cap is DEFENDER's own: a plain run or a random filter never reads it,
+        # so their keys (and a later study's reuse of them) do not change with it
+        train["max_trajectory"] = None
     config: dict[str, Any] = {
         "label": study_label(
             algo, strategy, trajectory, None if count == cfg.n_demos else count, top_up
@@ -376,7 +382,7 @@ def study_task(
         "n_demos": count if strategy else 0,
         "top_up": bool(top_up) if strategy else True,
         "demos": recipe if strategy else None,
-        "train": {f: getattr(cfg, f) for f in TRAIN_FIELDS},
+        "train": train,
         "eval_episodes": cfg.eval_episodes,
         "bins": STUDY_CURVE_BINS,
     }
