@@ -522,3 +522,12 @@ STUDY_V4_DATA_NOTE = (
     "on these runs)"
 )
 """The same for the fourth study (``defender-c7c9-v4``)."""
+
+STUDY_V5_DATA_NOTE = (
+    "the setting (SB3's SAC v2 with the thesis's 256-256 networks for 200,000 steps per run on "
+    "Hopper, not the authors' SAC v1 for 5,000 episodes; both demonstration groups from one "
+    "200,000-step SAC run with those networks, as the thesis did; the MeanDemoW5/MeanDemoW10 "
+    "filter on the trajectory's last 20 states, as the authors' code has it, since on the whole "
+    "trajectory, as the text has it, it stopped firing)"
+)
+"""The same for the fifth study (``defender-c7c9-v5``)."""
