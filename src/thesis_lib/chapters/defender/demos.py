@@ -258,12 +258,14 @@ def trim_pool(run: DemoRun, n: int) -> tuple[DemoRun, dict[str, int]]:
         which the trimmed run no longer shows.
     """
     groups: dict[str, list[Any]] = {}
+    picked: dict[str, list[Any]] = {}
     n_sac: dict[str, int] = {}
     counts: dict[str, int] = {}
     for g in ("safe", "unsafe"):
         pool = getattr(run.pool, g)
         k = run.n_sac.get(g, len(pool))
-        keep = {id(d) for d in select_diverse(pool, n)} if pool else set()
+        picked[g] = select_diverse(pool, n) if pool else []  # the top-up path's n
+        keep = {id(d) for d in picked[g]}
         if k:
             keep |= {id(d) for d in select_diverse(pool[:k], n)}
         groups[g] = [d for d in pool if id(d) in keep]
@@ -271,11 +273,7 @@ def trim_pool(run: DemoRun, n: int) -> tuple[DemoRun, dict[str, int]]:
         counts[f"pool_{g}"] = len(pool)
         counts[f"sac_rollouts_{g}"] = k
     pool = DemoSet(groups["safe"], groups["unsafe"], run.pool.env_id)
-    demos = DemoSet(
-        select_diverse(pool.safe, n) if pool.safe else [],
-        select_diverse(pool.unsafe, n) if pool.unsafe else [],
-        pool.env_id,
-    )
+    demos = DemoSet(picked["safe"], picked["unsafe"], run.pool.env_id)  # nested: the trim's own
     return DemoRun(demos, pool, [], None, n_sac), counts
 
 
