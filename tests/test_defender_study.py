@@ -221,6 +221,10 @@ def test_a_matched_control_fires_at_the_rate_its_run_fired(tmp_path, monkeypatch
         ex.matched_rate(key)
     # the filter it matches ended 7 episodes in 200 steps: 0.035 firings per step
     (store / f"{key}.json").write_text(json.dumps({"rows": [{"filtered": 7, "steps": 200}]}))
+    with pytest.raises(RuntimeError, match="holds task None"):  # not a record of this key
+        ex.matched_rate(key)
+    record = {"key": key, "rows": [{"filtered": 7, "steps": 200}]}
+    (store / f"{key}.json").write_text(json.dumps(record))
     assert ex.matched_rate(key) == pytest.approx(0.035)
     (row,) = ex.study_run(control.config)
     assert row["random_rate"] == pytest.approx(0.035) and row["matched_to"] == key
@@ -228,8 +232,13 @@ def test_a_matched_control_fires_at_the_rate_its_run_fired(tmp_path, monkeypatch
     assert row["filtered"] > 0 and row["safe_strategy"] is None
     assert {"random_rate", "matched_to"} <= set(ex.STUDY_COLUMNS)
     # a filter that never fired is matched by a control that never fires
-    (store / f"{key}.json").write_text(json.dumps({"rows": [{"filtered": 0, "steps": 200}]}))
+    record["rows"] = [{"filtered": 0, "steps": 200}]
+    (store / f"{key}.json").write_text(json.dumps(record))
     assert ex.matched_rate(key) == 0.0
+    record["rows"] = [{"filtered": 3}]  # a row without the steps: not a training run's
+    (store / f"{key}.json").write_text(json.dumps(record))
+    with pytest.raises(RuntimeError, match="not a finished DEFENDER training run"):
+        ex.matched_rate(key)
 
 
 def test_study_config_errors():

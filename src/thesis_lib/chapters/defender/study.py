@@ -12,7 +12,6 @@ Used in: DEFENDER chapter study (``thesis study 03_defender``).
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import numpy as np
@@ -35,7 +34,7 @@ from thesis_lib.chapters.defender.tasks import (
     runs_from_episodes,
     train_task,
 )
-from thesis_lib.sweep import Task, task_id
+from thesis_lib.sweep import Task, TaskStore, task_id
 
 #: The thesis's Table 4.3 plain-SAC Acc Reward per task: ``*_score`` columns are returns in
 #: percent of it (the tasks' returns differ by a factor 3, so raw returns would let
@@ -198,7 +197,8 @@ def matched_rate(key: str) -> float:
 
     Raises:
         RuntimeError: no store holds a finished record of ``key`` (the control runs after the
-            run it matches: resume the study once that has finished).
+            run it matches: resume the study once that has finished), or the record is
+            damaged or not a training run's (:meth:`TaskStore.read`).
     """
     root = studies_dir(CHAPTER)
     found = sorted(p for p in root.glob(f"**/tasks/{key}.json") if p.parent.name == "tasks")
@@ -208,8 +208,13 @@ def matched_rate(key: str) -> float:
             f"{root}; it has not finished. The study orders the controls last: resume it once "
             "that run has finished."
         )
-    (row,) = json.loads(found[0].read_text())["rows"]
-    return float(row["filtered"]) / float(row["steps"])
+    rows = TaskStore(found[0].parent).read(key)["rows"]
+    if len(rows) != 1 or not {"filtered", "steps"} <= set(rows[0]) or not rows[0]["steps"]:
+        raise RuntimeError(
+            f"{found[0]} is not a finished DEFENDER training run (one row with 'filtered' and "
+            "'steps' > 0), so a matched control cannot take its rate from it"
+        )
+    return float(rows[0]["filtered"]) / float(rows[0]["steps"])
 
 
 @task_id("thesis_lib.chapters.defender:study_run")
