@@ -216,6 +216,20 @@ def test_a_study_replaced_before_it_completed_says_where_it_stopped(project):
 
     side = studies_table(claims.reset_index()).set_index("claim")
     assert side.loc["C3", ["v2 study", "v2"]].tolist() == ["fake-v3", "pending, 0/12 tasks"]
+    # v2's evidence section says it stopped, not that it is in progress; v3's that it runs
+    from thesis_lib.book import evidence as evi
+
+    v2 = st.load_study("04_hdt:v2")
+    st.run_study(CHAPTERS["04_hdt"], study=v2, progress=False)
+    keys = [t.key for t in st.study_tasks(v2, CHAPTERS["04_hdt"])]
+    (v2.folder / "tasks" / f"{keys[0]}.json").unlink()  # as if replaced after 11 of 12
+    st.write_study_summary(v2, keys)
+    line = evi.status_line(evi.load_evidence(CHAPTERS["04_hdt"], reps=200, study="v2"))
+    assert "11/12 tasks (stopped: superseded by fake-v3)" in line
+    assert st.superseded_by(st.load_study("04_hdt:v3")) is None
+    st.run_study(CHAPTERS["04_hdt"], study="v3", progress=False)
+    line = evi.status_line(evi.load_evidence(CHAPTERS["04_hdt"], reps=200, study="v3"))
+    assert "12/12 tasks (complete)" in line
 
 
 def test_a_study_read_beside_another_is_listed_in_the_history_and_decides_nothing(project):

@@ -113,9 +113,10 @@ def load_evidence(chapter: Chapter, reps: int = 10_000, study: str = "") -> Evid
 
 
 def status_line(ev: Evidence) -> str:
-    """The study, tasks done of total, CPU-hours, the commits it ran at (a commit with
-    uncommitted changes says so), and once it is complete whether the library changed since
-    (:func:`code_changes_since`)."""
+    """The study, tasks done of total (and, short of complete, whether it is still running or a
+    later study replaced it: :func:`~thesis_lib.book.study.superseded_by`), CPU-hours, the
+    commits it ran at (a commit with uncommitted changes says so), and once it is complete
+    whether the library changed since (:func:`code_changes_since`)."""
     i = ev.info
     if not i or i.get("study_hash") != ev.study.hash:
         return f"Study {ev.study.study}: not run yet (`thesis study {ev.study.ref}`)."
@@ -126,7 +127,14 @@ def status_line(ev: Evidence) -> str:
         )
         or "none"
     )
-    state = "complete" if ev.complete else "in progress: verdicts wait for the full grid"
+    later = None if ev.complete else st.superseded_by(ev.study)
+    state = (
+        "complete"
+        if ev.complete
+        else f"stopped: superseded by {later}"
+        if later
+        else "in progress: verdicts wait for the full grid"
+    )
     line = (
         f"Study {i['study']}: {i['tasks_done']}/{i['tasks_total']} tasks ({state}), "
         f"{i.get('cpu_hours', 0):.1f} CPU-hours, run at commit(s) {commits}."

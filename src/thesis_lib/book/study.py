@@ -213,6 +213,13 @@ def chapter_studies(chapter: str) -> list[Study]:
     return [load_study(p) for p in study_files() if _name_parts(p)[0] == chapter]
 
 
+def superseded_by(study: Study) -> str | None:
+    """The id of the later study of ``study``'s chapter that replaces it (``supersedes:``
+    names it), or None."""
+    later = [s.study for s in chapter_studies(study.chapter) if s.supersedes == study.study]
+    return later[0] if later else None
+
+
 def parse_study(data: Mapping[str, Any], path: Path | None = None) -> Study:
     """Validate a study mapping (unknown or missing keys, unknown claims are errors)."""
     where = f" in {path}" if path else ""
@@ -938,6 +945,7 @@ def write_claims(chapters: Mapping[str, Chapter], reps: int = 10_000) -> pd.Data
 __all__ = [
     "Study",
     "chapter_studies",
+    "superseded_by",
     "evaluate_rows",
     "evaluate_study",
     "history_entries",
