@@ -990,6 +990,31 @@ def test_the_estimate_of_cpu_hours_left_prices_each_task_like_its_finished_kin(p
     assert st.cpu_hours_left(study, tasks) == 0.0  # nothing finished: no basis for a price
 
 
+def _label_run(config):
+    return [config]
+
+
+def test_the_estimate_prices_tasks_that_name_their_method_label_by_it():
+    """The DEFENDER chapter's tasks say ``label``, not ``method``: a filtered run is priced at
+    the filtered runs' cost, not at the mean of plain and filtered ones."""
+    from thesis_lib.sweep import fn_path
+
+    run = _label_run
+
+    def task(label, seed):
+        return Task(run, {"label": label, "seed": seed})
+
+    done = [task("SAC", 0), task("SAC+filter", 0)]
+    todo = [task("SAC", 1), task("SAC+filter", 1), task("SAC+filter", 2), task("SAC+random", 1)]
+    records = [
+        {"key": done[0].key, "fn": fn_path(run), "config": done[0].config, "cpu_s": 3600.0},
+        {"key": done[1].key, "fn": fn_path(run), "config": done[1].config, "cpu_s": 10800.0},
+    ]
+    # plain 1 h, filtered 3 h each, the control (no finished kin) at the mean of all: 2 h
+    # (priced all alike, the four would be 8 h)
+    assert st.cpu_hours_left(None, done + todo, records=records) == pytest.approx(9.0)
+
+
 # ------------------------------------------------------------------ issue #37: study boundaries
 
 

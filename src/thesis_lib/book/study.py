@@ -665,7 +665,8 @@ def cpu_hours_left(
 
     Tasks of a grid differ (the scale check's run longer; a baseline costs next to nothing), so
     each unfinished task is priced at the mean CPU time of the finished tasks most like it: the
-    same function, scale (``check`` or the study's own) and ``method``; failing that, the same
+    same function, scale (``check`` or the study's own) and ``method`` (or ``label``, as the
+    DEFENDER chapter's tasks name their method); failing that, the same
     function and scale; failing that, the same function; failing that, all of them. ``0.0``
     when nothing has finished. ``records``: the study's task records, when the caller has
     already read them (:func:`task_records`).
@@ -677,7 +678,8 @@ def cpu_hours_left(
 
     def levels(fn: str, config: Mapping[str, Any]) -> list[tuple[Any, ...]]:
         scale = config.get("scale", "study")
-        return [(fn, scale, str(config.get("method"))), (fn, scale), (fn,), ()]
+        method = config.get("method", config.get("label"))
+        return [(fn, scale, str(method)), (fn, scale), (fn,), ()]
 
     costs: dict[tuple[Any, ...], list[float]] = {}
     for r in recs:
