@@ -675,6 +675,19 @@ def test_thesis_study_keep_going_runs_the_rest_and_the_next_study(project, capsy
     assert len(status["tasks_failed"]) == 2
     left = status["cpu_hours"] / 18 * 2  # two tasks left, at the mean cost of the 18 done
     assert status["cpu_hours_left_estimate"] == pytest.approx(left, abs=0.05)
+    assert "checkpoints" not in status  # neither unfinished task saved one
+    # an unfinished task with a training checkpoint (partial/<key>/step-<n>/) is listed with
+    # its newest step; a finished task's leftover folder is not
+    tasks = st.study_tasks(st.load_study("04_hdt"), CHAPTERS["04_hdt"])
+    store = project / "studies" / "04_hdt" / "tasks"
+    todo = [t for t in tasks if not (store / f"{t.key}.json").exists()]
+    for t, steps in ((todo[0], (2000, 4000)), (tasks[0], (1000,))):
+        for n in steps:
+            (store / "partial" / t.key / f"step-{n:010d}").mkdir(parents=True)
+    main(["study", "04_hdt", "--status"])
+    (ckpt,) = json.loads(capsys.readouterr().out)["checkpoints"]
+    assert ckpt["task"] == todo[0].key and ckpt["checkpoint_step"] == 4000
+    assert ckpt["method"] == todo[0].config["method"] and ckpt["updated"].startswith("20")
     FAIL.clear()  # fixed: a rerun runs only the failed tasks, and forgets their failures
     CALLS.clear()
     assert main(["study", "04_hdt", "--keep-going"]) == 0

@@ -2,7 +2,8 @@
 
 thesis study 04_hdt                   # run or resume params/04_hdt.study.yml
 thesis study 04_hdt --executor local -j 2
-thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate)
+thesis study 04_hdt --status          # tasks done / total, CPU-hours so far and left (estimate),
+                                      # the checkpoints of unfinished tasks (their newest step)
 thesis study --status                 # the same for every registered study
 thesis study params/04_hdt.study.yml  # the same, named by its study file
 thesis study 04_hdt:v2                # a later study of the chapter: params/04_hdt.v2.study.yml
@@ -46,6 +47,42 @@ def _status(ref: str) -> dict:
             out["cpu_hours_left_estimate"] = round(st.cpu_hours_left(s, tasks, records=recs), 1)
     if failed:  # the last run of these tasks raised: tasks/failed/<key>.txt says why
         out["tasks_failed"] = failed
+    done = {r["key"] for r in recs}
+    checkpoints = _checkpoints(s.folder / "tasks", [t for t in tasks if t.key not in done])
+    if checkpoints:
+        out["checkpoints"] = checkpoints
+    return out
+
+
+def _checkpoints(store: Path, tasks: list) -> list[dict]:
+    """The unfinished ``tasks`` that have saved a training checkpoint (``<store>/partial/<key>/``,
+    where a resumable task keeps one; the task resumes from it): running now, or cut off by
+    the end of an earlier run. Each with its method and seed where its config names them, the
+    newest checkpoint's step (a ``step-<n>`` folder) and when the folder last changed."""
+    import datetime as dt
+
+    from thesis_lib.sweep._tasks import SCRATCH_FOLDER
+
+    out = []
+    for t in tasks:
+        folder = store / SCRATCH_FOLDER / t.key
+        if not folder.is_dir():
+            continue
+        entry: dict = {"task": t.key}
+        for name in ("method", "label", "seed", "scale"):
+            if t.config.get(name) is not None:
+                entry["method" if name == "label" else name] = t.config[name]
+        parts = list(folder.iterdir())
+        steps = [
+            int(p.name.removeprefix("step-"))
+            for p in parts
+            if p.name.startswith("step-") and p.name.removeprefix("step-").isdigit()
+        ]
+        if steps:
+            entry["checkpoint_step"] = max(steps)
+        changed = max([folder.stat().st_mtime] + [p.stat().st_mtime for p in parts])
+        entry["updated"] = dt.datetime.fromtimestamp(changed, dt.UTC).isoformat(timespec="seconds")
+        out.append(entry)
     return out
 
 
@@ -329,7 +366,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-j", "--jobs", type=int, default=None, help="parallel tasks (local)")
     p.add_argument("--address", default=None, help="Ray cluster address (or $RAY_ADDRESS)")
     p.add_argument("--force", action="store_true", help="recompute finished tasks")
-    p.add_argument("--status", action="store_true", help="print progress; run nothing")
+    p.add_argument(
+        "--status",
+        action="store_true",
+        help="print progress (tasks done, CPU-hours so far and left, the newest checkpoint of each unfinished task); run nothing",
+    )
     p.add_argument(
         "-k",
         "--keep-going",
