@@ -614,9 +614,21 @@ def run_study(
                 f"{first} ({_holder(first)})",
                 file=sys.stderr,
             )
+        mine = [t for t in tasks if t.key not in busy]
+        finished = task_records(study) if taken and progress is not False else []
+        if finished:  # the bar's own ETA waits for a task of this run to finish
+            ours = set(taken)
+            left = cpu_hours_left(study, [t for t in mine if t.key in ours], records=finished)
+            n = n_jobs or 1
+            jobs = f", about {left / n:.1f} hours at {n} jobs" if n > 1 else ""
+            print(
+                f"study {study.study}: {len(taken)} task(s) to run, about {left:.1f} CPU-hours "
+                f"at the cost of its finished tasks{jobs}",
+                file=sys.stderr,
+            )
         try:
             rows = run_tasks(
-                [t for t in tasks if t.key not in busy],
+                mine,
                 store.root,
                 executor=executor,
                 n_jobs=n_jobs,
