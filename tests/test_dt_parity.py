@@ -224,21 +224,22 @@ def test_v1_study_files_keep_their_init_and_task_keys():
 
 
 # ----------------------------------------------------------------------------------------------
-# Learning: the DT reaches BC's level on hopper/medium (fails with the v1 initialisation)
+# Learning: the DT reaches BC's level on hopper/medium (the v1 initialisation did not on the
+# earlier data recipes)
 
 
 @pytest.mark.slow
 def test_dt_learns_to_bc_level_on_hopper_medium():
     """Our DT within 5 normalised points of BC on the hopper/medium smoke set, at the study's
-    size (d32, 1 layer) with batch 16 for 10k updates (about 90 CPU-seconds a run; the three
+    size (d32, 1 layer) with batch 16 for 10k updates (about 90 CPU-seconds a run; the two
     runs share the two cores through the parity harness's own task function).
 
-    The v1 initialisation (``init="torch"``) runs beside it, reported, not asserted: it fell
-    more than 5 points short of the fixed DT on the recipe-2 data of the parity table (v1 12.0
-    and 15.0 against 35.2 and 32.0) and on recipe 3 (16.8 against 23.9), but not on recipe 4's
-    hopper medium at D4RL's level (seed 0: DT 32.0, v1 33.6, BC 34.8; data 41.9). How much the
-    v1 initialisation costs depends on the data; the parity table's `-r4` rows measure it over
-    seeds."""
+    The v1 initialisation (``init="torch"``) is not run here: it fell more than 5 points short
+    of the fixed DT on the recipe-2 data of the parity table (v1 12.0 and 15.0 against 35.2 and
+    32.0) and on recipe 3 (16.8 against 23.9), but not on recipe 4's hopper medium at D4RL's
+    level (seed 0: DT 32.0, v1 33.6, BC 34.8; data 41.9), so no bound on it would hold on every
+    recipe; the parity table's `-r4` rows measure it over seeds. (It ran here as a third,
+    unasserted run until 2026-12-01: a third of this test's CPU and half its wall time.)"""
     from thesis_lib.data.recipe import GENERATOR_VERSION
     from thesis_lib.parity import ours_run
     from thesis_lib.sweep import Task, run_tasks
@@ -260,14 +261,11 @@ def test_dt_learns_to_bc_level_on_hopper_medium():
         )  # fmt: skip
 
     rows = run_tasks(
-        [task("DT", "auto"), task("DT", "torch"), task("BC", "auto")],
-        executor="local",
-        n_jobs=2,
-        progress=False,
+        [task("DT", "auto"), task("BC", "auto")], executor="local", n_jobs=2, progress=False
     )
-    dt, v1, bc = rows["score"].tolist()
-    assert dt >= bc - 5.0, {"DT": dt, "DT v1 init": v1, "BC": bc}
-    assert np.isfinite(v1)
+    dt, bc = rows["score"].tolist()
+    assert np.isfinite(dt) and np.isfinite(bc)
+    assert dt >= bc - 5.0, {"DT": dt, "BC": bc}
 
 
 def test_a_run_of_another_data_recipe_is_refused():
