@@ -65,6 +65,12 @@ met only at the peer's size, and only on the first day; with both levers the v2 
 reaches 1.4-1.5x. The other levers of issue #36 add little on this CPU
 (``bench_ensemble.py``: stacking seeds at most 8%, ``torch.compile`` slower).
 
+2026-12-01, beside a running two-process study, DT at d64, 30 updates x 4 repeats in turns,
+an experiment not kept in the code: the fast kernels' attention with its two matrix products
+in bfloat16 (softmax in float32) instead of float32 took 56.7 against 57.9 ms (fp32 83.9: x1.48
+against x1.45). A bfloat16 step's profile there: casts 18%, the matrix products 27%, dropout
+masks 9%, LayerNorm 6%; the attention's float32 products are not what holds the ratio down.
+
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50
 """
