@@ -615,7 +615,7 @@ def run_study(
                 file=sys.stderr,
             )
         mine = [t for t in tasks if t.key not in busy]
-        finished = task_records(study) if taken and progress is not False else []
+        finished = task_records(study) if taken and not force and progress is not False else []
         if finished:  # the bar's own ETA waits for a task of this run to finish
             ours = set(taken)
             left = cpu_hours_left(study, [t for t in mine if t.key in ours], records=finished)

@@ -66,13 +66,15 @@ def _checkpoints(store: Path, tasks: list) -> list[dict]:
     out = []
     for t in tasks:
         folder = store / SCRATCH_FOLDER / t.key
-        if not folder.is_dir():
+        try:  # a running task rotates its checkpoints, and removes the folder when it ends
+            parts = list(folder.iterdir())
+            changed = max([folder.stat().st_mtime] + [p.stat().st_mtime for p in parts])
+        except (FileNotFoundError, NotADirectoryError):
             continue
         entry: dict = {"task": t.key}
         for name in ("method", "label", "seed", "scale"):
             if t.config.get(name) is not None:
                 entry["method" if name == "label" else name] = t.config[name]
-        parts = list(folder.iterdir())
         steps = [
             int(p.name.removeprefix("step-"))
             for p in parts
@@ -80,7 +82,6 @@ def _checkpoints(store: Path, tasks: list) -> list[dict]:
         ]
         if steps:
             entry["checkpoint_step"] = max(steps)
-        changed = max([folder.stat().st_mtime] + [p.stat().st_mtime for p in parts])
         entry["updated"] = dt.datetime.fromtimestamp(changed, dt.UTC).isoformat(timespec="seconds")
         out.append(entry)
     return out
