@@ -230,6 +230,13 @@ def test_a_matched_control_fires_at_the_rate_its_run_fired(tmp_path, monkeypatch
     assert row["random_rate"] == pytest.approx(0.035) and row["matched_to"] == key
     assert row["method"] == "SAC+random:matched" and row["strategy"] == "random:matched"
     assert row["filtered"] > 0 and row["safe_strategy"] is None
+    # the steps at which it ended its episodes, for a blind control that fires at those steps
+    q = [row[c] for c in ex.FILTER_STEP_COLUMNS]
+    assert 1 <= q[0] and q == sorted(q) and q[-1] <= cfg.max_episode_steps
+    never = pd.DataFrame(
+        {"filtered": [False, False], "length": [20, 7]}
+    )  # a filter that never fired
+    assert np.isnan(list(ex.filter_step_numbers(never).values())).all()
     assert {"random_rate", "matched_to"} <= set(ex.STUDY_COLUMNS)
     # a filter that never fired is matched by a control that never fires
     record["rows"] = [{"filtered": 0, "steps": 200}]

@@ -80,9 +80,11 @@ from thesis_lib.chapters.defender.lookahead import (
 from thesis_lib.chapters.defender.study import (
     CRASH_DEFINITION,
     DEMO_INFO,
+    FILTER_STEP_COLUMNS,
     STUDY_COLUMNS,
     STUDY_CURVE_BINS,
     THESIS_SAC_RETURN,
+    filter_step_numbers,
     matched_rate,
     study_label,
     study_row,
@@ -146,6 +148,7 @@ __all__ = [
     "MATCHED_RANDOM_STRATEGY",
     "RANDOM_STRATEGY",
     "RUN_COLUMNS",
+    "FILTER_STEP_COLUMNS",
     "STUDY_COLUMNS",
     "STUDY_CURVE_BINS",
     "STUDY_DATA_NOTE",
@@ -214,5 +217,6 @@ __all__ = [
     "thesis_env_name",
     "train_run",
     "train_task",
+    "filter_step_numbers",
     "training_run_numbers",
 ]

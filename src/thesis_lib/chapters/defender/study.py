@@ -51,6 +51,33 @@ STUDY_CURVE_BINS = 10
 crash rate, filtered rate and mean return of the episodes that ended in each span."""
 
 
+FILTER_STEP_COLUMNS = [f"filter_step_q{q:03d}" for q in range(0, 101, 10)]
+"""The deciles (0-100%) of the steps at which a run's filter ended its episodes: each filtered
+episode's length, the filtered step included (:func:`filter_step_numbers`). A blind control
+that fires at the filter's steps, not at its states, can be drawn from them."""
+
+
+def filter_step_numbers(episodes: pd.DataFrame) -> dict[str, float]:
+    """The deciles of the steps at which the filter ended its episodes
+    (:data:`FILTER_STEP_COLUMNS`): the ``length`` of each ``filtered`` episode of a training log
+    (one row per episode, as :func:`training_run_numbers` reads it). All NaN where no episode
+    was filtered or the log has no ``length`` (a plain run's rows have them NaN).
+
+    >>> log = pd.DataFrame({"filtered": [True, False, True, True], "length": [50, 140, 54, 58]})
+    >>> q = filter_step_numbers(log)
+    >>> q["filter_step_q000"], q["filter_step_q050"], q["filter_step_q100"]
+    (50.0, 54.0, 58.0)
+    """
+    nan = dict.fromkeys(FILTER_STEP_COLUMNS, float("nan"))
+    if "length" not in episodes or "filtered" not in episodes:
+        return nan
+    lengths = episodes.loc[episodes["filtered"].astype(bool), "length"].to_numpy(dtype=float)
+    if not len(lengths):
+        return nan
+    qs = np.percentile(lengths, np.arange(0, 101, 10))
+    return {c: float(v) for c, v in zip(FILTER_STEP_COLUMNS, qs, strict=True)}
+
+
 CRASH_DEFINITION = (
     "A training episode **crashed** when the task terminated it before the horizon "
     "(an unsafe state: Hopper or Walker2d fell, the pendulum tipped over) and the filter did "
@@ -179,6 +206,8 @@ STUDY_COLUMNS = [
     "saved_crashes", "false_alarms", "filter_precision", "filter_recall",
     "crash_rate_without_filter",
     *(f"{k}_b{b}" for b in range(STUDY_CURVE_BINS) for k in ("crash_rate", "filtered_rate", "return")),
+    # filter_step_numbers
+    *FILTER_STEP_COLUMNS,
     "eval_return", "eval_return_std", "eval_crash_rate", "eval_length", "eval_score",
     "best_score", "steps", "train_wall_s", "train_cpu_s", "log_speed",
     # study_demonstrations
@@ -277,8 +306,9 @@ def study_row(config: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, A
         ``eval_crash_rate``, ``eval_length``); ``eval_score`` and ``best_score``
         (``eval_return`` and ``return_best`` in % of the thesis's plain-SAC return on the task,
         :data:`THESIS_SAC_RETURN`); ``steps``, ``train_wall_s``, ``train_cpu_s``,
-        ``log_speed`` (ln of training steps per CPU-second: higher is cheaper); and where the
-        demonstrations came from (:data:`DEMO_INFO`).
+        ``log_speed`` (ln of training steps per CPU-second: higher is cheaper); the deciles of
+        the steps at which the filter ended its episodes (:func:`filter_step_numbers`); and
+        where the demonstrations came from (:data:`DEMO_INFO`).
     """
     train = [r for r in rows if r.get("phase", "train") == "train"]
     ev = pd.DataFrame([r for r in rows if r.get("phase") == "eval"])
@@ -304,6 +334,7 @@ def study_row(config: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, A
         "top_up": bool(config["top_up"]) if config["strategy"] else None,
         **run_row,
         **numbers,
+        **filter_step_numbers(ep),
         "eval_return": float(ev["return"].mean()),
         "eval_return_std": float(ev["return"].std(ddof=0)),
         "eval_crash_rate": float(ev["crashed"].mean()),
