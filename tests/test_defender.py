@@ -941,6 +941,51 @@ def test_random_filter_fires_at_its_rate_and_acts_as_the_filter_does(walk_demos)
     assert never.n_filtered_steps == 0
 
 
+def test_timer_filter_fires_at_its_drawn_steps_in_its_share_of_episodes(walk_demos):
+    """The blind timing control: an armed episode is filtered at the step drawn from the
+    deciles (its length, the filtered step included), an unarmed one never; draws are seeded."""
+    from thesis_lib.defender import TimerFilter
+
+    safe, unsafe = walk_demos
+    step = np.array([0.0], np.float32)
+
+    def lengths(p, deciles, seed=0, episodes=400):
+        env = TimerFilter(
+            gym.wrappers.TimeLimit(CountingEnv(), 12),
+            safe, unsafe, p_episode=p, step_deciles=deciles, seed=seed,
+        )  # fmt: skip
+        out = []
+        for _ in range(episodes):
+            env.reset(seed=0)
+            for t in range(1, 13):
+                before = env.unwrapped.n_steps
+                *_, reward, term, trunc, info = env.step(step)
+                if info["filtered"]:  # no real step, the lowest reward, the end
+                    assert env.unwrapped.n_steps == before and term and reward == env.filter_reward
+                    out.append(t)
+                    break
+                if term or trunc:
+                    out.append(None)
+                    break
+        return out, env
+
+    fixed, env = lengths(1.0, [5] * 11)
+    assert fixed == [5] * 400 and env.n_filtered_steps == 400
+    spread, _ = lengths(1.0, [2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7])
+    assert set(spread) == {2, 3, 4, 5, 6, 7} and abs(np.median(spread) - 4.5) <= 0.5
+    half, _ = lengths(0.5, [5] * 11)
+    armed = sum(x == 5 for x in half)  # 400 Bernoulli(0.5): 200 +- 10; a 5-sigma band
+    assert abs(armed - 200) < 5 * 10 and set(half) == {5, None}
+    late, _ = lengths(1.0, [30] * 11)  # past the horizon: the episode ends first, unfiltered
+    assert late == [None] * 400
+    assert lengths(0.5, [5] * 11, seed=1)[0] != half and lengths(0.5, [5] * 11)[0] == half
+    for bad in ([5] * 10, [0] + [5] * 10, [6, 5] + [5] * 9, [5] * 10 + [float("nan")]):
+        with pytest.raises(ValueError, match="step_deciles must be 11"):
+            TimerFilter(CountingEnv(), safe, unsafe, p_episode=1.0, step_deciles=bad)
+    with pytest.raises(ValueError, match="p_episode must be a probability"):
+        TimerFilter(CountingEnv(), safe, unsafe, p_episode=1.5, step_deciles=[5] * 11)
+
+
 def test_random_filter_state_dict_continues_the_same_draws(walk_demos):
     from thesis_lib.defender import RandomFilter
 

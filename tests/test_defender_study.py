@@ -248,6 +248,43 @@ def test_a_matched_control_fires_at_the_rate_its_run_fired(tmp_path, monkeypatch
         ex.matched_rate(key)
 
 
+def test_a_timing_control_fires_at_the_steps_its_run_fired_at(tmp_path, monkeypatch):
+    """The blind control for a filter that fires at about the same step of every episode: it
+    ends the share of episodes its run's filter ended, at steps drawn from that filter's own
+    firing steps, and comes after the random controls."""
+    monkeypatch.setenv("THESIS_RESULTS_DIR", str(tmp_path))
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(tmp_path / "project"))
+    cfg = ex.Config(
+        **{**TINY, "tasks": ["InvertedDoublePendulum-v5"], "algo_tasks": {},
+           "random_filter_matched": True, "timer_filter_matched": True}
+    )  # fmt: skip
+    tasks = ex.study_tasks(cfg)
+    labels = [t.config["label"] for t in tasks[-4:]]
+    assert labels == ["SAC+random:matched"] * 2 + ["SAC+timer:matched"] * 2
+    control = tasks[-2]  # seed 0's
+    assert control.config["seed"] == 0 and control.config["train"]["max_trajectory"] is None
+    key = control.config["match"]
+    assert key == tasks[-4].config["match"]  # the run the random control matches too
+    store = tmp_path / "project" / "studies" / "03_defender" / "v9" / "tasks"
+    store.mkdir(parents=True)
+    record = {"key": key, "rows": [{"filtered": 7, "steps": 200, "filtered_rate": 0.5}]}
+    (store / f"{key}.json").write_text(json.dumps(record))
+    with pytest.raises(RuntimeError, match="has no firing steps"):  # a run stored before them
+        ex.matched_timing(key)
+    steps = dict(zip(ex.FILTER_STEP_COLUMNS, [4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 8], strict=True))
+    record["rows"][0].update(steps)
+    (store / f"{key}.json").write_text(json.dumps(record))
+    assert ex.matched_timing(key) == (0.5, [4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 8])
+    (row,) = ex.study_run(control.config)
+    assert row["method"] == "SAC+timer:matched" and row["strategy"] == "timer:matched"
+    assert row["timer_p_episode"] == 0.5 and row["matched_to"] == key
+    # the episodes it ended, it ended at the drawn steps (lengths 4-8)
+    assert row["filtered"] > 0 and 4 <= row["filter_step_q000"] <= row["filter_step_q100"] <= 8
+    assert "timer_p_episode" in ex.STUDY_COLUMNS
+    with pytest.raises(ValueError, match="resolves it from the run it matches"):
+        ex.timer_filter_params(ex.MATCHED_TIMER_STRATEGY)
+
+
 def test_study_config_errors():
     with pytest.raises(ValueError, match="algo_tasks\\['TD3'\\] lists 'Ant-v5'"):
         ex.Config(algo_tasks={"TD3": ["Ant-v5"]})

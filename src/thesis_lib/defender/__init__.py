@@ -83,6 +83,7 @@ from thesis_lib.defender.wrapper import (
     PAPER_MAX_TRAJECTORY,
     DefenderWrapper,
     RandomFilter,
+    TimerFilter,
 )
 
 __all__ = [
@@ -100,6 +101,7 @@ __all__ = [
     "WINDOWINGS",
     "DefenderWrapper",
     "RandomFilter",
+    "TimerFilter",
     "DemoRun",
     "EpisodeRecorder",
     "DemoSet",

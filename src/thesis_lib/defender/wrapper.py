@@ -39,8 +39,10 @@ __all__ = [
     "EPISODE_LOG_COLUMNS",
     "PAPER_MAX_TRAJECTORY",
     "RANDOM_FILTER_STREAM",
+    "TIMER_FILTER_STREAM",
     "DefenderWrapper",
     "RandomFilter",
+    "TimerFilter",
     "counterfactual_crash_step",
     "counterfactual_terminates",
 ]
@@ -546,3 +548,103 @@ class RandomFilter(DefenderWrapper):
 
 RANDOM_FILTER_STREAM = 0x5EED
 """The second word of :class:`RandomFilter`'s generator seed, ``[seed, RANDOM_FILTER_STREAM]``."""
+
+
+class TimerFilter(DefenderWrapper):
+    """A blind filter that fires at DEFENDER's steps, not at its states: the stronger control
+    for a filter that fires at about the same step of every episode.
+
+    :class:`RandomFilter` fires uniformly over steps; a filter that ends most episodes near
+    one step (DEFENDER with the 20-step cap on a policy whose episodes fall alike,
+    ``studies/03_defender/diagnostics/``) cuts more crashes than that at the same rate by its
+    timing alone. At each reset this filter arms itself with probability ``p_episode`` (the
+    share of the matched run's episodes its filter ended) and then fires at the step drawn
+    from ``step_deciles`` (the deciles of the matched filter's firing steps, as episode
+    lengths: the filtered step included; drawn by linear interpolation between them), whatever
+    the trajectory. An episode that ends before that step is not filtered. A firing is
+    :class:`DefenderWrapper`'s to the letter (the demonstrations' lowest reward, a
+    dynamics-model next state, the counterfactual).
+
+    Args:
+        env, safe_demos, unsafe_demos: as :class:`RandomFilter`.
+        p_episode: the probability that an episode is armed, in [0, 1].
+        step_deciles: 11 non-decreasing episode lengths >= 1, the 0th to 100th percentiles
+            of the matched filter's firing steps.
+        seed: seeds the draws and the dynamics model.
+        counterfactual, filter_reward, dynamics, dynamics_kwargs, dynamics_train_every: as
+            :class:`DefenderWrapper`.
+
+    Raises:
+        ValueError: ``p_episode`` outside [0, 1], deciles that are not 11 finite,
+            non-decreasing values >= 1, and :class:`DefenderWrapper`'s errors.
+
+    Used in: DEFENDER chapter, the timing control of the C7 study.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        safe_demos: Sequence[Any],
+        unsafe_demos: Sequence[Any],
+        *,
+        p_episode: float,
+        step_deciles: Sequence[float],
+        seed: int = 0,
+        counterfactual: bool = False,
+        filter_reward: float | None = None,
+        dynamics: DynamicsModel | None = None,
+        dynamics_kwargs: Mapping[str, Any] | None = None,
+        dynamics_train_every: int | None = None,
+    ) -> None:
+        p_episode = float(p_episode)
+        if not 0.0 <= p_episode <= 1.0:
+            raise ValueError(f"p_episode must be a probability in [0, 1], got {p_episode}.")
+        q = np.asarray(step_deciles, dtype=float)
+        if q.shape != (11,) or not np.isfinite(q).all() or q[0] < 1 or (np.diff(q) < 0).any():
+            raise ValueError(
+                "step_deciles must be 11 finite, non-decreasing episode lengths >= 1 (the 0th to "
+                f"100th percentiles of the matched filter's firing steps), got {list(q)}."
+            )
+        super().__init__(
+            env,
+            safe_demos,
+            unsafe_demos,
+            seed=seed,
+            counterfactual=counterfactual,
+            filter_reward=filter_reward,
+            dynamics=dynamics,
+            dynamics_kwargs=dynamics_kwargs,
+            dynamics_train_every=dynamics_train_every,
+        )
+        self.p_episode, self.step_deciles = p_episode, q
+        self._rng = np.random.default_rng([int(seed), TIMER_FILTER_STREAM])
+        self._fire_at: int | None = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict]:
+        """Reset, and draw whether and at which step this episode is filtered."""
+        out = super().reset(seed=seed, options=options)
+        armed, u = self._rng.random(2)
+        step = np.interp(u, np.linspace(0.0, 1.0, 11), self.step_deciles)
+        self._fire_at = max(1, int(round(step))) if armed < self.p_episode else None
+        return out
+
+    def _decide(self, action: np.ndarray) -> tuple[bool, dict[str, float]]:
+        return self._fire_at is not None and self._length + 1 == self._fire_at, {}
+
+    def state_dict(self) -> dict[str, Any]:
+        """:meth:`DefenderWrapper.state_dict` and the draws' generator (a checkpoint is taken
+        between episodes: the next reset draws again)."""
+        return {**super().state_dict(), "rng": self._rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        self._rng.bit_generator.state = state["rng"]
+
+    def __repr__(self) -> str:
+        return f"TimerFilter({self.env}, p_episode={self.p_episode})"
+
+
+TIMER_FILTER_STREAM = 0x7173
+"""The second word of :class:`TimerFilter`'s generator seed, ``[seed, TIMER_FILTER_STREAM]``."""

@@ -103,6 +103,13 @@ class Config:
     episodes per training step, read from that run's finished record:
     :data:`~thesis_lib.chapters.defender.tasks.MATCHED_RANDOM_STRATEGY`). These runs come
     last in the study's order, after every run they match. False: none (v1-v3)."""
+    timer_filter_matched: bool = False
+    """Study: a control arm, the first of ``algos`` with a blind filter that ends the share of
+    episodes the first of ``state_strategies`` ended in the same seed's and task's run, each at
+    a step drawn from that filter's own firing steps (:class:`~thesis_lib.defender.TimerFilter`,
+    :data:`~thesis_lib.chapters.defender.tasks.MATCHED_TIMER_STRATEGY`): a filter that fires
+    at about the same step of every episode cuts crashes by its timing alone. These runs come
+    last, after the random ones. False: none (v1-v5)."""
 
     def __post_init__(self) -> None:
         from thesis_lib.defender import parse_strategy  # lazy: torch

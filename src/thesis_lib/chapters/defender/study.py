@@ -26,12 +26,15 @@ from thesis_lib.chapters.defender.demos import (
 )
 from thesis_lib.chapters.defender.tasks import (
     MATCHED_RANDOM_STRATEGY,
+    MATCHED_TIMER_STRATEGY,
     RANDOM_STRATEGY,
     RUN_COLUMNS,
+    TIMER_STRATEGY,
     TRAIN_FIELDS,
     random_filter_rate,
     random_strategy,
     runs_from_episodes,
+    timer_strategy,
     train_task,
 )
 from thesis_lib.sweep import Task, TaskStore, task_id
@@ -213,8 +216,8 @@ STUDY_COLUMNS = [
     # study_demonstrations
     "demos_file", "demos_safe", "demos_unsafe", "demos_safe_expert", "demos_unsafe_expert",
     "sac_rollouts_safe", "sac_rollouts_unsafe",
-    # the matched control (study_run)
-    "random_rate", "matched_to",
+    # the matched controls (study_run)
+    "random_rate", "matched_to", "timer_p_episode",
 ]  # fmt: skip
 
 
@@ -229,6 +232,13 @@ def matched_rate(key: str) -> float:
             run it matches: resume the study once that has finished), or the record is
             damaged or not a training run's (:meth:`TaskStore.read`).
     """
+    _, row = _matched_row(key)
+    return float(row["filtered"]) / float(row["steps"])
+
+
+def _matched_row(key: str) -> tuple[Any, dict[str, Any]]:
+    """The path and row of the finished run ``key`` a matched control reads, from any store
+    under ``studies/03_defender/`` (:func:`matched_rate`'s errors)."""
     root = studies_dir(CHAPTER)
     found = sorted(p for p in root.glob(f"**/tasks/{key}.json") if p.parent.name == "tasks")
     if not found:
@@ -243,7 +253,28 @@ def matched_rate(key: str) -> float:
             f"{found[0]} is not a finished DEFENDER training run (one row with 'filtered' and "
             "'steps' > 0), so a matched control cannot take its rate from it"
         )
-    return float(rows[0]["filtered"]) / float(rows[0]["steps"])
+    return found[0], rows[0]
+
+
+def matched_timing(key: str) -> tuple[float, list[float]]:
+    """What the timing control (:data:`MATCHED_TIMER_STRATEGY`) takes from the run it
+    matches, task ``key``: the share of its episodes its filter ended (``filtered_rate``) and
+    the deciles of the steps it ended them at (:data:`FILTER_STEP_COLUMNS`).
+
+    Raises:
+        RuntimeError: as :func:`matched_rate`; or the run's row has no firing steps (a run
+            stored before they were recorded, or whose filter never fired: a control that
+            never fires is then :func:`matched_rate`'s).
+    """
+    path, row = _matched_row(key)
+    deciles = np.array([row.get(c, np.nan) for c in FILTER_STEP_COLUMNS], dtype=float)
+    if not np.isfinite(deciles).all():  # JSON keeps a NaN as NaN, a missing column as absent
+        raise RuntimeError(
+            f"{path} has no firing steps ({FILTER_STEP_COLUMNS[0]}..): its run was stored "
+            "before the study rows recorded them, or its filter never fired, so a timing "
+            "control cannot be matched to it"
+        )
+    return float(row["filtered_rate"]), deciles.tolist()
 
 
 @task_id("thesis_lib.chapters.defender:study_run")
@@ -257,7 +288,9 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
     filter), ``train`` (:data:`TRAIN_FIELDS`), ``eval_episodes``, ``bins`` and, for a scale
     check, ``scale``. A matched control (``strategy`` :data:`MATCHED_RANDOM_STRATEGY`) also has
     ``match``: it fires at :func:`matched_rate` of that run, and its row says the rate
-    (``random_rate``) and the run (``matched_to``).
+    (``random_rate``) and the run (``matched_to``); so has the timing control
+    (:data:`MATCHED_TIMER_STRATEGY`), which fires at that run's own steps
+    (:func:`matched_timing`; its row says ``timer_p_episode`` and ``matched_to``).
 
     Used in: DEFENDER chapter study (``thesis study 03_defender``).
     """
@@ -271,6 +304,14 @@ def study_run(config: dict[str, Any]) -> list[dict[str, Any]]:
         matched = {
             "strategy": config["strategy"],
             "random_rate": rate,
+            "matched_to": config["match"],
+        }
+    elif config["strategy"] == MATCHED_TIMER_STRATEGY:
+        p_episode, deciles = matched_timing(config["match"])
+        run["strategy"] = timer_strategy(p_episode, deciles)
+        matched = {
+            "strategy": config["strategy"],
+            "timer_p_episode": p_episode,
             "matched_to": config["match"],
         }
     rows = train_task(
@@ -402,8 +443,8 @@ def study_task(
     recipe = {f: getattr(cfg, f) for f in DEMO_FIELDS} | {"n_demos": n, "n_demos_list": [n]}
     count = cfg.n_demos if n_demos is None else n_demos
     train = {f: getattr(cfg, f) for f in TRAIN_FIELDS}
-    if not strategy or strategy.startswith(RANDOM_STRATEGY):
-        # the trajectory cap is DEFENDER's own: a plain run or a random filter never reads it,
+    if not strategy or strategy.startswith((RANDOM_STRATEGY, TIMER_STRATEGY)):
+        # the trajectory cap is DEFENDER's own: a plain run or a blind filter never reads it,
         # so their keys (and a later study's reuse of them) do not change with it
         train["max_trajectory"] = None
     config: dict[str, Any] = {
@@ -422,7 +463,7 @@ def study_task(
         "eval_episodes": cfg.eval_episodes,
         "bins": STUDY_CURVE_BINS,
     }
-    if strategy == MATCHED_RANDOM_STRATEGY:
+    if strategy in (MATCHED_RANDOM_STRATEGY, MATCHED_TIMER_STRATEGY):
         if not cfg.state_strategies:
             raise ValueError("the matched control needs a state strategy to match")
         config["match"] = study_task(
@@ -442,7 +483,8 @@ def study_tasks(cfg: Config) -> list[Task]:
     ``random_filter_rates`` (the control, :func:`random_strategy`). The other algorithms (TD3)
     run plain and with the first state strategy, on their ``algo_tasks``. With
     ``random_filter_matched``, the matched controls (:data:`MATCHED_RANDOM_STRATEGY`) come
-    last, seed by seed, after every run they match.
+    last, seed by seed, after every run they match; with ``timer_filter_matched`` the timing
+    controls (:data:`MATCHED_TIMER_STRATEGY`) after them.
 
     Order: the plain runs of the first algorithm for every seed come first, since the study's
     level gates read them alone (plain SAC's return): a gate that fails is then known before
@@ -478,9 +520,11 @@ def study_tasks(cfg: Config) -> list[Task]:
                     tasks.append(study_task(cfg, task, algo, seed, random_strategy(rate)))
     gated = [t.config["algo"] == main and not t.config["strategy"] for t in tasks]
     ordered = [t for t, g in zip(tasks, gated) if g] + [t for t, g in zip(tasks, gated) if not g]
-    if cfg.random_filter_matched:
+    controls = [MATCHED_RANDOM_STRATEGY] if cfg.random_filter_matched else []
+    controls += [MATCHED_TIMER_STRATEGY] if cfg.timer_filter_matched else []
+    for control in controls:
         ordered += [
-            study_task(cfg, task, main, seed, MATCHED_RANDOM_STRATEGY)
+            study_task(cfg, task, main, seed, control)
             for seed in cfg.seeds
             for task in cfg.tasks
             if task in cfg.algo_tasks.get(main, cfg.tasks)

@@ -20,6 +20,7 @@ Used in: DEFENDER chapter (thesis 4.3).
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal, NamedTuple, cast
 
@@ -39,7 +40,7 @@ from thesis_lib.chapters.defender.demos import (
     study_demonstrations,
     thesis_env_name,
 )
-from thesis_lib.defender import DefenderWrapper, DemoRun, DemoSet, RandomFilter
+from thesis_lib.defender import DefenderWrapper, DemoRun, DemoSet, RandomFilter, TimerFilter
 from thesis_lib.defender.ablation import strategy_ablation
 from thesis_lib.rl import config_from_params, evaluate, train
 from thesis_lib.sweep import Task, note_resumed_cpu, run_tasks, task_id, task_scratch
@@ -169,8 +170,14 @@ def train_run(
             "batch_size": cfg.batch_size,
         },
     }
+    timing = timer_filter_params(strategy)
     if demos is not None and rate is not None:  # the control: a filter firing at random
         env = RandomFilter(env, demos.safe, demos.unsafe, rate=rate, **filter_kwargs)
+    elif demos is not None and timing is not None:  # the control: firing at DEFENDER's steps
+        env = TimerFilter(
+            env, demos.safe, demos.unsafe, p_episode=timing[0], step_deciles=timing[1],
+            **filter_kwargs,
+        )  # fmt: skip
     elif demos is not None and strategy is not None:
         safe_s, unsafe_s = strategy.split("/")
         env = DefenderWrapper(
@@ -266,6 +273,50 @@ def random_filter_rate(strategy: str | None) -> float | None:
             "matches (thesis_lib.chapters.defender.study.matched_rate)."
         )
     return float(strategy[len(RANDOM_STRATEGY) :])
+
+
+TIMER_STRATEGY = "timer:"
+"""The prefix of a timing control's ``strategy``: ``"timer:0.6:50,51,...,58"`` is a blind filter
+that arms 60% of the episodes and fires in each at a step drawn from those 11 deciles
+(:class:`~thesis_lib.defender.TimerFilter`)."""
+
+
+MATCHED_TIMER_STRATEGY = "timer:matched"
+"""The ``strategy`` of the timing control (``Config.timer_filter_matched``): a blind filter
+that ends the share of episodes DEFENDER ended in the run it matches, each at a step drawn
+from that filter's own firing steps. The study resolves it to a :func:`timer_strategy` when
+the run starts (:func:`~thesis_lib.chapters.defender.study.matched_timing`); it never reaches
+:func:`train_run`."""
+
+
+def timer_strategy(p_episode: float, step_deciles: Sequence[float]) -> str:
+    """The ``strategy`` of the timing control: arm a share ``p_episode`` of the episodes, fire
+    at a step drawn from ``step_deciles`` (11 values).
+
+    >>> timer_strategy(0.5, [50, 51, 52, 53, 54, 54, 55, 56, 57, 58, 60])
+    'timer:0.5:50,51,52,53,54,54,55,56,57,58,60'
+    """
+    steps = ",".join(f"{float(q):g}" for q in step_deciles)
+    return f"{TIMER_STRATEGY}{float(p_episode):g}:{steps}"
+
+
+def timer_filter_params(strategy: str | None) -> tuple[float, list[float]] | None:
+    """``(p_episode, step_deciles)`` of a :func:`timer_strategy`, None for any other strategy.
+
+    >>> timer_filter_params("timer:0.5:" + ",".join(["7"] * 11))[0]
+    0.5
+    >>> timer_filter_params("MeanDemoW5/MeanDemoW10") is None
+    True
+    """
+    if not strategy or not strategy.startswith(TIMER_STRATEGY):
+        return None
+    if strategy == MATCHED_TIMER_STRATEGY:
+        raise ValueError(
+            f"{strategy!r} has no steps of its own: the study resolves it from the run it "
+            "matches (thesis_lib.chapters.defender.study.matched_timing)."
+        )
+    p, _, steps = strategy[len(TIMER_STRATEGY) :].partition(":")
+    return float(p), [float(q) for q in steps.split(",")]
 
 
 def _run_numbers(ep: pd.DataFrame) -> dict[str, Any]:
