@@ -1,7 +1,8 @@
-"""The DEFENDER chapter's fifth study (defender-c7c9-v5, params/03_defender.v5.study.yml) before
-it completes: its grid (the plain runs are v4's, each control matches its seed's filter and
-runs last), and its comparisons and gates on hand-made rows shaped as its tasks make them, so
-that the verdicts its rows will get are known to follow CLAIMS.md's rules (a control not
+"""The DEFENDER chapter's fifth and sixth studies (defender-c7c9-v5 and -v6,
+params/03_defender.v5.study.yml and .v6) before they complete: their grids (the plain runs are
+v4's, each control matches its seed's filter and runs last, v6 is v5 plus the timing
+controls), and their comparisons and gates on hand-made rows shaped as their tasks make them,
+so that the verdicts their rows will get are known to follow CLAIMS.md's rules (a control not
 beaten, a floor, a filter that does not act: untestable) before 24 CPU-hours are spent."""
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from thesis_lib.chapters import CHAPTERS
 REPO = Path(__file__).resolve().parents[1]
 FILTER = "SAC+MeanDemoW5/MeanDemoW10"
 CONTROL = "SAC+random:matched"
+TIMER = "SAC+timer:matched"
 #: Per method: crashes per 1,000 training steps, final eval score (% of the thesis's SAC), the
 #: share of training episodes a filter ended, ln(training steps per CPU-second).
 GOOD = {
@@ -25,6 +27,7 @@ GOOD = {
     f"{FILTER} state-action": (3.5, 64.0, 0.55, 3.90),
     f"{FILTER} n=10": (3.5, 65.0, 0.50, 4.10),
     CONTROL: (4.0, 60.0, 0.60, 4.20),
+    TIMER: (3.5, 60.0, 0.60, 4.20),
 }
 
 
@@ -48,7 +51,11 @@ def _rows(study, levels: dict[str, tuple[float, float, float, float]]) -> pd.Dat
     for t in _tasks(study):
         c = t.config
         crashes, score, filtered, speed = levels[c["label"]]
-        demos = c["strategy"] not in (None, CONTROL.removeprefix("SAC+"))
+        demos = c["strategy"] not in (
+            None,
+            CONTROL.removeprefix("SAC+"),
+            TIMER.removeprefix("SAC+"),
+        )
         rows.append(
             {
                 "method": c["label"],
@@ -144,3 +151,40 @@ def test_filters_that_barely_act_withhold_the_crash_comparisons_of_c8_and_c9(v5)
     one = {**quiet, FILTER: GOOD[FILTER]}
     res, _ = _verdicts(v5, _rows(v5, one))
     assert _by_label(res, "crashes per 1,000 training steps, 10 vs 50")["validity"] == "valid"
+
+
+@pytest.fixture
+def v6(monkeypatch):
+    from thesis_lib.book import study as st
+
+    monkeypatch.setenv("THESIS_PROJECT_ROOT", str(REPO))
+    return st.load_study("03_defender:v6")
+
+
+def test_v6_is_v5_and_a_timing_control_per_seed_run_last(v5, v6):
+    tasks5, tasks6 = _tasks(v5), _tasks(v6)
+    assert [t.key for t in tasks6[:31]] == [t.key for t in tasks5]  # every v5 task, reused
+    timers = tasks6[31:]
+    assert [t.config["label"] for t in timers] == [TIMER] * 5
+    random = {t.config["seed"]: t.config["match"] for t in tasks5 if t.config["label"] == CONTROL}
+    assert {t.config["seed"]: t.config["match"] for t in timers} == random  # the same runs
+    assert v6.supersedes == v5.study and "03_defender:v5" in v6.reuse
+
+
+def test_v6_decides_c7_where_the_filter_beats_both_controls(v6):
+    res, verdicts = _verdicts(v6, _rows(v6, GOOD))
+    decided = res[res["counts"].astype(bool)]
+    assert (decided["validity"] == "valid").all(), decided[["label", "gates"]].to_string()
+    assert verdicts == {"C7": "holds", "C8": "holds", "C9": "holds"}
+
+
+def test_v6_withholds_c7_where_a_blind_filter_at_its_steps_does_as_well(v6):
+    """Beating the random control is not enough: a filter whose crash cut a timer firing at
+    its own steps matches has shown its timing, not its knowledge of the fall."""
+    levels = {**GOOD, TIMER: (2.0, 60.0, 0.60, 4.20)}
+    res, verdicts = _verdicts(v6, _rows(v6, levels))
+    crash = _by_label(res, "crashes per 1,000 training steps, SAC without vs with")
+    assert crash["validity"] == "untestable"
+    assert "FAILED control: SAC+timer:matched" in crash["gates"]
+    assert "passed control: SAC+random:matched" in crash["gates"]
+    assert verdicts == {"C7": "untestable", "C8": "holds", "C9": "holds"}
