@@ -1,7 +1,7 @@
 """``thesis defender lookahead``: how far ahead of a crash DEFENDER fires, for a saved policy.
 
     thesis defender lookahead studies/03_defender/v5/tasks/partial/<key>/step-*/model.zip \\
-        [--study 03_defender:v5] [--strategy MeanDemoW5/MeanDemoW10] [--trajectory state] \\
+        [--study 03_defender:v6] [--strategy MeanDemoW5/MeanDemoW10] [--trajectory state] \\
         [--n-demos 50] [--steps 20000] [--lookahead 1,5,10,20,50,100] [--seed 0] [--out t.csv]
 
 It prints the table of :func:`thesis_lib.chapters.defender.lookahead.filter_lookahead` (the
@@ -95,7 +95,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     la.add_argument("model", help="a stable-baselines3 model.zip (a study checkpoint's)")
     la.add_argument(
-        "--study", default="03_defender:v5", help="the study whose task and demos to use"
+        "--study", default="03_defender:v6", help="the study whose task and demos to use"
     )
     la.add_argument("--strategy", help="<safe>/<unsafe> methods; default the study's first")
     la.add_argument("--trajectory", choices=["state", "state_action"], default="state")

@@ -256,7 +256,7 @@ def lookahead_table(
 
 def study_lookahead(
     model: str | Path,
-    study: str = "03_defender:v5",
+    study: str = "03_defender:v6",
     strategy: str | None = None,
     trajectory: str = "state",
     n_demos: int | None = None,
