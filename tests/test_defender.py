@@ -986,6 +986,35 @@ def test_timer_filter_fires_at_its_drawn_steps_in_its_share_of_episodes(walk_dem
         TimerFilter(CountingEnv(), safe, unsafe, p_episode=1.5, step_deciles=[5] * 11)
 
 
+def test_timer_filter_resumed_after_a_reset_draws_that_reset_again(walk_demos):
+    """A checkpoint is taken after the next episode's reset and that reset is made again on
+    resume (thesis_lib.rl.resume): the resumed filter draws the same firing steps."""
+    from thesis_lib.defender import TimerFilter
+
+    safe, unsafe = walk_demos
+    deciles = [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
+
+    def make():
+        env = gym.wrappers.TimeLimit(CountingEnv(), 12)
+        return TimerFilter(env, safe, unsafe, p_episode=0.7, step_deciles=deciles, seed=3)
+
+    a = make()
+    for _ in range(5):
+        a.reset(seed=0)
+    state = a.state_dict()  # after the 5th reset
+    after = []
+    for _ in range(20):
+        after.append(a._fire_at)
+        a.reset(seed=0)
+    b = make()
+    b.load_state_dict(state)
+    redone = []
+    for _ in range(20):
+        b.reset(seed=0)  # the first one is the 5th reset, made again
+        redone.append(b._fire_at)
+    assert redone == after and len(set(after)) > 2
+
+
 def test_random_filter_state_dict_continues_the_same_draws(walk_demos):
     from thesis_lib.defender import RandomFilter
 

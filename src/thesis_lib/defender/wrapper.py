@@ -618,6 +618,7 @@ class TimerFilter(DefenderWrapper):
         )
         self.p_episode, self.step_deciles = p_episode, q
         self._rng = np.random.default_rng([int(seed), TIMER_FILTER_STREAM])
+        self._rng_before_reset = dict(self._rng.bit_generator.state)
         self._fire_at: int | None = None
 
     def reset(
@@ -625,6 +626,7 @@ class TimerFilter(DefenderWrapper):
     ) -> tuple[Any, dict]:
         """Reset, and draw whether and at which step this episode is filtered."""
         out = super().reset(seed=seed, options=options)
+        self._rng_before_reset = dict(self._rng.bit_generator.state)
         armed, u = self._rng.random(2)
         step = np.interp(u, np.linspace(0.0, 1.0, 11), self.step_deciles)
         self._fire_at = max(1, int(round(step))) if armed < self.p_episode else None
@@ -634,13 +636,16 @@ class TimerFilter(DefenderWrapper):
         return self._fire_at is not None and self._length + 1 == self._fire_at, {}
 
     def state_dict(self) -> dict[str, Any]:
-        """:meth:`DefenderWrapper.state_dict` and the draws' generator (a checkpoint is taken
-        between episodes: the next reset draws again)."""
-        return {**super().state_dict(), "rng": self._rng.bit_generator.state}
+        """:meth:`DefenderWrapper.state_dict` and the draws' generator as it was before the
+        last reset: a checkpoint is taken between episodes, after the next episode's reset, and
+        on resume that reset is made again (:mod:`thesis_lib.rl.resume`), so it draws again
+        what it drew."""
+        return {**super().state_dict(), "rng": dict(self._rng_before_reset)}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         super().load_state_dict(state)
         self._rng.bit_generator.state = state["rng"]
+        self._rng_before_reset = dict(state["rng"])
 
     def __repr__(self) -> str:
         return f"TimerFilter({self.env}, p_episode={self.p_episode})"
