@@ -283,6 +283,13 @@ def test_a_timing_control_fires_at_the_steps_its_run_fired_at(tmp_path, monkeypa
     assert "timer_p_episode" in ex.STUDY_COLUMNS
     with pytest.raises(ValueError, match="resolves it from the run it matches"):
         ex.timer_filter_params(ex.MATCHED_TIMER_STRATEGY)
+    # a filter that never fired (its deciles NaN) is matched by a timer that never fires
+    nan = dict.fromkeys(ex.FILTER_STEP_COLUMNS, float("nan"))
+    record["rows"] = [{"filtered": 0, "steps": 200, "filtered_rate": 0.0, **nan}]
+    (store / f"{key}.json").write_text(json.dumps(record))
+    assert ex.matched_timing(key)[0] == 0.0
+    (row,) = ex.study_run(control.config)
+    assert row["filtered"] == 0 and row["timer_p_episode"] == 0.0
 
 
 def test_study_config_errors():

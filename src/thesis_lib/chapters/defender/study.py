@@ -261,18 +261,20 @@ def matched_timing(key: str) -> tuple[float, list[float]]:
     matches, task ``key``: the share of its episodes its filter ended (``filtered_rate``) and
     the deciles of the steps it ended them at (:data:`FILTER_STEP_COLUMNS`).
 
+    A filter that never fired is matched by a timer that never fires (``p_episode`` 0).
+
     Raises:
-        RuntimeError: as :func:`matched_rate`; or the run's row has no firing steps (a run
-            stored before they were recorded, or whose filter never fired: a control that
-            never fires is then :func:`matched_rate`'s).
+        RuntimeError: as :func:`matched_rate`; or the run fired but its row has no firing
+            steps (a run stored before the study rows recorded them).
     """
     path, row = _matched_row(key)
+    if not row["filtered"]:
+        return 0.0, [1.0] * len(FILTER_STEP_COLUMNS)
     deciles = np.array([row.get(c, np.nan) for c in FILTER_STEP_COLUMNS], dtype=float)
     if not np.isfinite(deciles).all():  # JSON keeps a NaN as NaN, a missing column as absent
         raise RuntimeError(
             f"{path} has no firing steps ({FILTER_STEP_COLUMNS[0]}..): its run was stored "
-            "before the study rows recorded them, or its filter never fired, so a timing "
-            "control cannot be matched to it"
+            "before the study rows recorded them, so a timing control cannot be matched to it"
         )
     return float(row["filtered_rate"]), deciles.tolist()
 
