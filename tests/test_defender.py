@@ -949,7 +949,7 @@ def test_timer_filter_fires_at_its_drawn_steps_in_its_share_of_episodes(walk_dem
     safe, unsafe = walk_demos
     step = np.array([0.0], np.float32)
 
-    def lengths(p, deciles, seed=0, episodes=400):
+    def lengths(p, deciles, seed=0, episodes=150):
         env = TimerFilter(
             gym.wrappers.TimeLimit(CountingEnv(), 12),
             safe, unsafe, p_episode=p, step_deciles=deciles, seed=seed,
@@ -970,14 +970,14 @@ def test_timer_filter_fires_at_its_drawn_steps_in_its_share_of_episodes(walk_dem
         return out, env
 
     fixed, env = lengths(1.0, [5] * 11)
-    assert fixed == [5] * 400 and env.n_filtered_steps == 400
+    assert fixed == [5] * 150 and env.n_filtered_steps == 150
     spread, _ = lengths(1.0, [2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7])
     assert set(spread) == {2, 3, 4, 5, 6, 7} and abs(np.median(spread) - 4.5) <= 0.5
     half, _ = lengths(0.5, [5] * 11)
-    armed = sum(x == 5 for x in half)  # 400 Bernoulli(0.5): 200 +- 10; a 5-sigma band
-    assert abs(armed - 200) < 5 * 10 and set(half) == {5, None}
+    armed = sum(x == 5 for x in half)  # 150 Bernoulli(0.5): 75 +- 6.1; a 5-sigma band
+    assert abs(armed - 75) < 5 * np.sqrt(150 * 0.25) and set(half) == {5, None}
     late, _ = lengths(1.0, [30] * 11)  # past the horizon: the episode ends first, unfiltered
-    assert late == [None] * 400
+    assert late == [None] * 150
     assert lengths(0.5, [5] * 11, seed=1)[0] != half and lengths(0.5, [5] * 11)[0] == half
     for bad in ([5] * 10, [0] + [5] * 10, [6, 5] + [5] * 9, [5] * 10 + [float("nan")]):
         with pytest.raises(ValueError, match="step_deciles must be 11"):
