@@ -471,7 +471,55 @@ class DefenderWrapper(gym.Wrapper):
         )
 
 
-class RandomFilter(DefenderWrapper):
+class _BlindFilter(DefenderWrapper):
+    """A filter that fires without reading the trajectory (the controls :class:`RandomFilter`
+    and :class:`TimerFilter`): :class:`DefenderWrapper` to the letter when it fires, its
+    decisions drawn from its own generator, seeded ``[seed, stream]`` (the dynamics model's
+    torch generator is seeded with ``seed`` too), which a checkpoint saves (:meth:`_rng_state`).
+    ``counterfactual``, ``filter_reward``, ``dynamics``, ``dynamics_kwargs`` and
+    ``dynamics_train_every`` are :class:`DefenderWrapper`'s."""
+
+    def __init__(
+        self,
+        env: gym.Env,
+        safe_demos: Sequence[Any],
+        unsafe_demos: Sequence[Any],
+        *,
+        stream: int,
+        seed: int = 0,
+        counterfactual: bool = False,
+        filter_reward: float | None = None,
+        dynamics: DynamicsModel | None = None,
+        dynamics_kwargs: Mapping[str, Any] | None = None,
+        dynamics_train_every: int | None = None,
+    ) -> None:
+        super().__init__(
+            env,
+            safe_demos,
+            unsafe_demos,
+            seed=seed,
+            counterfactual=counterfactual,
+            filter_reward=filter_reward,
+            dynamics=dynamics,
+            dynamics_kwargs=dynamics_kwargs,
+            dynamics_train_every=dynamics_train_every,
+        )
+        self._rng = np.random.default_rng([int(seed), stream])
+
+    def _rng_state(self) -> dict[str, Any]:
+        """The generator's state a checkpoint saves: its state now."""
+        return dict(self._rng.bit_generator.state)
+
+    def state_dict(self) -> dict[str, Any]:
+        """:meth:`DefenderWrapper.state_dict` and the draws' generator (:meth:`_rng_state`)."""
+        return {**super().state_dict(), "rng": self._rng_state()}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        self._rng.bit_generator.state = state["rng"]
+
+
+class RandomFilter(_BlindFilter):
     """A filter that fires at random: the control of CLAIMS.md for DEFENDER ("a filter firing
     at random at the same rate").
 
@@ -507,40 +555,18 @@ class RandomFilter(DefenderWrapper):
         *,
         rate: float,
         seed: int = 0,
-        counterfactual: bool = False,
-        filter_reward: float | None = None,
-        dynamics: DynamicsModel | None = None,
-        dynamics_kwargs: Mapping[str, Any] | None = None,
-        dynamics_train_every: int | None = None,
+        **options: Any,
     ) -> None:
         rate = float(rate)
         if not 0.0 <= rate < 1.0:
             raise ValueError(f"rate must be a probability in [0, 1), got {rate}.")
         super().__init__(
-            env,
-            safe_demos,
-            unsafe_demos,
-            seed=seed,
-            counterfactual=counterfactual,
-            filter_reward=filter_reward,
-            dynamics=dynamics,
-            dynamics_kwargs=dynamics_kwargs,
-            dynamics_train_every=dynamics_train_every,
+            env, safe_demos, unsafe_demos, stream=RANDOM_FILTER_STREAM, seed=seed, **options
         )
         self.rate = rate
-        # its own stream: the dynamics model's torch generator is seeded with `seed` too
-        self._rng = np.random.default_rng([int(seed), RANDOM_FILTER_STREAM])
 
     def _decide(self, action: np.ndarray) -> tuple[bool, dict[str, float]]:
         return bool(self._rng.random() < self.rate), {}
-
-    def state_dict(self) -> dict[str, Any]:
-        """:meth:`DefenderWrapper.state_dict` and the firing draws' generator."""
-        return {**super().state_dict(), "rng": self._rng.bit_generator.state}
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        super().load_state_dict(state)
-        self._rng.bit_generator.state = state["rng"]
 
     def __repr__(self) -> str:
         return f"RandomFilter({self.env}, rate={self.rate})"
@@ -550,7 +576,7 @@ RANDOM_FILTER_STREAM = 0x5EED
 """The second word of :class:`RandomFilter`'s generator seed, ``[seed, RANDOM_FILTER_STREAM]``."""
 
 
-class TimerFilter(DefenderWrapper):
+class TimerFilter(_BlindFilter):
     """A blind filter that fires at DEFENDER's steps, not at its states: the stronger control
     for a filter that fires at about the same step of every episode.
 
@@ -590,11 +616,7 @@ class TimerFilter(DefenderWrapper):
         p_episode: float,
         step_deciles: Sequence[float],
         seed: int = 0,
-        counterfactual: bool = False,
-        filter_reward: float | None = None,
-        dynamics: DynamicsModel | None = None,
-        dynamics_kwargs: Mapping[str, Any] | None = None,
-        dynamics_train_every: int | None = None,
+        **options: Any,
     ) -> None:
         p_episode = float(p_episode)
         if not 0.0 <= p_episode <= 1.0:
@@ -606,18 +628,9 @@ class TimerFilter(DefenderWrapper):
                 f"100th percentiles of the matched filter's firing steps), got {list(q)}."
             )
         super().__init__(
-            env,
-            safe_demos,
-            unsafe_demos,
-            seed=seed,
-            counterfactual=counterfactual,
-            filter_reward=filter_reward,
-            dynamics=dynamics,
-            dynamics_kwargs=dynamics_kwargs,
-            dynamics_train_every=dynamics_train_every,
+            env, safe_demos, unsafe_demos, stream=TIMER_FILTER_STREAM, seed=seed, **options
         )
         self.p_episode, self.step_deciles = p_episode, q
-        self._rng = np.random.default_rng([int(seed), TIMER_FILTER_STREAM])
         self._rng_before_reset = dict(self._rng.bit_generator.state)
         self._fire_at: int | None = None
 
@@ -635,16 +648,14 @@ class TimerFilter(DefenderWrapper):
     def _decide(self, action: np.ndarray) -> tuple[bool, dict[str, float]]:
         return self._fire_at is not None and self._length + 1 == self._fire_at, {}
 
-    def state_dict(self) -> dict[str, Any]:
-        """:meth:`DefenderWrapper.state_dict` and the draws' generator as it was before the
-        last reset: a checkpoint is taken between episodes, after the next episode's reset, and
-        on resume that reset is made again (:mod:`thesis_lib.rl.resume`), so it draws again
-        what it drew."""
-        return {**super().state_dict(), "rng": dict(self._rng_before_reset)}
+    def _rng_state(self) -> dict[str, Any]:
+        """The generator as it was before the last reset: a checkpoint is taken between
+        episodes, after the next episode's reset, and on resume that reset is made again
+        (:mod:`thesis_lib.rl.resume`), so it draws again what it drew."""
+        return dict(self._rng_before_reset)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         super().load_state_dict(state)
-        self._rng.bit_generator.state = state["rng"]
         self._rng_before_reset = dict(state["rng"])
 
     def __repr__(self) -> str:
