@@ -48,6 +48,12 @@ and 1.2-1.55x at d64 with 2 (two days). The cheaper dropout mask and fused AdamW
 ``TrainConfig(kernels="fast")`` (32-bit lanes, exact to 2^-32); on top of bfloat16 they take
 a tenth to a fifth off a transformer's step (2026-11-29).
 
+Does bfloat16 change that? (2026-12-02, beside a running two-process study, d64 with 2 layers,
+the v2 studies' size, 20 updates x 4 repeats in turns.) One ``Trainer.step`` at batch 320 against
+batch 64 costs 4.72x in float32 and 4.25x in bf16 with the fast kernels for the DT (346.5
+against 73.5 ms, 232.5 against 54.7), 4.28x and 4.31x for the HDT. Stacking five seeds could
+save at most 15% on top of bf16+fast: with it, about 1.45 x 1.15 = 1.7x, still short of 2x.
+
     python benchmarks/bench_ensemble.py                 # 5 seeds, d32, 1 layer, batch 64
     python benchmarks/bench_ensemble.py --d-model 128 --n-layer 3
 """
