@@ -39,6 +39,36 @@ def test_stratified_intervals_agree_with_rliable_to_monte_carlo_error(name, fn, 
     assert hi == pytest.approx(RL[name][1], abs=tol)
 
 
+@pytest.mark.parametrize("shape", [(2, 1), (5, 1), (5, 4), (30, 2)])
+@pytest.mark.parametrize("stat", [stats.mean, stats.iqm, stats.probability_of_improvement])
+def test_batched_statistics_give_the_intervals_of_one_call_per_resample(stat, shape):
+    """The vectorised statistics (``stats.BATCHED``) see the same resamples and give the same
+    numbers, bit for bit: a study's verdicts do not move with the speed-up. Rounded scores make
+    ties, which the probability of improvement counts as halves."""
+    rng = np.random.default_rng(shape[0] * 10 + shape[1])
+    x = np.round(rng.normal(size=shape) * 2)
+    y = np.round(rng.normal(size=(shape[0] + 1, shape[1])) * 2)
+    args = (x, y) if stat is stats.probability_of_improvement else (x,)
+    one_by_one = stats.bootstrap_ci(stat, *args, reps=700, seed=3)
+    assert stats.bootstrap_ci(stat, *args, reps=700, seed=3, batched=stats.BATCHED[stat]) == (
+        one_by_one
+    )
+
+
+def test_mean_interval_is_the_bootstrap_of_the_mean_and_says_nan_under_two_values():
+    v = [3.0, 1.0, 4.0, 1.0, 5.0]
+    assert stats.mean_interval(v, reps=500, seed=2) == stats.bootstrap_ci(
+        stats.mean, np.array(v)[:, None], reps=500, seed=2
+    )
+    assert all(np.isnan(x) for x in stats.mean_interval([]))
+    m, lo, hi = stats.mean_interval([7.0])
+    assert m == 7.0 and np.isnan(lo) and np.isnan(hi)
+    with pytest.raises(ValueError, match="NaN or inf"):
+        stats.mean_interval([1.0, np.nan])
+    with pytest.raises(ValueError, match="batched must return 50 values"):
+        stats.bootstrap_ci(stats.mean, np.ones((3, 1)), reps=50, batched=lambda a: a.mean())
+
+
 def test_probability_of_improvement_by_hand():
     # pairs (x > y): 1:0 2:0.5 3:1 ... 4.5 of 9; second setting: x always better
     x = np.array([[1.0, 10.0], [2.0, 11.0], [3.0, 12.0]])

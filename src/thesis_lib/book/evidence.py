@@ -38,7 +38,7 @@ from thesis_lib.book import study as st
 from thesis_lib.book.chapter import Chapter
 from thesis_lib.paths import project_root
 from thesis_lib.provenance import git_output
-from thesis_lib.stats import aggregate_interval, bootstrap_ci, performance_profile, score_matrix
+from thesis_lib.stats import aggregate_interval, mean_interval, performance_profile, score_matrix
 from thesis_lib.stats.claims import CLAIMS, VERDICT_COLOURS, claim_verdicts, evaluate_comparisons
 
 __all__ = [
@@ -278,15 +278,6 @@ def code_changes_since(ev: Evidence) -> pd.DataFrame | None:
     return out
 
 
-def _mean_ci(values: np.ndarray, reps: int, seed: int = 0) -> tuple[float, float, float]:
-
-    v = np.asarray(values, dtype=float)
-    if len(v) < 2:
-        m = float(v.mean()) if len(v) else np.nan
-        return m, np.nan, np.nan
-    return bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps, seed=seed)
-
-
 def input_versions(ev: Evidence, column: str) -> pd.DataFrame:
     """The versions of one input the study's rows record (``column``: a hash such as
     ``data_sha``), with how many rows and which seeds saw each, the most used first.
@@ -339,7 +330,7 @@ def per_setting_table(
     df = df[df[metric].notna()]
     out = []
     for k, g in df.groupby(keys, sort=False):
-        mean, lo, hi = _mean_ci(g[metric].to_numpy(), reps)
+        mean, lo, hi = mean_interval(g[metric].to_numpy(), reps)
         r = dict(zip(keys, k if isinstance(k, tuple) else (k,)))
         r |= {"mean": mean, "ci_low": lo, "ci_high": hi, "seeds": g[c["seed"]].nunique()}
         if secondary and secondary in g:

@@ -8,14 +8,12 @@ Used in: chapter 02_clfd.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import pandas as pd
 
 from thesis_lib.book import compare_with_paper
 from thesis_lib.chapters.clfd.config import Config
-from thesis_lib.stats import bootstrap_ci
+from thesis_lib.stats import mean_interval
 
 
 def compare_table_4_1(table: pd.DataFrame, differs: dict[str, str]) -> pd.DataFrame:
@@ -102,14 +100,6 @@ def describe_numbers(t41: pd.DataFrame, compat: pd.DataFrame, t42: pd.DataFrame)
 # -- the study's rows (thesis_lib.chapters.clfd.tasks.study_tasks) ---------------------------------
 
 
-def mean_ci(values: Any, reps: int = 2000) -> tuple[float, float, float]:
-    """The mean of ``values`` and its 95% bootstrap interval (NaN bounds under two values)."""
-    v = np.asarray(values, dtype=float)
-    if len(v) < 2:
-        return (float(v.mean()) if len(v) else np.nan), np.nan, np.nan
-    return bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps, seed=0)
-
-
 def compare_study_tables(
     rows: pd.DataFrame, differs: dict[str, str]
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -130,7 +120,7 @@ def compare_study_tables(
         out = []
         c10 = rows[rows["claim"] == "C10"]  # mid-study: maybe no alignment row (nor column) yet
         for (enc, m), g in c10.groupby(["encoder", "method"], sort=False) if len(c10) else []:
-            mean, lo, hi = mean_ci(g["alignment_error_pct"])
+            mean, lo, hi = mean_interval(g["alignment_error_pct"])
             out.append(
                 ["PickPlace", enc, m, mean, lo, hi, g["seed"].nunique(), g["val_best_pct"].mean()]
             )
@@ -139,7 +129,7 @@ def compare_study_tables(
         c11 = c11[c11["features"] == "CLfD"] if "features" in c11 else c11.iloc[:0]
         out = []
         for v, g in c11.groupby("method", sort=False):
-            mean, lo, hi = mean_ci(g["stage_accuracy"])
+            mean, lo, hi = mean_interval(g["stage_accuracy"])
             out.append([v, mean, lo, hi, g["seed"].nunique()])
         t42 = pd.DataFrame(out, columns=t42.columns) if out else t42
     extra41 = ["dataset", "encoder", "method", "ci_low", "ci_high", "seeds", "val_best_pct"]
@@ -196,5 +186,5 @@ def summarize_study_rl_curves(rows: pd.DataFrame) -> pd.DataFrame:
         for episode, col in curve:
             v = g[col].dropna()
             if len(v):
-                out.append([m, episode, *mean_ci(v), g.loc[v.index, "seed"].nunique()])
+                out.append([m, episode, *mean_interval(v), g.loc[v.index, "seed"].nunique()])
     return pd.DataFrame(out, columns=cols)

@@ -26,7 +26,7 @@ from thesis_lib.defender import (
     shipped_expert_label,
 )
 from thesis_lib.defender.ablation import rank_strategies
-from thesis_lib.stats import bootstrap_ci
+from thesis_lib.stats import mean_interval
 
 
 def scale_note(cfg: Config) -> str:
@@ -377,10 +377,7 @@ def summarize_study_curves(rows: pd.DataFrame, reps: int = 1000) -> pd.DataFrame
         for b in spans:
             for measure in ("crash_rate", "filtered_rate", "return"):
                 v = g[f"{measure}_b{b}"].dropna().to_numpy(dtype=float)
-                if len(v) >= 2:
-                    m, lo, hi = bootstrap_ci(lambda a: float(a.mean()), v[:, None], reps=reps)
-                else:
-                    m, lo, hi = (float(v.mean()) if len(v) else np.nan), np.nan, np.nan
+                m, lo, hi = mean_interval(v, reps=reps)
                 out.append(
                     {
                         "method": method,
