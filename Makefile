@@ -63,12 +63,15 @@ ladder: $(STAMP)
 
 # The tests run in $(JOBS) pytest-xdist workers, a test file to a worker (--dist loadfile: a
 # file's module fixtures are made once, and the chapter runs of test_chapters.py stay on one
-# worker, which runs them 2 at a time). `pytest` alone runs them in one process.
+# worker, which runs them 2 at a time, longest first). --no-loadscope-reorder hands the files
+# out in collection order, where tests/conftest.py puts test_chapters.py first: the chapter
+# runs start at once. `pytest` alone runs them in one process.
+XDIST := -n $(JOBS) --dist loadfile --no-loadscope-reorder
 test: $(STAMP)
-	$(PY) -m pytest -n $(JOBS) --dist loadfile
+	$(PY) -m pytest $(XDIST)
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -n $(JOBS) --dist loadfile -m "not slow"
+	$(PY) -m pytest $(XDIST) -m "not slow"
 
 LINT_PATHS := src tests benchmarks notebooks book/_ext
 

@@ -54,6 +54,14 @@ def pytest_sessionfinish(session, exitstatus):
         shutil.rmtree(private, ignore_errors=True)
 
 
+def pytest_collection_modifyitems(session, config, items):
+    """The chapters' smoke runs (``test_chapters.py``, a third of `make test`'s CPU, run two at a
+    time by one worker) come first, so that they start at once rather than after the worker's
+    earlier files; with ``--dist loadfile --no-loadscope-reorder`` (the Makefile's), xdist hands
+    out the files in this order. The rest keep pytest's order."""
+    items.sort(key=lambda item: 0 if item.nodeid.startswith("tests/test_chapters.py") else 1)
+
+
 @pytest.fixture(autouse=True, scope="session")
 def _one_torch_thread():
     """Small models run faster on one thread, and a busy 2-core CI machine has no spare core."""

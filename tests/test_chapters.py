@@ -19,7 +19,8 @@ import nbformat
 import pytest
 
 from thesis_lib.book import list_chapters, project_root, run_chapters
-from thesis_lib.book.runner import GENERATED, build_book
+from thesis_lib.book.runner import GENERATED, build_book, start_order
+from thesis_lib.chapters import CHAPTERS as REGISTRY
 
 ROOT = project_root()
 CHAPTERS = list_chapters(ROOT)
@@ -36,6 +37,17 @@ def test_committed_notebooks_carry_no_outputs():
         assert len(tagged) == 1, f"{path.name} needs exactly one cell tagged 'parameters'"
 
 
+def test_every_chapter_has_a_smoke_cost_and_the_longest_start_first():
+    """``run_chapters`` starts the longest smoke runs first (``Chapter.smoke_s``), so that the
+    book's and `make test`'s chapter runs do not end with one long chapter running alone."""
+    assert set(CHAPTERS) <= set(REGISTRY)
+    assert all(REGISTRY[c].smoke_s > 0 for c in CHAPTERS)
+    order = start_order(CHAPTERS, REGISTRY)
+    assert sorted(order) == sorted(CHAPTERS)
+    costs = [REGISTRY[c].smoke_s for c in order]
+    assert costs == sorted(costs, reverse=True)
+
+
 @pytest.fixture(scope="session")
 def executed(tmp_path_factory):
     """Run every chapter once (smoke profile, 2 processes), results into a temporary folder, with
@@ -50,7 +62,7 @@ def executed(tmp_path_factory):
     mp.setenv("TMPDIR", str(temp))
     mp.setattr(tempfile, "tempdir", None)  # this process reads TMPDIR again too
     try:
-        runs = run_chapters(CHAPTERS, jobs=2, profile="smoke", root=ROOT)
+        runs = run_chapters(CHAPTERS, registry=REGISTRY, jobs=2, profile="smoke", root=ROOT)
     finally:
         mp.undo()
         tempfile.tempdir = None

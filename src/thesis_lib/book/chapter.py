@@ -51,11 +51,16 @@ class Chapter:
             ``params/04_hdt.*.yml``, ``results/04_hdt/``, ``studies/04_hdt/``).
         config_file: the source file that defines the chapter's ``Config``.
         load: imports the chapter's package and returns it (called once, on first use).
+        smoke_s: about how many seconds its smoke run takes on the project's 2-core machine,
+            two chapters at a time (a hint, measured, never asserted): when
+            :func:`~thesis_lib.book.runner.run_chapters` runs several at once it starts the
+            longest first, so that no long chapter is left to run alone at the end.
     """
 
     name: str
     config_file: Path
     load: Callable[[], ModuleType] = field(repr=False, compare=False)
+    smoke_s: float = 0.0
 
     @functools.cached_property
     def package(self) -> ModuleType:

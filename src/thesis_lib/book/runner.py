@@ -383,6 +383,20 @@ def _run_one(args: tuple) -> ChapterRun:
     )
 
 
+def start_order(chapters: Sequence[str], registry: Mapping[str, Chapter]) -> list[str]:
+    """``chapters`` longest smoke run first (:attr:`Chapter.smoke_s
+    <thesis_lib.book.chapter.Chapter.smoke_s>`), the order in which :func:`run_chapters`
+    starts them when it runs several at once; chapters of equal or no hint keep their order.
+
+    >>> from pathlib import Path
+    >>> reg = {"a": Chapter("a", Path("a.py"), load=lambda: None, smoke_s=10),
+    ...        "b": Chapter("b", Path("b.py"), load=lambda: None, smoke_s=400)}
+    >>> start_order(["a", "unknown", "b"], reg)
+    ['b', 'a', 'unknown']
+    """
+    return sorted(chapters, key=lambda c: -(registry[c].smoke_s if c in registry else 0.0))
+
+
 def run_chapters(
     chapters: Sequence[str] | None = None,
     *,
@@ -398,7 +412,10 @@ def run_chapters(
     ``jobs`` counts chapters; how each chapter's own task grids run (executor, parallel
     tasks) is set by ``env`` (see :func:`sweep_environment`), given to every chapter's kernel.
     ``registry`` (``thesis_lib.chapters.CHAPTERS``): each chapter found there has its values
-    checked against its ``Config``'s type hints before papermill starts it.
+    checked against its ``Config``'s type hints before papermill starts it, and with
+    ``jobs > 1`` the chapters start longest first (:attr:`Chapter.smoke_s
+    <thesis_lib.book.chapter.Chapter.smoke_s>`; the rest in the order given), so that the
+    last to finish is a short one. The runs come back in the order given.
 
     Raises:
         ChapterFailed: after all chapters ran, if any failed (every failure in the message).
@@ -417,6 +434,9 @@ def run_chapters(
         )
         for c in chapters
     ]
+    if jobs > 1:
+        start = {c: i for i, c in enumerate(start_order(chapters, registry))}
+        tasks.sort(key=lambda t: start[t[0]])
     done: list[ChapterRun] = []
     failures: list[str] = []
 

@@ -23,7 +23,7 @@ __all__ = ["CHAPTERS", "get_chapter"]
 _HERE = Path(__file__).resolve().parent
 
 
-def _chapter(name: str, package: str) -> Chapter:
+def _chapter(name: str, package: str, smoke_s: float) -> Chapter:
     folder = _HERE / package
     config = folder / "config.py"
     return Chapter(
@@ -32,22 +32,25 @@ def _chapter(name: str, package: str) -> Chapter:
         # imported on first use: a chapter package imports torch (seconds), and `thesis run`
         # reads a Config's hints from its file first
         load=lambda: importlib.import_module(f"{__name__}.{package}"),
+        smoke_s=smoke_s,
     )
 
 
-#: Every chapter of the book, by its notebook's name.
+#: Every chapter of the book, by its notebook's name, with how long its smoke run took
+#: (seconds, ``make test``'s chapter runs on an idle 2-core machine, two at a time, 2026-12-02:
+#: papermill's durations; the order in which ``thesis book -j 2`` starts them).
 CHAPTERS: dict[str, Chapter] = {
     c.name: c
     for c in (
-        _chapter("01_background", "background"),
-        _chapter("survey", "survey"),
-        _chapter("02_clfd", "clfd"),
-        _chapter("03_defender", "defender"),
-        _chapter("04_hdt", "hdt"),
-        _chapter("05_decision_mamba", "decision_mamba"),
-        _chapter("06_mdlt", "mdlt"),
-        _chapter("07_ur3_deployment", "ur3"),
-        _chapter("claims", "claims"),
+        _chapter("01_background", "background", 131),
+        _chapter("survey", "survey", 6),
+        _chapter("02_clfd", "clfd", 191),
+        _chapter("03_defender", "defender", 392),
+        _chapter("04_hdt", "hdt", 427),
+        _chapter("05_decision_mamba", "decision_mamba", 143),
+        _chapter("06_mdlt", "mdlt", 404),
+        _chapter("07_ur3_deployment", "ur3", 94),
+        _chapter("claims", "claims", 12),
     )
 }
 
