@@ -748,6 +748,50 @@ def test_thesis_study_commit_every_commits_the_studies_and_nothing_else(project,
         main(["study", "04_hdt", "--commit-every", "0"])
 
 
+def test_a_run_landing_during_a_commit_waits_for_the_next_one(project, monkeypatch):
+    """A run stored while ``commit_studies`` refreshes the summaries is not in its rows.csv, so
+    it is not committed with them: the commit's count and rows.csv agree, and the next commit
+    takes the run with the rows.csv that has it (seen on defender-c7c9-v6 12/36: a commit of
+    one new task whose rows.csv still had 12 rows)."""
+    import subprocess
+
+    from thesis_lib.book import study as st
+    from thesis_lib.cli import main
+    from thesis_lib.cli import study as study_cli
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=project, check=True, capture_output=True, text=True
+        ).stdout
+
+    git("init", "-q")
+    git("config", "user.name", "t")
+    git("config", "user.email", "t@t")
+    FAIL.add("HDT/b/4")
+    assert main(["study", "04_hdt", "--keep-going"]) == 1  # 19 of 20 stored, none committed
+    tasks = project / "studies" / "04_hdt" / "tasks"
+    late = sorted(tasks.glob("*.json"))[-1]
+    held = late.read_text()
+    late.unlink()  # stored "later": while the first commit refreshes the summaries
+    write_claims = st.write_claims
+
+    def landing(*args, **kwargs):
+        late.write_text(held)
+        return write_claims(*args, **kwargs)
+
+    monkeypatch.setattr(st, "write_claims", landing)
+    msg = study_cli.commit_studies(["04_hdt"])
+    assert msg == "studies: 18 finished task(s) landed (fake-v1 18/20)"
+    committed = git("show", "--name-only", "--format=", "HEAD").split()
+    assert f"studies/04_hdt/tasks/{late.name}" not in committed
+    assert len(pd.read_csv(io.StringIO(git("show", "HEAD:studies/04_hdt/rows.csv")))) == 18
+    monkeypatch.setattr(st, "write_claims", write_claims)
+    assert study_cli.commit_studies(["04_hdt"]) == (
+        "studies: 1 finished task(s) landed (fake-v1 19/20)"
+    )
+    assert f"studies/04_hdt/tasks/{late.name}" in git("show", "--name-only", "--format=", "HEAD")
+
+
 def test_status_line_says_what_changed_in_the_library_since_the_study(project, monkeypatch):
     import subprocess
 

@@ -137,6 +137,9 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
             (another git command holding the index lock, say); the message has git's words.
     """
     root = _checkout(root)
+    # the runs stored now: a run that lands while the summaries are refreshed (seconds) is not
+    # in them, so it waits for the next commit, with the rows.csv that has it
+    landed = set(_stored_runs(root))
     summary = []
     for chapter in chapters:
         s = _status(chapter)
@@ -171,6 +174,7 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
     paths = [p for p in paths if (root / p).exists()]
     if not paths:
         return None
+    others |= {p for p in _stored_runs(root) if p not in landed}
     summary_text = "; ".join(summary) + stale
     return commit_paths(
         root,
@@ -178,6 +182,11 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
         others,
         lambda added: f"studies: {count_added(added)} finished task(s) landed ({summary_text})",
     )
+
+
+def _stored_runs(root: Path) -> list[str]:
+    """The stored runs under ``studies/`` (``*/tasks/*.json``), relative to ``root``."""
+    return [p.relative_to(root).as_posix() for p in (root / "studies").glob("**/tasks/*.json")]
 
 
 def count_added(added: list[str], folder: str = "tasks") -> int:
