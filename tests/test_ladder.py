@@ -511,6 +511,26 @@ def test_thesis_ladder_commit_every_commits_the_ladders_folder_and_nothing_else(
     assert not any(c.endswith(".lock") or ".tmp" in c for c in committed)
     assert git("diff", "--cached", "--name-only").split() == ["mine.txt"]  # still only staged
     assert commit_ladder(f, tmp_path / "studies" / "mine" / "tasks") is None  # nothing new
+    # a run stored while the table is rewritten waits for the next commit, with its table
+    import thesis_lib.cli.ladder as ladder_cli
+
+    tasks = tmp_path / "studies" / "mine" / "tasks"
+    late = sorted(tasks.glob("*.json"))[-1]
+    held = late.read_text()
+    git("rm", "-q", str(late))
+    git("commit", "-q", "-m", "one run fewer")
+    write_table = ladder_cli.write_ladder_table
+
+    def landing(*args, **kwargs):
+        out = write_table(*args, **kwargs)  # the table is made, then the run lands
+        late.write_text(held)
+        return out
+
+    monkeypatch.setattr(ladder_cli, "write_ladder_table", landing)
+    assert commit_ladder(f, tasks) == "mine: 0 finished run(s) landed (1/2)"
+    assert late.name not in git("show", "--name-only", "--format=", "HEAD")
+    monkeypatch.setattr(ladder_cli, "write_ladder_table", write_table)
+    assert commit_ladder(f, tasks) == "mine: 1 finished run(s) landed (2/2)"
     curve = ["--curve", "hopper/medium", "d8 L1", "DT", "0", "--every", "4", "--to", "8"]
     assert main(["ladder", "-f", str(f), "--commit-every", "3600", *curve]) == 0
     assert git("log", "-1", "--format=%s").strip() == "mine: 1 learning curve(s) landed (2/2)"

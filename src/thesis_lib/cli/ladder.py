@@ -44,20 +44,22 @@ def commit_ladder(path: Path, store: Path, root: Path | None = None) -> str | No
     Raises:
         RuntimeError: ``root`` (default: the project) is not a git checkout, or git refused.
     """
-    from thesis_lib.cli.study import _checkout, commit_paths, count_added
+    from thesis_lib.cli.study import _checkout, _stored_runs, commit_paths, count_added
     from thesis_lib.ladder import ladder_tasks, load_ladder_file
     from thesis_lib.sweep import TaskStore
 
     root = _checkout(root)
     ladder = load_ladder_file(path)
     every = ladder_tasks(ladder)
-    write_ladder_table(ladder, every, store)
     folder = store.parent.resolve().relative_to(root.resolve()).as_posix()
+    # a run stored while the table is rewritten is not in it: it waits for the next commit
+    landed = set(_stored_runs(root, folder))
     done = sum(TaskStore(store).has(t.key) for t in every)
+    write_ladder_table(ladder, every, store)
     return commit_paths(
         root,
         [folder],
-        [],
+        [p for p in _stored_runs(root, folder) if p not in landed],
         lambda added: (
             _landed(path.stem, count_added(added), count_added(added, "curves"))
             + f" ({done}/{len(every)})"

@@ -184,9 +184,11 @@ def commit_studies(chapters: list[str], root: Path | None = None) -> str | None:
     )
 
 
-def _stored_runs(root: Path) -> list[str]:
-    """The stored runs under ``studies/`` (``*/tasks/*.json``), relative to ``root``."""
-    return [p.relative_to(root).as_posix() for p in (root / "studies").glob("**/tasks/*.json")]
+def _stored_runs(root: Path, under: str = "studies") -> list[str]:
+    """The stored runs below ``root / under`` (``*/tasks/*.json`` and a ladder's
+    ``*/curves/*.json``), relative to ``root``."""
+    found = [*(root / under).glob("**/tasks/*.json"), *(root / under).glob("**/curves/*.json")]
+    return [p.relative_to(root).as_posix() for p in found]
 
 
 def count_added(added: list[str], folder: str = "tasks") -> int:
