@@ -55,7 +55,7 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 def pytest_collection_modifyitems(session, config, items):
-    """The chapters' smoke runs (``test_chapters.py``, a third of `make test`'s CPU, run two at a
+    """The chapters' smoke runs (``test_chapters.py``, about half of `make test`'s CPU, run two at a
     time by one worker) come first, so that they start at once rather than after the worker's
     earlier files; with ``--dist loadfile --no-loadscope-reorder`` (the Makefile's), xdist hands
     out the files in this order. The rest keep pytest's order."""
