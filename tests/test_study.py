@@ -753,20 +753,10 @@ def test_a_run_landing_during_a_commit_waits_for_the_next_one(project, monkeypat
     it is not committed with them: the commit's count and rows.csv agree, and the next commit
     takes the run with the rows.csv that has it (seen on defender-c7c9-v6 12/36: a commit of
     one new task whose rows.csv still had 12 rows)."""
-    import subprocess
-
-    from thesis_lib.book import study as st
     from thesis_lib.cli import main
     from thesis_lib.cli import study as study_cli
 
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", *args], cwd=project, check=True, capture_output=True, text=True
-        ).stdout
-
-    git("init", "-q")
-    git("config", "user.name", "t")
-    git("config", "user.email", "t@t")
+    git = _git_checkout(project)
     FAIL.add("HDT/b/4")
     assert main(["study", "04_hdt", "--keep-going"]) == 1  # 19 of 20 stored, none committed
     tasks = project / "studies" / "04_hdt" / "tasks"
