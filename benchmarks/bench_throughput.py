@@ -71,6 +71,14 @@ in bfloat16 (softmax in float32) instead of float32 took 56.7 against 57.9 ms (f
 against x1.45). A bfloat16 step's profile there: casts 18%, the matrix products 27%, dropout
 masks 9%, LayerNorm 6%; the attention's float32 products are not what holds the ratio down.
 
+2026-12-02, the same set-up, 30 updates x 4 repeats in turns, another experiment not kept: the
+whole DT in bfloat16 (parameters, activations, LayerNorm and fused AdamW, no autocast and so
+no casts) took 52.8 ms a step against 54.7 for bf16+fast (float32 84.5): x1.04, so the casts
+are not the lever either. torch's profiler on the bf16+fast step: ``copy_`` 17% (about 200
+calls a step on [64, 60, 64]-sized tensors), matrix products 24%, lane masks 7%, and the
+ReLU and its backward on [64, 60, 256] 7% (about 1.2 ms each: elementwise bfloat16 is slow on
+this CPU); no single op is left that could give the missing 1.35x.
+
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50
 """
