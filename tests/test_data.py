@@ -191,6 +191,39 @@ def test_maze_planner_reaches_the_goal():
     assert d.tolist() == [[-1] * 4, [-1, 2, 1, -1], [-1, -1, 0, -1], [-1] * 4]
 
 
+def test_random_returns_are_seeded_full_episodes():
+    # Hopper's random episodes fall within tens of steps (healthy reward 1 a step)
+    h = data.random_returns("hopper", n_episodes=5, seed=0)
+    assert h.shape == (5,) and np.array_equal(h, data.random_returns("hopper", 5, seed=0))
+    assert not np.array_equal(h, data.random_returns("hopper", 5, seed=1))
+    assert 0 < h.mean() < 300, h
+    with pytest.raises(ValueError, match="n_episodes"):
+        data.random_returns("maze2d-umaze", n_episodes=0)
+
+
+def test_shipped_maze_record_is_measured_in_this_maze():
+    """The shipped ``policies/maze2d.json`` reproduces in the maze the models are evaluated in
+    (the fixed-target PointMaze): the planner's and the random actions' mean returns, at the
+    record's own episodes and seed. (The record of 1e621d7 predated the fixed targets: 247.34
+    against 230.81 on umaze.)"""
+    import json
+
+    from thesis_lib.data import experts
+    from thesis_lib.data.card import expert_quality
+
+    rec = json.loads((experts.POLICY_DIR / "maze2d.json").read_text())["maze2d-umaze"]
+    n, seed = rec["n_episodes"], rec["seed"]
+    sr, rets = data.maze_success_rate("maze2d-umaze", n, seed, return_returns=True)
+    assert sr == rec["success_rate"] and round(float(rets.mean()), 2) == rec["return_mean"]
+    rand = float(data.random_returns("maze2d-umaze", n, seed).mean())
+    assert round(rand, 2) == rec["random_return_mean"]
+    assert rec["random_normalized"] == pytest.approx(normalized_score("maze2d-umaze", rand))
+    q = expert_quality().set_index("task")
+    assert q.loc["maze2d-umaze", "random_return"] == rec["random_return_mean"]
+    # the planner far above random actions; D4RL's references put both elsewhere than 100 and 0
+    assert rec["random_normalized"] < 0 < 100 < rec["normalized"]
+
+
 # --- scores --------------------------------------------------------------------------------
 
 

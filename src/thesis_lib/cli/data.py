@@ -292,7 +292,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     t = sub.add_parser("train-experts", help="re-train the shipped ARS expert/medium policies")
     t.add_argument(
-        "--task", default="all", help="an ARS task, 'maze2d' (measure the scripted expert) or 'all'"
+        "--task",
+        default="all",
+        help="an ARS task, 'maze2d' (measure the scripted expert and random actions) or 'all'",
     )
     t.add_argument("--steps", type=int, default=None, help="override the recipe's step count")
     t.add_argument("--seed", type=int, default=None)

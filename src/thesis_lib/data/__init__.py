@@ -22,6 +22,7 @@ from .card import (
     format_card,
     maze_success_rate,
     plot_return_histograms,
+    random_returns,
     record_maze_experts,
 )
 from .d4rl_reference import D4RLStats, d4rl_stats
@@ -108,6 +109,7 @@ __all__ = [
     "maze_success_rate",
     "minari_root",
     "normalized_score",
+    "random_returns",
     "open_dataset",
     "parse_dataset_id",
     "returns_to_go",

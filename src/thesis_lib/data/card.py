@@ -19,7 +19,7 @@ from . import experts  # POLICY_DIR looked up per call, as load_policy does
 from .d4rl_reference import BAND_MIN_EPISODES, SOURCES, band_transitions, d4rl_stats, in_band
 from .experts import has_medium_run, has_policies, load_policy_record
 from .maze import WaypointExpert
-from .recipe import GENERATOR_VERSION, action_noise_for, make_env
+from .recipe import GENERATOR_VERSION, _random_policy, action_noise_for, make_env
 from .scores import normalized_score
 from .storage import OfflineDataset, generate_command, load
 from .tasks import TASKS, get_task, is_our_namespace, parse_dataset_id
@@ -256,7 +256,11 @@ def expert_quality() -> Any:
     ``medium_sampled_normalized`` (its own Gaussian, as the medium tier samples it; a medium run
     records it), ``medium_in_range`` (of the sampled figure where recorded, else the
     deterministic one), ``n_eval_episodes`` and, for the Maze2D rows (target =
-    success rate 0.9), ``success_rate``.
+    success rate 0.9), ``success_rate``, ``random_return`` and ``random_normalized``: uniform
+    random actions in this project's maze (:func:`random_returns`), where D4RL's normalisation
+    puts its own maze's random policy at 0. Here the planner scores 150-520 normalised and random
+    actions -4 to 11 (the PointMaze is not D4RL's maze2d), so the Maze2D scores compare the
+    models of this project with each other, not with D4RL's tables.
     """
     import pandas as pd
 
@@ -305,6 +309,8 @@ def expert_quality() -> Any:
                     "meets_target": m["success_rate"] >= MAZE_SUCCESS_TARGET,
                     "success_rate": m["success_rate"],
                     "n_eval_episodes": m["n_episodes"],
+                    "random_return": m.get("random_return_mean"),
+                    "random_normalized": m.get("random_normalized"),
                 }
             )
     df = pd.DataFrame(rows)
@@ -357,6 +363,12 @@ only (the ARS paper needs 10-75M steps for Walker2d and Ant). The TQC / CrossQ r
 background, checkpoints itself and resumes where it stopped; a task still showing ARS has
 not been shipped from it yet. A weak expert also squeezes the medium tier: its target is
 raised to 25 D4RL-normalised, which can bring it close to the expert's return.
+
+Maze2D's rows set the planner beside uniform random actions (`random_return`,
+`random_normalized`) in this project's maze, Gymnasium-Robotics' PointMaze with D4RL's fixed
+target. D4RL's references were measured in D4RL's own maze2d: here its scale puts the planner
+at 150-520 and random actions at -4 to 11, not at 100 and 0. Normalised Maze2D scores compare
+this project's models with each other, not with D4RL's tables.
 """
 
 
@@ -450,18 +462,54 @@ def maze_success_rate(
     return (hits / n_episodes, rets) if return_returns else hits / n_episodes
 
 
+def random_returns(task: str, n_episodes: int = 100, seed: int = 0) -> np.ndarray:
+    """Episode returns of uniform random actions in ``task``'s environment, as evaluated here.
+
+    D4RL's normalisation puts its random policy at 0 (``ref_min_score``), measured in D4RL's
+    environments. Where an environment here differs (Gymnasium-Robotics' PointMaze against
+    D4RL's maze2d), this is the random score in the environment the models are evaluated in,
+    to set beside that reference (the Maze2D rows of :func:`expert_quality`).
+
+    Args:
+        task: a task of :data:`~thesis_lib.data.TASKS`.
+        n_episodes: episodes, each to its end (termination or the task's step limit).
+        seed: seed of the resets and the actions.
+
+    Returns:
+        ``(n_episodes,)`` episode returns.
+    """
+    if n_episodes < 1:
+        raise ValueError(f"Expect n_episodes >= 1, actually: {n_episodes}.")
+    env = make_env(task)
+    act = _random_policy(env)
+    rng = np.random.default_rng(seed)
+    rets = np.zeros(n_episodes)
+    for i in range(n_episodes):
+        obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)))
+        done = False
+        while not done:
+            obs, r, term, trunc, _ = env.step(act(obs, rng))
+            rets[i] += float(r)
+            done = term or trunc
+    env.close()
+    return rets
+
+
 def record_maze_experts(n_episodes: int = 100, seed: int = 0, out_dir: Any = None) -> dict:
-    """Measure the scripted expert on every Maze2D layout; write ``policies/maze2d.json``.
+    """Measure the scripted expert, and uniform random actions, on every Maze2D layout; write
+    ``policies/maze2d.json``.
 
     Returns:
         ``{task: {success_rate, return_mean, return_std, normalized, action_noise,
-        n_episodes, seed}}``.
+        n_episodes, seed, random_return_mean, random_normalized}}`` (the ``random_`` pair:
+        :func:`random_returns` over the same number of episodes and seed).
     """
     out: dict[str, Any] = {}
     for task, spec in TASKS.items():
         if spec.kind != "maze":
             continue
         sr, rets = maze_success_rate(task, n_episodes, seed, return_returns=True)
+        rand = float(random_returns(task, n_episodes, seed).mean())
         out[task] = {
             "success_rate": sr,
             "return_mean": round(float(rets.mean()), 2),
@@ -470,6 +518,8 @@ def record_maze_experts(n_episodes: int = 100, seed: int = 0, out_dir: Any = Non
             "action_noise": action_noise_for(task),
             "n_episodes": n_episodes,
             "seed": seed,
+            "random_return_mean": round(rand, 2),
+            "random_normalized": normalized_score(task, rand, missing="none"),
         }
     path = Path(out_dir) if out_dir is not None else experts.POLICY_DIR
     path.mkdir(parents=True, exist_ok=True)
