@@ -137,6 +137,14 @@ def format_card(card: dict[str, Any]) -> str:
         lines.append(f"{'made by':>16}: {json.dumps(card['info'], default=str)}")
         lines += _version_lines(card)
     task = _our_task_tier(card["id"])[0]
+    ref = maze_reference(task) if task in TASKS and get_task(task).kind == "maze" else None
+    if ref is not None and ref.get("random_normalized") is not None:
+        lines.append(
+            f"{'in this maze':>16}: uniform random actions {ref['random_return_mean']:.1f} "
+            f"(normalised {ref['random_normalized']:.1f}), the planner {ref['return_mean']:.1f} "
+            f"({ref['normalized']:.1f}): D4RL's references, measured in D4RL's maze2d, put "
+            "them at 0 and 100 (thesis data card --experts)"
+        )
     if task in TASKS and get_task(task).kind == "robotics":
         fam = "antmaze" if task.startswith("antmaze") else task if task == "kitchen" else "adroit"
         lines.append(f"{'feasibility':>16}: {FEASIBILITY[fam]}")
@@ -460,6 +468,16 @@ def maze_success_rate(
         hits += ok
     env.close()
     return (hits / n_episodes, rets) if return_returns else hits / n_episodes
+
+
+def maze_reference(task: str) -> dict[str, Any] | None:
+    """The shipped Maze2D record of ``task`` (``policies/maze2d.json``, written by
+    :func:`record_maze_experts`): the planner's and uniform random actions' returns in this
+    project's maze; ``None`` where none is recorded."""
+    path = experts.POLICY_DIR / "maze2d.json"
+    if not path.exists():
+        return None
+    return json.loads(path.read_text()).get(task)
 
 
 def random_returns(task: str, n_episodes: int = 100, seed: int = 0) -> np.ndarray:
