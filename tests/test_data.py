@@ -221,6 +221,7 @@ def test_shipped_maze_record_is_measured_in_this_maze():
     assert rec["random_normalized"] == pytest.approx(normalized_score("maze2d-umaze", rand))
     q = expert_quality().set_index("task")
     assert q.loc["maze2d-umaze", "random_return"] == rec["random_return_mean"]
+    assert q.loc["maze2d-umaze", "algorithm"] == "planner"
     # a maze set's card says where this maze's random actions and planner fall on D4RL's scale
     text = data.format_card(data.data_card(generate("maze2d-umaze", "random", n_transitions=300)))
     assert f"uniform random actions {rec['random_return_mean']:.1f}" in text

@@ -311,6 +311,7 @@ def expert_quality() -> Any:
             rows.append(
                 {
                     "task": task,
+                    "algorithm": "planner",  # BFS waypoints + PD, with its action noise
                     "expert_return": m["return_mean"],
                     "expert_normalized": normalized_score(task, m["return_mean"], missing="none"),
                     "target": MAZE_SUCCESS_TARGET,
