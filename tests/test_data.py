@@ -206,12 +206,9 @@ def test_shipped_maze_record_is_measured_in_this_maze():
     (the fixed-target PointMaze): the planner's and the random actions' mean returns, at the
     record's own episodes and seed. (The record of 1e621d7 predated the fixed targets: 247.34
     against 230.81 on umaze.)"""
-    import json
-
-    from thesis_lib.data import experts
     from thesis_lib.data.card import expert_quality
 
-    rec = json.loads((experts.POLICY_DIR / "maze2d.json").read_text())["maze2d-umaze"]
+    rec = data.maze_reference("maze2d-umaze")
     n, seed = rec["n_episodes"], rec["seed"]
     sr, rets = data.maze_success_rate("maze2d-umaze", n, seed, return_returns=True)
     assert sr == rec["success_rate"]

@@ -19,7 +19,7 @@ from . import experts  # POLICY_DIR looked up per call, as load_policy does
 from .d4rl_reference import BAND_MIN_EPISODES, SOURCES, band_transitions, d4rl_stats, in_band
 from .experts import has_medium_run, has_policies, load_policy_record
 from .maze import WaypointExpert
-from .recipe import GENERATOR_VERSION, _random_policy, action_noise_for, make_env
+from .recipe import GENERATOR_VERSION, _random_policy, action_noise_for, make_env, rollout
 from .scores import normalized_score
 from .storage import OfflineDataset, generate_command, load
 from .tasks import TASKS, get_task, is_our_namespace, parse_dataset_id
@@ -305,23 +305,21 @@ def expert_quality() -> Any:
                 "n_eval_episodes": rec.n_eval_episodes,
             }
         )
-    maze = experts.POLICY_DIR / "maze2d.json"
-    if maze.exists():
-        for task, m in json.loads(maze.read_text()).items():
-            rows.append(
-                {
-                    "task": task,
-                    "algorithm": "planner",  # BFS waypoints + PD, with its action noise
-                    "expert_return": m["return_mean"],
-                    "expert_normalized": normalized_score(task, m["return_mean"], missing="none"),
-                    "target": MAZE_SUCCESS_TARGET,
-                    "meets_target": m["success_rate"] >= MAZE_SUCCESS_TARGET,
-                    "success_rate": m["success_rate"],
-                    "n_eval_episodes": m["n_episodes"],
-                    "random_return": m.get("random_return_mean"),
-                    "random_normalized": m.get("random_normalized"),
-                }
-            )
+    for task, m in _maze_records().items():
+        rows.append(
+            {
+                "task": task,
+                "algorithm": "planner",  # BFS waypoints + PD, with its action noise
+                "expert_return": m["return_mean"],
+                "expert_normalized": normalized_score(task, m["return_mean"], missing="none"),
+                "target": MAZE_SUCCESS_TARGET,
+                "meets_target": m["success_rate"] >= MAZE_SUCCESS_TARGET,
+                "success_rate": m["success_rate"],
+                "n_eval_episodes": m["n_episodes"],
+                "random_return": m.get("random_return_mean"),
+                "random_normalized": m.get("random_normalized"),
+            }
+        )
     df = pd.DataFrame(rows)
     for col in ("steps_trained", "n_eval_episodes"):
         if col in df:
@@ -471,14 +469,17 @@ def maze_success_rate(
     return (hits / n_episodes, rets) if return_returns else hits / n_episodes
 
 
+def _maze_records() -> dict[str, dict[str, Any]]:
+    """``policies/maze2d.json`` (:func:`record_maze_experts`), ``{}`` where it is not shipped."""
+    path = experts.POLICY_DIR / "maze2d.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
 def maze_reference(task: str) -> dict[str, Any] | None:
     """The shipped Maze2D record of ``task`` (``policies/maze2d.json``, written by
     :func:`record_maze_experts`): the planner's and uniform random actions' returns in this
     project's maze; ``None`` where none is recorded."""
-    path = experts.POLICY_DIR / "maze2d.json"
-    if not path.exists():
-        return None
-    return json.loads(path.read_text()).get(task)
+    return _maze_records().get(task)
 
 
 def random_returns(task: str, n_episodes: int = 100, seed: int = 0) -> np.ndarray:
@@ -500,18 +501,13 @@ def random_returns(task: str, n_episodes: int = 100, seed: int = 0) -> np.ndarra
     if n_episodes < 1:
         raise ValueError(f"Expect n_episodes >= 1, actually: {n_episodes}.")
     env = make_env(task)
-    act = _random_policy(env)
-    rng = np.random.default_rng(seed)
-    rets = np.zeros(n_episodes)
-    for i in range(n_episodes):
-        obs, _ = env.reset(seed=int(rng.integers(2**31 - 1)))
-        done = False
-        while not done:
-            obs, r, term, trunc, _ = env.step(act(obs, rng))
-            rets[i] += float(r)
-            done = term or trunc
+    # the random tier's roll-out; no episode is cut, since none outlasts the step limit
+    cap = n_episodes * get_task(task).max_episode_steps
+    eps = rollout(
+        env, _random_policy(env), cap, np.random.default_rng(seed), max_episodes=n_episodes
+    )
     env.close()
-    return rets
+    return np.array([float(e.rewards.sum()) for e in eps])
 
 
 def record_maze_experts(n_episodes: int = 100, seed: int = 0, out_dir: Any = None) -> dict:
