@@ -272,7 +272,8 @@ def test_papermill_runs_the_check_in_the_kernel(tmp_path):
 
 def test_thesis_run_refuses_before_importing_torch():
     """The refusal comes at once: ``thesis run`` imports no sub-package's CLI (the chapters', MDLT's
-    and the data's import torch and scipy, seconds) and reads the chapter's hints without it."""
+    and the data's import torch and scipy, seconds) and reads the chapter's hints without it,
+    its base's (``SeqTraining``: ``kernels``) from that base's file."""
     import subprocess
     import sys
 
@@ -280,11 +281,14 @@ def test_thesis_run_refuses_before_importing_torch():
         "import sys\n"
         "from thesis_lib.cli import main\n"
         "rc = main(['run', '04_hdt', '-p', 'iterations', 'abc'])\n"
-        "print(rc, 'torch' in sys.modules, 'scipy' in sys.modules)\n"
+        "rc2 = main(['run', '07_ur3_deployment', '-p', 'kernels', 'slow'])\n"
+        "print(rc, rc2, 'torch' in sys.modules, 'scipy' in sys.modules,\n"
+        "      'thesis_lib.chapters.hdt' in sys.modules)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert proc.stdout.split() == ["1", "False", "False"]
+    assert proc.stdout.split() == ["1", "1", "False", "False", "False"]
     assert "Expect `iterations` to be an int" in proc.stderr
+    assert "Expect `kernels` to be one of 'torch', 'fast'" in proc.stderr
 
 
 def test_the_lazy_subcommands_help_is_the_registered_help():

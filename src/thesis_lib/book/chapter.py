@@ -109,9 +109,10 @@ class Chapter:
         return getattr(self.package, "STUDY_FILE_DEFAULTS", {})
 
     def hints(self) -> dict[str, Any]:
-        """The type hints of ``Config``'s fields, read from :attr:`config_file` without
-        importing the package where its annotations name only builtins and ``Literal`` (and
-        ``Config`` has no base classes); otherwise from the imported ``Config``.
+        """The type hints of ``Config``'s fields, in field order, read from :attr:`config_file`
+        (and the file of its base class, where it has one imported from ``thesis_lib``) without
+        importing the package, where the annotations name only builtins and ``Literal``;
+        otherwise from the imported ``Config``.
 
         Raises:
             ValueError: the file is missing or defines no class ``Config``.
@@ -119,18 +120,55 @@ class Chapter:
         if not self.config_file.is_file():
             raise ValueError(f"{self.name}: no file {self.config_file} (its Config)")
         tree = ast.parse(self.config_file.read_text())
-        node = next(
-            (n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "Config"), None
-        )
-        if node is None:
+        if _class_def(tree, "Config") is None:
             raise ValueError(f"{self.name}: {self.config_file} has no dataclass Config")
-        if not node.bases:
-            fields = [n for n in node.body if isinstance(n, ast.AnnAssign)]
-            try:
-                return {
-                    ast.unparse(f.target): eval(ast.unparse(f.annotation), {"Literal": Literal})
-                    for f in fields
-                }
-            except NameError:
-                pass
-        return config_hints(self.Config)
+        read = _source_hints(tree, "Config")
+        return read if read is not None else config_hints(self.Config)
+
+
+def _class_def(tree: ast.Module, name: str) -> ast.ClassDef | None:
+    return next((n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == name), None)
+
+
+def _source_hints(tree: ast.Module, name: str) -> dict[str, Any] | None:
+    """The hints of the dataclass ``name``'s fields as its source (``tree``) writes them, its
+    base's first (``dataclasses.fields``' order); ``None`` where that takes an import: a hint
+    naming more than builtins and ``Literal``, more than one base, or a base not imported by
+    name from a ``thesis_lib`` module."""
+    import importlib.util
+
+    node = _class_def(tree, name)
+    if node is None or len(node.bases) > 1:
+        return None
+    hints: dict[str, Any] = {}
+    for base in node.bases:
+        module = next(
+            (
+                imp.module
+                for imp in tree.body
+                if isinstance(imp, ast.ImportFrom)
+                and imp.level == 0
+                and any(a.name == getattr(base, "id", None) and a.asname is None for a in imp.names)
+            ),
+            None,
+        )
+        if not isinstance(base, ast.Name) or not (module or "").startswith("thesis_lib."):
+            return None
+        spec = importlib.util.find_spec(module)  # type: ignore[arg-type]
+        if spec is None or spec.origin is None:
+            return None
+        inherited = _source_hints(ast.parse(Path(spec.origin).read_text()), base.id)
+        if inherited is None:
+            return None
+        hints.update(inherited)
+    fields = [n for n in node.body if isinstance(n, ast.AnnAssign)]
+    try:
+        hints.update(
+            {
+                ast.unparse(f.target): eval(ast.unparse(f.annotation), {"Literal": Literal})
+                for f in fields
+            }
+        )
+    except NameError:
+        return None
+    return hints

@@ -340,8 +340,44 @@ def _plain(value: Any, where: str) -> Any:
     )
 
 
+def own_fields_first(cls: type) -> list[dataclasses.Field[Any]]:
+    """The ``__init__`` fields of the dataclass ``cls``: those the class itself declares, in
+    their order, then each base's own (nearest base first), where ``dataclasses.fields`` puts
+    the bases' first. A chapter's parameters cell opens with the chapter's own parameters
+    (seed, data sets, methods) and ends with the options it shares
+    (:class:`~thesis_lib.chapters.seq_config.SeqTraining`).
+
+    >>> @dataclasses.dataclass
+    ... class Shared:
+    ...     device: str = "cpu"
+    >>> @dataclasses.dataclass
+    ... class Demo(Shared):
+    ...     seed: int = 0
+    >>> [f.name for f in own_fields_first(Demo)]
+    ['seed', 'device']
+    """
+    by_name = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
+    order: list[str] = []
+    for klass in cls.__mro__:
+        if not dataclasses.is_dataclass(klass):
+            continue
+        inherited = {
+            f.name
+            for base in klass.__bases__
+            if dataclasses.is_dataclass(base)
+            for f in dataclasses.fields(base)
+        }
+        order += [
+            f.name
+            for f in dataclasses.fields(klass)
+            if f.name not in inherited and f.name in by_name and f.name not in order
+        ]
+    return [by_name[n] for n in order]
+
+
 def config_defaults(cls: type) -> dict[str, Any]:
-    """The defaults of a Config dataclass, field by field, as plain data (the smoke profile).
+    """The defaults of a Config dataclass, field by field (:func:`own_fields_first`), as plain
+    data (the smoke profile).
 
     >>> @dataclasses.dataclass
     ... class Demo:
@@ -356,7 +392,7 @@ def config_defaults(cls: type) -> dict[str, Any]:
     """
     if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
         raise TypeError(f"{cls!r} is not a dataclass")
-    fields = [f for f in dataclasses.fields(cls) if f.init]
+    fields = own_fields_first(cls)
     missing = [
         f.name
         for f in fields

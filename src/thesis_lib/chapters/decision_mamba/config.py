@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal, NamedTuple
 
 from thesis_lib.book.params import spec_from
+from thesis_lib.chapters.seq_config import SeqTraining
 
 if TYPE_CHECKING:
     from thesis_lib.seq.registry import ArchSpec
@@ -81,12 +82,15 @@ def parse_arch(text: str | Arch) -> Arch:
 
 
 @dataclass
-class Config:
+class Config(SeqTraining):
     """Parameters of the Decision Mamba chapter; defaults are the smoke scale.
 
     ``params/05_decision_mamba.smoke.yml`` equals these defaults; ``.full.yml`` holds the
     thesis's scale (5.3.3: batch 16, lr 1e-4, up to 1M iterations, evaluation every 1,000 on
     100 episodes, 4 seeds, 6 layers, d 128, K 20).
+
+    The sequence models' training options (``init``, ``sampling``, ``device``, ``precision``,
+    ``kernels``) are :class:`~thesis_lib.chapters.seq_config.SeqTraining`'s.
 
     Used in: Decision Mamba chapter.
     """
@@ -156,28 +160,6 @@ class Config:
     paper_compat: bool = False
     """The authors' behaviours (a_{t-1} tokens, left-padded time-steps, last sub-goal = state 0,
     HDM Tanh sub-goal head); with ``eval_mode`` ``window`` that is the authors' code."""
-    init: Literal["auto", "normal", "original", "torch", "d3rlpy"] = "auto"
-    """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
-    ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
-    Hugging Face's DT), ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
-    names no ``init`` ran with it) or ``d3rlpy`` (d3rlpy 2.8.1's DT: ``normal`` in the trunk,
-    PyTorch's defaults for the token embeddings and the head; the parity runs')."""
-    sampling: Literal["end", "start"] | None = None
-    """How the training windows are drawn (:class:`~thesis_lib.data.SequenceDataset`): ``end``
-    (a step uniform over all steps, the window ending at it: d3rlpy's DT), ``start`` (the
-    window's start: the original DT code's, the v1 studies'; a study file that names no
-    ``sampling`` ran with it), ``None``: ``start`` with ``paper_compat``, else ``end``."""
-    device: str = "cpu"
-    """Training device (``cpu``, ``cuda``, ``auto``)."""
-    precision: Literal["fp32", "bf16"] = "fp32"
-    """Training precision (:attr:`~thesis_lib.seq.trainer.TrainConfig.precision`): ``fp32``, or
-    ``bf16`` mixed precision (matrix products in bfloat16; 1.2-1.55x the updates per CPU-second
-    at d64 and 1.5-2x at d128 with 3 layers on a CPU with AVX-512 BF16, by the day's machine;
-    the numbers differ from float32's by rounding). Every study so far ran in ``fp32``."""
-    kernels: Literal["torch", "fast"] = "torch"
-    """Training kernels (:attr:`~thesis_lib.seq.trainer.TrainConfig.kernels`): ``torch``, or
-    ``fast`` (cheaper dropout masks on a CPU and fused AdamW; identical in distribution, other
-    draws). Every study so far ran with ``torch``."""
     progress: bool = False
     """Progress bars of the runs."""
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
 from thesis_lib.book.params import spec_from
+from thesis_lib.chapters.seq_config import SeqTraining
 
 if TYPE_CHECKING:
     from thesis_lib.seq.registry import ArchSpec
@@ -34,8 +35,11 @@ RTG_SCALE = 10.0
 
 
 @dataclass
-class Config:
+class Config(SeqTraining):
     """The notebook's parameters (``params/07_ur3_deployment.*.yml``); defaults are the smoke scale.
+
+    The sequence models' training options (``init``, ``sampling``, ``device``, ``precision``,
+    ``kernels``) are :class:`~thesis_lib.chapters.seq_config.SeqTraining`'s.
 
     Used in: UR3 deployment chapter.
     """
@@ -84,28 +88,6 @@ class Config:
     """Limits: clip (clamp and rate-limit) or reject."""
     viewer_frames: int = 180
     """Frames stored in the 3-D viewer (subsampled)."""
-    init: Literal["auto", "normal", "original", "torch", "d3rlpy"] = "auto"
-    """Initialisation of the transformers (DT, HDT): ``auto`` (the authors' ``original`` with
-    ``paper_compat``, else ``normal``: every Linear and Embedding N(0, 0.02), as CORL's and
-    Hugging Face's DT), ``torch`` (PyTorch's defaults, the v1 studies'; a study file that
-    names no ``init`` ran with it) or ``d3rlpy`` (d3rlpy 2.8.1's DT: ``normal`` in the trunk,
-    PyTorch's defaults for the token embeddings and the head; the parity runs')."""
-    sampling: Literal["end", "start"] | None = None
-    """How the training windows are drawn (:class:`~thesis_lib.data.SequenceDataset`): ``end``
-    (a step uniform over all steps, the window ending at it: d3rlpy's DT), ``start`` (the
-    window's start: the original DT code's, the v1 studies'; a study file that names no
-    ``sampling`` ran with it), ``None``: ``start`` with ``paper_compat``, else ``end``."""
-    device: str = "cpu"
-    """Training device."""
-    precision: Literal["fp32", "bf16"] = "fp32"
-    """Training precision (:attr:`~thesis_lib.seq.trainer.TrainConfig.precision`): ``fp32``, or
-    ``bf16`` mixed precision (matrix products in bfloat16; 1.2-1.55x the updates per CPU-second
-    at d64 and 1.5-2x at d128 with 3 layers on a CPU with AVX-512 BF16, by the day's machine;
-    the numbers differ from float32's by rounding). Every study so far ran in ``fp32``."""
-    kernels: Literal["torch", "fast"] = "torch"
-    """Training kernels (:attr:`~thesis_lib.seq.trainer.TrainConfig.kernels`): ``torch``, or
-    ``fast`` (cheaper dropout masks on a CPU and fused AdamW; identical in distribution, other
-    draws). Every study so far ran with ``torch``."""
     progress: bool = False
     """Progress bars."""
 
