@@ -79,6 +79,14 @@ calls a step on [64, 60, 64]-sized tensors), matrix products 24%, lane masks 7%,
 ReLU and its backward on [64, 60, 256] 7% (about 1.2 ms each: elementwise bfloat16 is slow on
 this CPU); no single op is left that could give the missing 1.35x.
 
+2026-12-02 (a later session), the same set-up, DT at d64, 20 updates x 4 repeats in turns after
+a warm-up, an experiment not kept: ``torch.compile`` (inductor, ``dynamic=False``) on top of
+bf16, where the fusion of the elementwise ops could have paid. The whole model's forward:
+124.6 ms a step against 60.3 for bf16+fast (float32 97.1; the input checks and the masked loss
+break the graph, and the masked loss recompiles for each count of valid steps); the GPT trunk
+alone (``model.transformer``): 120.3 against 60.7 (float32 90.2). Compiled code is twice as
+slow on this CPU, with bf16 as with float32 (``bench_ensemble.py``).
+
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50
 """
