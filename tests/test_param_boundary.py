@@ -230,6 +230,46 @@ def test_chapter_hints_read_without_import_match_the_config(chapter):
     assert list(CHAPTERS[chapter].hints().items()) == list(config_hints(cls).items())
 
 
+def _refuse_import():
+    raise AssertionError("hints() imported the chapter")
+
+
+def test_hints_follow_a_thesis_lib_base_without_importing_and_fall_back_otherwise(tmp_path):
+    """A ``Config`` subclassing ``SeqTraining`` is read from the two files, the base's fields
+    first as ``dataclasses.fields`` has them; a base from elsewhere takes the import."""
+    from pathlib import Path
+
+    from thesis_lib.book.chapter import Chapter
+
+    ours = tmp_path / "ours.py"
+    ours.write_text(
+        "from dataclasses import dataclass\n"
+        "from thesis_lib.chapters.seq_config import SeqTraining\n\n"
+        "@dataclass\nclass Config(SeqTraining):\n    seed: int = 0\n"
+    )
+    hints = Chapter("99_demo", Path(ours), _refuse_import).hints()
+    assert list(hints) == ["init", "sampling", "device", "precision", "kernels", "seed"]
+    assert get_args(hints["kernels"]) == ("torch", "fast") and hints["seed"] is int
+
+    other = tmp_path / "other.py"
+    other.write_text(
+        "from dataclasses import dataclass\nfrom somewhere import Base\n\n"
+        "@dataclass\nclass Config(Base):\n    seed: int = 0\n"
+    )
+
+    @dataclass
+    class Base:
+        device: str = "cpu"
+
+    @dataclass
+    class Config(Base):
+        seed: int = 0
+
+    module = type(shutil)("demo")
+    module.Config = Config  # type: ignore[attr-defined]
+    assert Chapter("99_demo", Path(other), lambda: module).hints() == {"device": str, "seed": int}
+
+
 @pytest.mark.parametrize("chapter", sorted(c for c in CHAPTERS if "init" in CHAPTERS[c].hints()))
 def test_a_chapters_init_takes_every_scheme_the_models_know(chapter):
     """``thesis run -p init d3rlpy`` reaches the models: the hint lists :data:`INIT_SCHEMES`."""

@@ -142,19 +142,21 @@ def _source_hints(tree: ast.Module, name: str) -> dict[str, Any] | None:
         return None
     hints: dict[str, Any] = {}
     for base in node.bases:
+        if not isinstance(base, ast.Name):
+            return None
         module = next(
             (
                 imp.module
                 for imp in tree.body
                 if isinstance(imp, ast.ImportFrom)
                 and imp.level == 0
-                and any(a.name == getattr(base, "id", None) and a.asname is None for a in imp.names)
+                and any(a.name == base.id and a.asname is None for a in imp.names)
             ),
             None,
         )
-        if not isinstance(base, ast.Name) or not (module or "").startswith("thesis_lib."):
+        if module is None or not module.startswith("thesis_lib."):
             return None
-        spec = importlib.util.find_spec(module)  # type: ignore[arg-type]
+        spec = importlib.util.find_spec(module)
         if spec is None or spec.origin is None:
             return None
         inherited = _source_hints(ast.parse(Path(spec.origin).read_text()), base.id)
