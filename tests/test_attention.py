@@ -312,3 +312,26 @@ def test_block_backward_is_finite_with_left_padding():
     assert torch.isfinite(x.grad).all()
     assert all(torch.isfinite(p.grad).all() for p in block.parameters())
     assert torch.all(x.grad[~kpm] == 0)  # padded tokens do not influence real outputs
+
+
+@pytest.mark.parametrize("causal", [True, False])
+@pytest.mark.parametrize("side", [None, "right", "left"])
+@pytest.mark.parametrize("queries", [slice(1, None, 3), slice(0, None, 2), slice(None)])
+def test_block_queries_are_the_full_blocks_rows(causal, side, queries):
+    """``Block(queries=...)`` (the models' readout) gives the full block's outputs at those
+    tokens, forward and backward, with and without a causal mask and padding: every token is
+    still a key, and the dropped tokens' outputs feed nothing."""
+    torch.manual_seed(0)
+    block = _block(causal=causal)
+    T = 12
+    kpm = None if side is None else padding_mask([12, 7, 2], T, side=side)
+    x = torch.randn(3, T, 16, dtype=torch.float64, requires_grad=True)
+    full = block(x, kpm)[:, queries]
+    part = block(x, kpm, queries)
+    assert part.shape == full.shape
+    torch.testing.assert_close(part, full, atol=1e-12, rtol=0)
+    w = torch.randn_like(full)
+    g_full = torch.autograd.grad((full * w).sum(), [x, *block.parameters()])
+    g_part = torch.autograd.grad((part * w).sum(), [x, *block.parameters()])
+    for a, b in zip(g_part, g_full, strict=True):
+        torch.testing.assert_close(a, b, atol=1e-12, rtol=0)

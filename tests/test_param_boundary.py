@@ -249,7 +249,7 @@ def test_hints_follow_a_thesis_lib_base_without_importing_and_fall_back_otherwis
     )
     hints = Chapter("99_demo", Path(ours), _refuse_import).hints()
     assert list(hints) == ["init", "sampling", "device", "precision", "kernels", "seed"]
-    assert get_args(hints["kernels"]) == ("torch", "fast") and hints["seed"] is int
+    assert get_args(hints["kernels"]) == ("torch", "fast", "fast+readout") and hints["seed"] is int
 
     other = tmp_path / "other.py"
     other.write_text(

@@ -22,6 +22,8 @@ from thesis_lib.seq.models import (
     DTConfig,
     HDTConfig,
     SeqOutput,
+    readout_only,
+    readout_only_enabled,
 )
 from thesis_lib.seq.subgoals import subgoal_fn
 from thesis_lib.seq.trainer import TrainConfig, Trainer, batch_to_torch
@@ -202,6 +204,87 @@ def test_fast_kernels_draw_lane_masks_and_learn_as_torchs_do(kind):
     assert loss_fast[-20:].mean() == pytest.approx(loss_torch[-20:].mean(), rel=0.25)
 
 
+@pytest.mark.parametrize("kind", ["dt", "hdt"])
+@pytest.mark.parametrize("n_layers", [1, 2])
+def test_readout_kernels_without_dropout_are_fasts_numbers_up_to_float_error(kind, n_layers):
+    """``kernels="fast+readout"`` runs the transformers' last block on the read tokens only:
+    with no dropout it is ``"fast"``'s run (losses and weights after 30 updates) up to float
+    error, on windows with padding (the episodes' first steps) as without."""
+
+    def run(kernels):
+        torch.manual_seed(0)
+        arch = {**SMALL, "dropout": 0.0, "n_layers": n_layers}
+        cfg = (DTConfig if kind == "dt" else HDTConfig)(SD, AD, **arch)
+        model = (DecisionTransformer if kind == "dt" else HDT)(cfg)
+        trainer = Trainer(model, _dataset(), _cfg(iterations=30, kernels=kernels))
+        loss = trainer.train()["loss"].to_numpy()
+        return trainer, loss, nn.utils.parameters_to_vector(model.parameters()).detach()
+
+    t_fast, l_fast, p_fast = run("fast")
+    t_read, l_read, p_read = run("fast+readout")
+    assert t_read.optimizer.defaults["fused"]
+    np.testing.assert_allclose(l_read, l_fast, rtol=1e-5)
+    torch.testing.assert_close(p_read, p_fast, rtol=1e-4, atol=1e-5)
+    batch = batch_to_torch(None, _dataset(seed=1).sample(8))
+    assert not bool(batch["mask"].all())  # padding is exercised
+    model = t_read.model.eval()
+    with torch.no_grad():
+        full = model(batch, targets=batch)
+        with readout_only():
+            part = model(batch, targets=batch)
+    torch.testing.assert_close(part.actions, full.actions, atol=1e-6, rtol=0)
+    torch.testing.assert_close(part.loss, full.loss)
+    if kind == "hdt":
+        torch.testing.assert_close(part.subgoals, full.subgoals, atol=1e-6, rtol=0)
+
+
+def test_readout_kernels_train_with_dropout_and_evaluate_in_full():
+    """With dropout, ``"fast+readout"`` trains inside :func:`readout_only` and the lane masks,
+    learns as ``"torch"`` does (other draws), and evaluates outside both."""
+    seen: list[tuple[bool, bool]] = []
+
+    def run(kernels):
+        trainer = Trainer(_model("dt"), _dataset(), _cfg(iterations=80, kernels=kernels))
+        trainer.model.register_forward_hook(
+            lambda m, i, o: seen.append((readout_only_enabled(), lane_dropout_enabled()))
+        )
+        return trainer, trainer.train()["loss"].to_numpy()
+
+    _, loss_torch = run("torch")
+    assert set(seen) == {(False, False)}
+    seen.clear()
+    t_read, loss_read = run("fast+readout")
+    assert set(seen) == {(True, True)}
+    during_eval: list[bool] = []
+    t_read.eval_fn = lambda m: during_eval.append(readout_only_enabled()) or 0.0
+    t_read.config.eval_every = 40
+    t_read.train(iterations=120)
+    assert during_eval == [False]
+    assert not np.array_equal(loss_read, loss_torch)
+    assert loss_read[-10:].mean() < 0.5 * loss_read[:10].mean()
+    assert loss_read[-20:].mean() == pytest.approx(loss_torch[-20:].mean(), rel=0.25)
+
+
+def test_token_transformer_read_errors_and_outputs():
+    model = _model("dt").eval()
+    batch = batch_to_torch(None, _dataset().sample(4))
+    tokens = [torch.randn(4, K, SMALL["d_model"]) for _ in range(3)]
+    trunk = model.transformer
+    with torch.no_grad():
+        every = trunk(tokens, batch["timesteps"], batch["mask"])
+        assert len(every) == 3
+        torch.testing.assert_close(
+            trunk(tokens, batch["timesteps"], batch["mask"], read=1), every[1]
+        )
+        with readout_only():
+            one = trunk(tokens, batch["timesteps"], batch["mask"], read=-1)
+        torch.testing.assert_close(one, every[2], atol=1e-6, rtol=0)
+    with pytest.raises(
+        ValueError, match=r"Expect `read` in \[-3, 3\) for 3 token\(s\), actually: 3"
+    ):
+        trunk(tokens, batch["timesteps"], read=3)
+
+
 def test_an_unknown_kernels_is_a_clear_error():
     with pytest.raises(ValueError, match=r"Unknown kernels 'triton'\. Valid: torch, fast"):
         TrainConfig(kernels="triton")
@@ -212,6 +295,7 @@ def test_an_unknown_kernels_is_a_clear_error():
     # left out of a task's key at its default, as every task stored before it ran
     assert "kernels" not in TrainSpec().task_dict()
     assert TrainSpec(kernels="fast").task_dict()["kernels"] == "fast"
+    assert TrainSpec(kernels="fast+readout").task_dict()["kernels"] == "fast+readout"
     assert TrainSpec.from_task(TrainSpec().task_dict()).kernels == "torch"
 
 

@@ -43,7 +43,9 @@ class SeqTraining:
     ``bf16`` mixed precision (matrix products in bfloat16; 1.2-1.55x the updates per CPU-second
     at d64 and 1.5-2x at d128 with 3 layers on a CPU with AVX-512 BF16, by the day's machine;
     the numbers differ from float32's by rounding). Every study so far ran in ``fp32``."""
-    kernels: Literal["torch", "fast"] = "torch"
-    """Training kernels (:attr:`~thesis_lib.seq.trainer.TrainConfig.kernels`): ``torch``, or
+    kernels: Literal["torch", "fast", "fast+readout"] = "torch"
+    """Training kernels (:attr:`~thesis_lib.seq.trainer.TrainConfig.kernels`): ``torch``,
     ``fast`` (cheaper dropout masks on a CPU and fused AdamW; identical in distribution, other
-    draws). Every study so far ran with ``torch``."""
+    draws) or ``fast+readout`` (those, and the transformers' last block on the tokens the loss
+    reads only: the same loss up to float error; with ``bf16`` about 2x the updates per
+    CPU-second of ``fp32``/``torch`` for the d64 DT). Every study so far ran with ``torch``."""

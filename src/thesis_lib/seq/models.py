@@ -41,7 +41,9 @@ Used in: HDT chapter (thesis 5.2, Tables 5.1-5.3, 5.6); Decision Mamba chapter (
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import contextlib
+import contextvars
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
@@ -70,6 +72,8 @@ __all__ = [
     "check_inputs",
     "init_transformer",
     "masked_mse",
+    "readout_only",
+    "readout_only_enabled",
     "rsa_tokens",
 ]
 
@@ -448,6 +452,41 @@ def init_transformer(model: nn.Module, scheme: str, n_layers: int) -> nn.Module:
 # The shared transformer trunk
 
 
+_READOUT: contextvars.ContextVar[bool] = contextvars.ContextVar("readout_only", default=False)
+
+
+@contextlib.contextmanager
+def readout_only(enabled: bool = True) -> Iterator[None]:
+    """Within this context, a :class:`TokenTransformer` asked for one modality's output
+    (``read=``) runs its last block on that modality's tokens only (``Block(queries=...)``).
+
+    The outputs it returns are the same as outside the context up to float error (and the
+    dropout draws of the last block, which are fewer): every token is still a key of the last
+    block, and no token's output there feeds another's. So a training step's loss and
+    gradients are the same function of the weights, at about two thirds of the trunk's cost
+    for a 2-layer DT. The :class:`~thesis_lib.seq.trainer.Trainer` enters it for
+    ``TrainConfig(kernels="fast+readout")`` (issue #36's throughput), for the training step
+    only; ``act`` and evaluation run the full trunk.
+
+    Example:
+        >>> with readout_only():
+        ...     readout_only_enabled()
+        True
+        >>> readout_only_enabled()
+        False
+    """
+    token = _READOUT.set(bool(enabled))
+    try:
+        yield
+    finally:
+        _READOUT.reset(token)
+
+
+def readout_only_enabled() -> bool:
+    """Whether the current context runs the last block on the read tokens only (:func:`readout_only`)."""
+    return _READOUT.get()
+
+
 class TokenTransformer(nn.Module):
     """GPT trunk over interleaved per-step tokens: the part DT and both HDT levels share.
 
@@ -469,27 +508,44 @@ class TokenTransformer(nn.Module):
         self.ln_f = nn.LayerNorm(config.d_model)
 
     def forward(
-        self, tokens: list[torch.Tensor], timesteps: torch.Tensor, mask: torch.Tensor | None = None
-    ) -> tuple[torch.Tensor, ...]:
+        self,
+        tokens: list[torch.Tensor],
+        timesteps: torch.Tensor,
+        mask: torch.Tensor | None = None,
+        read: int | None = None,
+    ) -> Any:
         """Run the trunk.
 
         Args:
             tokens: ``n`` embeddings ``(B, T, d)``, in token order within a step.
             timesteps: ``(B, T)`` int64 time steps.
             mask: ``(B, T)`` bool, ``True`` = real step; ``None`` = all real.
+            read: ``None``: return every modality's output. An index into ``tokens`` (negative
+                counts from the end): return that modality's output only; inside
+                :func:`readout_only` the last block then runs on its tokens only.
 
         Returns:
-            ``n`` outputs ``(B, T, d)``: the output at each modality's token.
+            ``n`` outputs ``(B, T, d)``: the output at each modality's token; with ``read``,
+            the one output ``(B, T, d)``.
         """
+        n = len(tokens)
+        if read is not None and not -n <= read < n:
+            raise ValueError(f"Expect `read` in [{-n}, {n}) for {n} token(s), actually: {read!r}.")
         time = self.embed_timestep(timesteps)  # (B, T, d), shared by the step's tokens
         x = interleave_embeddings(*(tok + time for tok in tokens))  # (B, n T, d)
         x = self.drop(self.embed_ln(x))
         key_padding = None
         if mask is not None and not bool(mask.all()):  # all real: the fused causal kernel, no mask
-            key_padding = interleave_embeddings(*([mask.bool()] * len(tokens)))  # (B, n T)
-        for block in self.blocks:
-            x = block(x, key_padding)
-        return deinterleave_embeddings(self.ln_f(x), len(tokens))
+            key_padding = interleave_embeddings(*([mask.bool()] * n))  # (B, n T)
+        # inside readout_only, the last block's queries: the read modality's tokens only
+        readout = slice(read % n, None, n) if read is not None and readout_only_enabled() else None
+        last = len(self.blocks) - 1
+        for i, block in enumerate(self.blocks):
+            x = block(x, key_padding, readout if i == last else None)
+        if readout is not None:
+            return self.ln_f(x)  # (B, T, d): the read modality's tokens
+        out = deinterleave_embeddings(self.ln_f(x), n)
+        return out if read is None else out[read]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -556,8 +612,8 @@ class DecisionTransformer(nn.Module):
     def forward(self, batch: Tensors, targets: Tensors | None = None) -> SeqOutput:
         """Predict ``a_t`` at every step; with ``targets`` (``targets["actions"]``) also the loss."""
         _check_inputs(self, batch, self.input_keys())
-        h = self.transformer(rsa_tokens(self, batch), batch["timesteps"], batch.get("mask"))
-        h_state = h[-2]  # (B, T, d): output at the s_t tokens
+        tokens = rsa_tokens(self, batch)
+        h_state = self.transformer(tokens, batch["timesteps"], batch.get("mask"), read=-2)  # at s_t
         actions = self.predict_action(h_state) * self.config.max_action
         return action_output(actions, batch, targets)
 
@@ -667,7 +723,7 @@ class HDT(TwoLevel):
             self.high_embed_state(batch["states"]),
             self.high_embed_subgoal(batch["prev_subgoals"]),
         ]
-        _, h_goal = self.high(tokens, batch["timesteps"], batch.get("mask"))  # (B, T, d) at g_{t-1}
+        h_goal = self.high(tokens, batch["timesteps"], batch.get("mask"), read=1)  # at g_{t-1}
         return self.predict_subgoal(h_goal)
 
     def low_forward(self, batch: Tensors, subgoals: torch.Tensor) -> torch.Tensor:
@@ -680,8 +736,8 @@ class HDT(TwoLevel):
         ]
         if self.low_embed_rtg is not None:
             tokens.insert(0, self.low_embed_rtg(batch["returns_to_go"]))
-        h = self.low(tokens, batch["timesteps"], batch.get("mask"))
-        return self.predict_action(h[-2]) * self.config.max_action  # read at s_t
+        h_state = self.low(tokens, batch["timesteps"], batch.get("mask"), read=-2)  # at s_t
+        return self.predict_action(h_state) * self.config.max_action
 
     def input_keys(self) -> tuple[str, ...]:
         a_key = action_key(self.config.paper_compat)

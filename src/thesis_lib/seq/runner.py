@@ -90,8 +90,9 @@ class TrainSpec:
     """Training precision, :attr:`~thesis_lib.seq.trainer.TrainConfig.precision` (``"fp32"`` or
     ``"bf16"``, mixed precision)."""
     kernels: str = "torch"
-    """Training kernels, :attr:`~thesis_lib.seq.trainer.TrainConfig.kernels` (``"torch"`` or
-    ``"fast"``: lane dropout masks and fused AdamW)."""
+    """Training kernels, :attr:`~thesis_lib.seq.trainer.TrainConfig.kernels` (``"torch"``,
+    ``"fast"``: lane dropout masks and fused AdamW, or ``"fast+readout"``: those, and the
+    transformers' last block on the tokens the loss reads only)."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size"):

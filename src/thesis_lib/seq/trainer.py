@@ -46,6 +46,7 @@ from tqdm.auto import tqdm
 
 from thesis_lib._io import atomic_write, hash_arrays
 from thesis_lib.seq.dropout import lane_dropout
+from thesis_lib.seq.models import readout_only
 
 __all__ = [
     "KERNELS",
@@ -69,9 +70,10 @@ RESULT_FIELDS = ("seed", "lr", "weight_decay", "warmup_steps", "batch_size", "gr
 PRECISIONS = ("fp32", "bf16")
 
 
-#: :attr:`TrainConfig.kernels`' values. ``"fast"`` changes a run's numbers too (other dropout draws,
-#: another AdamW rounding); a checkpoint records it only where it is not ``torch``.
-KERNELS = ("torch", "fast")
+#: :attr:`TrainConfig.kernels`' values. ``"fast"`` and ``"fast+readout"`` change a run's numbers
+#: too (other dropout draws, another AdamW rounding); a checkpoint records it only where it is not
+#: ``torch``.
+KERNELS = ("torch", "fast", "fast+readout")
 
 #: Options left out of a checkpoint's record and a task's key at these values, as every run
 #: before the option existed ran (:meth:`Trainer.made_by`, ``TrainSpec.task_dict``, parity).
@@ -142,7 +144,14 @@ class TrainConfig:
     up to rounding), but other draws, so not the same run; a checkpoint is resumed only with its
     own kernels. It takes a tenth to a fifth off a transformer's bf16 step on a CPU; with
     ``precision="bf16"`` the v2 studies' d64 DT trains about 1.4-1.5x as fast as the float32
-    torch step (``benchmarks/bench_throughput.py``). Evaluation uses torch's kernels either way."""
+    torch step (``benchmarks/bench_throughput.py``). ``"fast+readout"``: ``"fast"``, and the
+    transformers' last block run on the tokens the loss reads only
+    (:func:`~thesis_lib.seq.models.readout_only`: the ``s_t`` tokens of the DT and the HDT's
+    low level, the ``g_{t-1}`` tokens of its high level). Every token is still a key there, so
+    the loss and its gradients are the same function of the weights as ``"fast"``'s up to
+    float error, with fewer dropout draws; with ``precision="bf16"`` the d64 DT trains about
+    2x as fast as the float32 torch step. The Mambas (DM, HDM) have no readout path: for them
+    it is ``"fast"``. Evaluation uses torch's kernels and the full trunk either way."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size", "warmup_steps"):
@@ -268,7 +277,7 @@ class Trainer:
             model.parameters(),
             lr=config.lr,
             weight_decay=config.weight_decay,
-            fused=True if config.kernels == "fast" else None,
+            fused=True if config.kernels != "torch" else None,
         )
         self.scheduler = torch.optim.lr_scheduler.LambdaLR(
             self.optimizer, functools.partial(_warmup, warmup_steps=config.warmup_steps)
@@ -307,7 +316,8 @@ class Trainer:
                     dtype=torch.bfloat16,
                     enabled=self.config.precision == "bf16",
                 ),
-                lane_dropout(self.config.kernels == "fast" and self.device.type == "cpu"),
+                lane_dropout(self.config.kernels != "torch" and self.device.type == "cpu"),
+                readout_only(self.config.kernels == "fast+readout"),
             ):
                 out = self.model(batch, targets=batch)
             self.optimizer.zero_grad(set_to_none=True)
