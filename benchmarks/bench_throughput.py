@@ -1,7 +1,9 @@
 """Runs per CPU-hour of the sequence-model studies: float32 (the v1 code) against bfloat16 mixed
-precision (``TrainConfig(precision="bf16")``), alone and with the fast training kernels
-(``TrainConfig(kernels="fast")``: lane dropout masks and fused AdamW), at equal config, in one
-process (issue #36).
+precision (``TrainConfig(precision="bf16")``), alone, with the fast training kernels
+(``TrainConfig(kernels="fast")``: lane dropout masks and fused AdamW) and with those and the
+readout-only last block (``kernels="fast+readout"``: the transformers' last block runs its
+queries, attention output, residuals and MLP on the tokens the loss reads only), at equal
+config, in one process (issue #36).
 
 A study run of the second studies (hdt-c1c3-v2, dm-c4c6-v2) is 10k training updates and five
 evaluations of 10 episodes of up to 1,000 steps. This script times, per method and size, the
@@ -87,6 +89,24 @@ break the graph, and the masked loss recompiles for each count of valid steps); 
 alone (``model.transformer``): 120.3 against 60.7 (float32 90.2). Compiled code is twice as
 slow on this CPU, with bf16 as with float32 (``bench_ensemble.py``).
 
+2026-12-02 (the sixteenth session), beside a running two-process study, 30 updates x 4 repeats
+in turns, the readout-only last block added (``kernels="fast+readout"``, kept in the code). Its
+loss and gradients are ``"fast"``'s up to float error (``tests/test_trainer.py``,
+``tests/test_attention.py``), so the parity of ``dt-peer-r4-bf16-fast`` carries over; what it
+saves is the last block's work at the tokens no loss reads (two of the DT's three, one of the
+HDT high level's two), about a fifth to a quarter of a bf16 step at d64:
+
+    method   size   fp32  bf16  bf16+fast  +readout  eval s/run  x bf16  x bf16+fast  x +readout
+    DT       study  85.8  63.1       53.1      40.6          27    1.35         1.59        2.05
+    HDT      study 110.3  87.0       73.6      57.5          31    1.26         1.48        1.87
+    DT       peer  274.4 170.2      161.2     131.5          68    1.59         1.67        2.03
+    HDT      peer  559.9 343.8      318.0     281.0         118    1.61         1.73        1.95
+
+So with bf16 and ``fast+readout`` the DT makes 2x the runs per CPU-hour of the v1 code at both
+sizes, the HDT 1.9x; the Mambas have no readout path (their scan runs over every token; a
+DM/HDM step is bound by the scan and the float32 elementwise ops around it) and stay at
+1.3x.
+
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50
 """
@@ -126,7 +146,12 @@ def parse_args() -> argparse.Namespace:
     return p.parse_args()
 
 
-VARIANTS = {"fp32": ("fp32", "torch"), "bf16": ("bf16", "torch"), "bf16+fast": ("bf16", "fast")}
+VARIANTS = {
+    "fp32": ("fp32", "torch"),
+    "bf16": ("bf16", "torch"),
+    "bf16+fast": ("bf16", "fast"),
+    "bf16+fast+readout": ("bf16", "fast+readout"),
+}
 """``name: (precision, kernels)``; ``fp32`` is the v1 code's training step."""
 
 
@@ -184,11 +209,11 @@ def main() -> None:
     names = list(VARIANTS)
     print(
         f"{'method':8} {'size':5} "
-        + " ".join(f"{n + ' ms':>12}" for n in names)
+        + " ".join(f"{n + ' ms':>20}" for n in names)
         + f" {'eval s/run':>10} "
-        + " ".join(f"{'runs/h ' + n:>14}" for n in names)
+        + " ".join(f"{'runs/h ' + n:>24}" for n in names)
         + " "
-        + " ".join(f"{'x ' + n:>11}" for n in names[1:])
+        + " ".join(f"{'x ' + n:>19}" for n in names[1:])
     )
     for size in args.sizes:
         for method in args.methods:
@@ -205,11 +230,11 @@ def main() -> None:
             per_hour = {n: 3600.0 / (RUN_UPDATES * step[n] + eval_s) for n in names}
             print(
                 f"{method:8} {size:5} "
-                + " ".join(f"{1e3 * step[n]:12.1f}" for n in names)
+                + " ".join(f"{1e3 * step[n]:20.1f}" for n in names)
                 + f" {eval_s:10.0f} "
-                + " ".join(f"{per_hour[n]:14.2f}" for n in names)
+                + " ".join(f"{per_hour[n]:24.2f}" for n in names)
                 + " "
-                + " ".join(f"{per_hour[n] / per_hour['fp32']:11.2f}" for n in names[1:])
+                + " ".join(f"{per_hour[n] / per_hour['fp32']:19.2f}" for n in names[1:])
             )
 
 
