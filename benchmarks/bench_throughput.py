@@ -105,7 +105,11 @@ HDT high level's two), about a fifth to a quarter of a bf16 step at d64:
 So with bf16 and ``fast+readout`` the DT makes 2x the runs per CPU-hour of the v1 code at both
 sizes, the HDT 1.9x; the Mambas have no readout path (their scan runs over every token; a
 DM/HDM step is bound by the scan and the float32 elementwise ops around it) and stay at
-1.3x.
+1.3x: in the same run, with the causal convolution's bfloat16 input cast to float32 once
+rather than in each of its four mixed-dtype products (``causal_depthwise_conv1d``; about a
+tenth off a bf16 DM step in a direct comparison, 106 against 95 ms), DM-noRTG at 125.4,
+97.3, 99.6 and 93.5 ms (x 1.28, 1.25, 1.32) and the HDM at 303.6, 225.0, 215.4 and 219.4 ms
+(x 1.33, 1.39, 1.37), where ``fast+readout`` is ``fast`` for them.
 
     python benchmarks/bench_throughput.py                       # DT and HDT, both sizes
     python benchmarks/bench_throughput.py --methods DT --sizes peer --updates 50

@@ -224,6 +224,25 @@ def test_causal_conv_matches_conv1d(K):
     )
 
 
+def test_causal_conv_of_bfloat16_input_computes_in_float32():
+    """A bfloat16 input (under ``precision="bf16"``, ``in_proj``'s output) with float32 weights
+    convolves in float32: the forward is the float32 input's exactly, and the input's gradient
+    is summed over the K taps in float32, then rounded once."""
+    torch.manual_seed(0)
+    conv = torch.nn.Conv1d(6, 6, 4, groups=6, padding=3)
+    x16 = torch.randn(2, 7, 6).bfloat16().requires_grad_()
+    x32 = x16.detach().float().requires_grad_()
+    y16 = causal_depthwise_conv1d(x16, conv.weight, conv.bias)
+    y32 = causal_depthwise_conv1d(x32, conv.weight, conv.bias)
+    assert y16.dtype == torch.float32
+    torch.testing.assert_close(y16, y32, atol=0, rtol=0)
+    g = torch.randn_like(y32)
+    (g16,) = torch.autograd.grad(y16, x16, g)
+    (g32,) = torch.autograd.grad(y32, x32, g)
+    assert g16.dtype == torch.bfloat16
+    torch.testing.assert_close(g16, g32.bfloat16(), atol=0, rtol=0)
+
+
 # --------------------------------------------------------------------------- config
 @pytest.mark.parametrize(
     ("kwargs", "match"),

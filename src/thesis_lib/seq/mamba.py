@@ -237,7 +237,10 @@ def causal_depthwise_conv1d(
     Same result as ``nn.Conv1d(D, D, K, groups=D, padding=K - 1)`` on ``x.transpose(1, 2)``
     with the right ``K - 1`` outputs dropped (Mamba's convolution), as K shifted
     multiply-adds: on CPU with small K this measured faster than the (mkldnn) convolution's
-    backward, and it skips two transposes.
+    backward, and it skips two transposes. A lower-precision ``x`` (bfloat16, under
+    ``TrainConfig(precision="bf16")``) is cast to the weights' dtype once, first: each product
+    would compute in that dtype anyway, but a mixed-dtype product costs about three times a
+    same-dtype one on a CPU, and its gradient would be rounded to bfloat16 at every tap.
 
     Args:
         x: ``(B, L, D)``.
@@ -248,6 +251,7 @@ def causal_depthwise_conv1d(
         ``(B, L, D)``.
     """
     w = weight.reshape(weight.shape[0], -1)  # (D, K)
+    x = x.to(torch.promote_types(x.dtype, w.dtype))  # once, not in each mixed-dtype product
     K, L = w.shape[1], x.shape[1]
     xp = F.pad(x, (0, 0, K - 1, 0))  # (B, L + K - 1, D): zeros before the first token
     y = xp[:, K - 1 :] * w[:, K - 1]
