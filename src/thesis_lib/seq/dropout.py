@@ -13,8 +13,8 @@ The draws come from torch's default generator, so ``torch.manual_seed`` (and the
 
 So a run with lane masks is identical in distribution to one with torch's, but not the same
 run: the masks are other draws. The lanes are used only inside :func:`lane_dropout` (the
-Trainer enters it for ``kernels="fast"`` and ``"fast+readout"`` on a CPU); everywhere else :class:`Dropout` is
-``nn.Dropout``.
+Trainer enters it for ``kernels="fast"`` and ``"fast+readout"`` on a CPU); everywhere else
+:class:`Dropout` is ``nn.Dropout``.
 
 Why by hand: no library offers a cheaper CPU dropout mask; ``torch.compile`` made the step
 slower (``benchmarks/bench_ensemble.py``).
