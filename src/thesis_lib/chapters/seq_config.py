@@ -47,5 +47,5 @@ class SeqTraining:
     """Training kernels (:attr:`~thesis_lib.seq.trainer.TrainConfig.kernels`): ``torch``,
     ``fast`` (cheaper dropout masks on a CPU and fused AdamW; identical in distribution, other
     draws) or ``fast+readout`` (those, and the transformers' last block on the tokens the loss
-    reads only: the same loss up to float error; with ``bf16`` about 2x the updates per
-    CPU-second of ``fp32``/``torch`` for the d64 DT). Every study so far ran with ``torch``."""
+    reads only: the same loss up to float error; with ``bf16`` 1.8-2x the runs per CPU-hour of
+    ``fp32``/``torch`` for the d64 DT). Every study so far ran with ``torch``."""

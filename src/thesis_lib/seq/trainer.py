@@ -149,8 +149,8 @@ class TrainConfig:
     (:func:`~thesis_lib.seq.models.readout_only`: the ``s_t`` tokens of the DT and the HDT's
     low level, the ``g_{t-1}`` tokens of its high level). Every token is still a key there, so
     the loss and its gradients are the same function of the weights as ``"fast"``'s up to
-    float error, with fewer dropout draws; with ``precision="bf16"`` the d64 DT trains about
-    2x as fast as the float32 torch step. The Mambas (DM, HDM) have no readout path: for them
+    float error, with fewer dropout draws; with ``precision="bf16"`` the d64 DT makes
+    1.8-2.05x the runs per CPU-hour of the float32 torch step, by the machine's load. The Mambas (DM, HDM) have no readout path: for them
     it is ``"fast"``. Evaluation uses torch's kernels and the full trunk either way."""
 
     def __post_init__(self) -> None:
