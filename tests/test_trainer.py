@@ -225,7 +225,7 @@ def test_readout_kernels_without_dropout_are_fasts_numbers_up_to_float_error(kin
     assert t_read.optimizer.defaults["fused"]
     np.testing.assert_allclose(l_read, l_fast, rtol=1e-5)
     torch.testing.assert_close(p_read, p_fast, rtol=1e-4, atol=1e-5)
-    batch = batch_to_torch(None, _dataset(seed=1).sample(8))
+    batch = batch_to_torch(None, _dataset(seed=1).sample(64))
     assert not bool(batch["mask"].all())  # padding is exercised
     model = t_read.model.eval()
     with torch.no_grad():
