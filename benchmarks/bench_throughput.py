@@ -110,9 +110,10 @@ and again the same day with the study paused (the machine otherwise idle), 30 x 
     DT       peer  269.4 183.3      172.1     142.5          73    1.45         1.54        1.85
     HDT      peer  443.8 274.2      262.3     221.5         106    1.60         1.66        1.96
 
-So with bf16 and ``fast+readout`` the DT and HDT make 1.8-2.05x the runs per CPU-hour of the
-v1 code, 2x beside a running study and 1.8-1.95x on an idle machine: issue #36's 2x is
-reached under load and missed by a tenth idle. The Mambas have no readout path (their scan runs over every token; a
+So with bf16 and ``fast+readout`` the DT makes 2.03-2.05x the runs per CPU-hour of the v1
+code beside a running study and 1.80-1.85x on an idle machine, the HDT 1.87-1.95x and
+1.77-1.96x: issue #36's 2x is reached for the DT under load only. The Mambas have no readout
+path (their scan runs over every token; a
 DM/HDM step is bound by the scan and the float32 elementwise ops around it) and stay at
 1.3x: in the same run, with the causal convolution's bfloat16 input cast to float32 once
 rather than in each of its four mixed-dtype products (``causal_depthwise_conv1d``; about a

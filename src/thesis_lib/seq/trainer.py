@@ -150,8 +150,8 @@ class TrainConfig:
     low level, the ``g_{t-1}`` tokens of its high level). Every token is still a key there, so
     the loss and its gradients are the same function of the weights as ``"fast"``'s up to
     float error, with fewer dropout draws; with ``precision="bf16"`` the d64 DT makes
-    1.8-2.05x the runs per CPU-hour of the float32 torch step, by the machine's load. The Mambas (DM, HDM) have no readout path: for them
-    it is ``"fast"``. Evaluation uses torch's kernels and the full trunk either way."""
+    1.8-2.05x the runs per CPU-hour of the float32 torch step, by the machine's load. The
+    Mambas (DM, HDM) have no readout path: for them it is ``"fast"``. Evaluation uses torch's kernels and the full trunk either way."""
 
     def __post_init__(self) -> None:
         for name in ("iterations", "batch_size", "warmup_steps"):
